@@ -1,0 +1,271 @@
+//! The model contract: what a dgan ONNX model takes, gives and declares in its metadata. The prose version is
+//! `docs/model-contract.md`; this module is the one the runtime checks against.
+
+use crate::class::AgentClass;
+use crate::decode::Anchors;
+use crate::error::{DganError, Result};
+use crate::spec::{InputSpec, EDGE_FEATURES};
+use ndarray::Array3;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The contract version this engine reads and the exporter writes.
+pub const CONTRACT_VERSION: u32 = 1;
+/// The ONNX `metadata_props` key holding the contract as JSON.
+pub const METADATA_KEY: &str = "dgan_contract";
+
+/// Input: agent-centric observed positions `(N, T_obs, 2)` f32, zero at invalid steps.
+pub const INPUT_TRAJECTORY: &str = "trajectory";
+/// Input: validity of each observed step `(N, T_obs)` f32, 1 or 0.
+pub const INPUT_TRAJECTORY_MASK: &str = "trajectory_mask";
+/// Input: traffic state `(N, 7 + C)` f32.
+pub const INPUT_STATE: &str = "state";
+/// Input: directed attention edges `(E, 2)` i64, `[receiver, sender]`, self-loops included, sorted by receiver.
+pub const INPUT_EDGE_INDEX: &str = "edge_index";
+/// Input: per-edge geometry `(E, 6)` f32, the sender seen from the receiver's frame.
+pub const INPUT_EDGE_FEATURES: &str = "edge_features";
+/// Input (map models only): agent-centric RGB crops `(N, 3, H, W)` f32 in [0, 1].
+pub const INPUT_MAP: &str = "map";
+/// Output: class logits `(N, C)` f32.
+pub const OUTPUT_CLASS_LOGITS: &str = "class_logits";
+/// Output: anchor logits `(N, K)` f32, K = Σ K_c, grouped by class in the model's class order.
+pub const OUTPUT_ANCHOR_LOGITS: &str = "anchor_logits";
+/// Output: agent-centric offsets from each anchor `(N, K, T_f, 2)` f32, metres.
+pub const OUTPUT_OFFSETS: &str = "offsets";
+
+/// Element type of a contract tensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DType {
+    /// 32-bit float.
+    F32,
+    /// 64-bit signed integer.
+    I64,
+}
+
+/// One dimension of a contract tensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dim {
+    /// The dynamic agent count N.
+    Agents,
+    /// The dynamic directed-edge count E.
+    Edges,
+    /// A fixed size.
+    Fixed(usize),
+}
+
+/// Name, element type and shape of one contract tensor.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TensorSpec {
+    /// ONNX name.
+    pub name: &'static str,
+    /// Element type.
+    pub dtype: DType,
+    /// Shape.
+    pub dims: Vec<Dim>,
+}
+
+/// The contract as stored in a model's metadata under [`METADATA_KEY`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelContract {
+    /// Must equal [`CONTRACT_VERSION`].
+    pub contract_version: u32,
+    /// Length unit of positions, anchors and offsets; always `"m"`.
+    pub units: String,
+    /// The input specification (flattened into the same JSON object).
+    #[serde(flatten)]
+    pub input: InputSpec,
+    /// Anchors per class name: `K_c × T_f` points `[x, y]` in the agent-centric frame.
+    pub anchors: BTreeMap<String, Vec<Vec<[f64; 2]>>>,
+    /// A short model name.
+    #[serde(default)]
+    pub name: String,
+    /// Free-form provenance (data, protocol, metrics).
+    #[serde(default)]
+    pub description: String,
+}
+
+impl ModelContract {
+    /// Parses and checks the metadata JSON.
+    pub fn from_json(json: &str) -> Result<Self> {
+        let c: ModelContract = serde_json::from_str(json)
+            .map_err(|e| DganError::Contract(format!("metadata {METADATA_KEY:?} is not a valid contract: {e}")))?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// Serialises the contract to the metadata JSON.
+    pub fn to_json(&self) -> Result<String> {
+        serde_json::to_string(self).map_err(|e| DganError::Contract(e.to_string()))
+    }
+
+    /// Checks the version, units, input specification and anchors.
+    pub fn validate(&self) -> Result<()> {
+        if self.contract_version != CONTRACT_VERSION {
+            return Err(DganError::Contract(format!(
+                "contract_version {} is not supported; this engine reads version {CONTRACT_VERSION}",
+                self.contract_version
+            )));
+        }
+        if self.units != "m" {
+            return Err(DganError::Contract(format!("units must be \"m\", got {:?}", self.units)));
+        }
+        self.input.validate().map_err(|e| DganError::Contract(e.to_string()))?;
+        self.anchors().map(|_| ())
+    }
+
+    /// The anchors as arrays, in the model's class order.
+    pub fn anchors(&self) -> Result<Anchors> {
+        let t_f = self.input.t_f;
+        let mut sets = Vec::with_capacity(self.input.classes.len());
+        for class in &self.input.classes {
+            let rows = self
+                .anchors
+                .get(class.name())
+                .ok_or_else(|| DganError::Contract(format!("no anchors for class {class}")))?;
+            let mut arr = Array3::zeros((rows.len(), t_f, 2));
+            for (k, anchor) in rows.iter().enumerate() {
+                if anchor.len() != t_f {
+                    return Err(DganError::Contract(format!(
+                        "anchor {k} of {class} has {} points, expected T_f = {t_f}",
+                        anchor.len()
+                    )));
+                }
+                for (t, p) in anchor.iter().enumerate() {
+                    arr[[k, t, 0]] = p[0];
+                    arr[[k, t, 1]] = p[1];
+                }
+            }
+            sets.push(arr);
+        }
+        if let Some(extra) = self.anchors.keys().find(|k| !self.input.classes.iter().any(|c| c.name() == *k)) {
+            return Err(DganError::Contract(format!("anchors given for {extra:?}, which is not among the classes")));
+        }
+        Anchors::new(self.input.classes.clone(), sets)
+    }
+
+    /// The inputs a model under this contract must take, exactly.
+    pub fn expected_inputs(&self) -> Vec<TensorSpec> {
+        expected_inputs(&self.input)
+    }
+
+    /// The outputs a model under this contract must give (others are ignored).
+    pub fn expected_outputs(&self) -> Result<Vec<TensorSpec>> {
+        let k = self.anchors()?.total();
+        let c = self.input.classes.len();
+        Ok(vec![
+            TensorSpec { name: OUTPUT_CLASS_LOGITS, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(c)] },
+            TensorSpec { name: OUTPUT_ANCHOR_LOGITS, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(k)] },
+            TensorSpec {
+                name: OUTPUT_OFFSETS,
+                dtype: DType::F32,
+                dims: vec![Dim::Agents, Dim::Fixed(k), Dim::Fixed(self.input.t_f), Dim::Fixed(2)],
+            },
+        ])
+    }
+}
+
+/// The network inputs of an input specification.
+pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
+    let mut v = vec![
+        TensorSpec {
+            name: INPUT_TRAJECTORY,
+            dtype: DType::F32,
+            dims: vec![Dim::Agents, Dim::Fixed(spec.t_obs), Dim::Fixed(2)],
+        },
+        TensorSpec { name: INPUT_TRAJECTORY_MASK, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(spec.t_obs)] },
+        TensorSpec { name: INPUT_STATE, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(spec.state_dim())] },
+        TensorSpec { name: INPUT_EDGE_INDEX, dtype: DType::I64, dims: vec![Dim::Edges, Dim::Fixed(2)] },
+        TensorSpec {
+            name: INPUT_EDGE_FEATURES,
+            dtype: DType::F32,
+            dims: vec![Dim::Edges, Dim::Fixed(EDGE_FEATURES.len())],
+        },
+    ];
+    if let Some(m) = &spec.map {
+        v.push(TensorSpec {
+            name: INPUT_MAP,
+            dtype: DType::F32,
+            dims: vec![Dim::Agents, Dim::Fixed(3), Dim::Fixed(m.height_px), Dim::Fixed(m.width_px)],
+        });
+    }
+    v
+}
+
+/// Checks one tensor a model declares (`shape` with -1 for dynamic dimensions) against its contract entry.
+pub fn check_tensor(kind: &str, want: &TensorSpec, dtype: Option<DType>, shape: &[i64]) -> Result<()> {
+    let fail = |m: String| Err(DganError::Contract(format!("{kind} {:?}: {m}", want.name)));
+    if dtype != Some(want.dtype) {
+        return fail(format!("element type is {dtype:?}, the contract says {:?}", want.dtype));
+    }
+    if shape.len() != want.dims.len() {
+        return fail(format!("has rank {} (shape {shape:?}), the contract says rank {}", shape.len(), want.dims.len()));
+    }
+    for (axis, (got, dim)) in shape.iter().zip(&want.dims).enumerate() {
+        match dim {
+            Dim::Agents | Dim::Edges if *got >= 0 => {
+                return fail(format!(
+                    "axis {axis} is fixed to {got}; it must be dynamic ({}) - export with a dynamic axis",
+                    if *dim == Dim::Agents { "the agent count N" } else { "the edge count E" }
+                ))
+            }
+            Dim::Fixed(n) if *got >= 0 && *got as usize != *n => {
+                return fail(format!("axis {axis} is {got}, the contract says {n} (shape {shape:?})"))
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// The agent classes named in a contract, for error messages.
+pub fn class_names(classes: &[AgentClass]) -> String {
+    classes.iter().map(|c| c.name()).collect::<Vec<_>>().join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn json() -> String {
+        r#"{"contract_version": 1, "units": "m", "dt_s": 0.4, "t_obs": 8, "t_f": 2,
+            "classes": ["vehicle", "pedestrian"], "attention_lambda": 0.5, "map": null,
+            "anchors": {"vehicle": [[[1, 0], [2, 0]]], "pedestrian": [[[0, 0], [0, 1]], [[0, 0], [1, 1]]]}}"#
+            .into()
+    }
+
+    #[test]
+    fn parses_and_round_trips() {
+        let c = ModelContract::from_json(&json()).unwrap();
+        assert_eq!(c.anchors().unwrap().per_class(), vec![1, 2]);
+        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+        assert_eq!(c.expected_inputs().len(), 5);
+        assert_eq!(c.expected_outputs().unwrap()[1].dims, vec![Dim::Agents, Dim::Fixed(3)]);
+    }
+
+    #[test]
+    fn rejects_broken_contracts() {
+        let cases = [
+            json().replace("\"contract_version\": 1", "\"contract_version\": 2"),
+            json().replace("\"units\": \"m\"", "\"units\": \"px\""),
+            json().replace("\"vehicle\": [[[1, 0], [2, 0]]], ", ""),
+            json().replace("[[1, 0], [2, 0]]", "[[1, 0]]"),
+            json().replace("\"t_obs\": 8", "\"t_obs\": 0"),
+            json().replace("\"vehicle\", \"pedestrian\"]", "\"vehicle\", \"truck\"]"),
+            "not json".into(),
+        ];
+        for case in cases {
+            assert!(matches!(ModelContract::from_json(&case), Err(DganError::Contract(_))), "{case}");
+        }
+    }
+
+    #[test]
+    fn tensor_checks() {
+        let spec = &expected_inputs(&ModelContract::from_json(&json()).unwrap().input)[0];
+        assert!(check_tensor("input", spec, Some(DType::F32), &[-1, 8, 2]).is_ok());
+        assert!(check_tensor("input", spec, Some(DType::F32), &[-1, -1, 2]).is_ok());
+        assert!(check_tensor("input", spec, Some(DType::F32), &[5, 8, 2]).is_err());
+        assert!(check_tensor("input", spec, Some(DType::F32), &[-1, 7, 2]).is_err());
+        assert!(check_tensor("input", spec, Some(DType::I64), &[-1, 8, 2]).is_err());
+        assert!(check_tensor("input", spec, Some(DType::F32), &[-1, 8]).is_err());
+    }
+}

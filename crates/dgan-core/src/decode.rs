@@ -1,0 +1,223 @@
+//! Anchor decoding: hierarchical probabilities p(mode) = p(c) · p(k | c), trajectories = anchor + offset taken
+//! back to the world frame, modes ranked by probability.
+
+use crate::class::AgentClass;
+use crate::error::{DganError, Result};
+use crate::transform::AgentPose;
+use ndarray::{Array2, Array3, Array4, ArrayView2, ArrayView4};
+
+/// Per-class anchor trajectories in the agent-centric frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Anchors {
+    classes: Vec<AgentClass>,
+    sets: Vec<Array3<f64>>,
+}
+
+impl Anchors {
+    /// Anchors for each class, in the model's class order; each set is `(K_c, T_f, 2)` metres.
+    pub fn new(classes: Vec<AgentClass>, sets: Vec<Array3<f64>>) -> Result<Self> {
+        if classes.len() != sets.len() || classes.is_empty() {
+            return Err(DganError::Contract(format!("{} anchor sets for {} classes", sets.len(), classes.len())));
+        }
+        let t_f = sets[0].dim().1;
+        for (c, s) in classes.iter().zip(&sets) {
+            let (k, t, d) = s.dim();
+            if k == 0 || t != t_f || d != 2 {
+                return Err(DganError::Contract(format!(
+                    "anchors of {c} must have shape (K_c >= 1, T_f = {t_f}, 2), got ({k}, {t}, {d})"
+                )));
+            }
+            if s.iter().any(|v| !v.is_finite()) {
+                return Err(DganError::Contract(format!("anchors of {c} hold NaN or infinite values")));
+            }
+        }
+        Ok(Self { classes, sets })
+    }
+
+    /// Classes, in the model's order.
+    pub fn classes(&self) -> &[AgentClass] {
+        &self.classes
+    }
+
+    /// The anchor set of each class, `(K_c, T_f, 2)`.
+    pub fn sets(&self) -> &[Array3<f64>] {
+        &self.sets
+    }
+
+    /// K_c for each class.
+    pub fn per_class(&self) -> Vec<usize> {
+        self.sets.iter().map(|s| s.dim().0).collect()
+    }
+
+    /// K = Σ K_c.
+    pub fn total(&self) -> usize {
+        self.per_class().iter().sum()
+    }
+
+    /// T_f.
+    pub fn steps(&self) -> usize {
+        self.sets[0].dim().1
+    }
+
+    /// The index of the class each of the K anchors belongs to.
+    pub fn class_of_anchor(&self) -> Vec<usize> {
+        self.per_class().iter().enumerate().flat_map(|(c, &k)| std::iter::repeat_n(c, k)).collect()
+    }
+
+    fn anchor(&self, k: usize) -> Option<ndarray::ArrayView2<'_, f64>> {
+        let mut k = k;
+        for s in &self.sets {
+            if k < s.dim().0 {
+                return Some(s.index_axis(ndarray::Axis(0), k));
+            }
+            k -= s.dim().0;
+        }
+        None
+    }
+}
+
+/// The decoded modes of N agents, M modes each, sorted by probability (highest first).
+#[derive(Debug, Clone)]
+pub struct Decoded {
+    /// `(N, M, T_f, 2)` world-frame positions.
+    pub trajectories: Array4<f64>,
+    /// `(N, M)` p(c) · p(k | c) of each mode.
+    pub probabilities: Array2<f64>,
+    /// `(N, C)` p(c).
+    pub class_probabilities: Array2<f64>,
+    /// `(N, M)` index (into the model's classes) of the class whose anchor each mode refines.
+    pub mode_classes: Array2<i64>,
+    /// `(N, M)` index into the K anchors of each mode.
+    pub mode_anchors: Array2<i64>,
+}
+
+fn softmax(logits: impl Iterator<Item = f64>) -> Vec<f64> {
+    let v: Vec<f64> = logits.collect();
+    let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let e: Vec<f64> = v.iter().map(|x| (x - max).exp()).collect();
+    let sum: f64 = e.iter().sum();
+    e.into_iter().map(|x| x / sum).collect()
+}
+
+/// Decodes the network's outputs for agents whose agent-centric frames are `poses`, keeping the top `modes`
+/// (at most K). `class_logits` is `(N, C)`, `anchor_logits` `(N, K)`, `offsets` `(N, K, T_f, 2)`.
+pub fn decode(
+    class_logits: ArrayView2<'_, f32>,
+    anchor_logits: ArrayView2<'_, f32>,
+    offsets: ArrayView4<'_, f32>,
+    anchors: &Anchors,
+    poses: &[AgentPose],
+    modes: usize,
+) -> Result<Decoded> {
+    let n = poses.len();
+    let c = anchors.classes().len();
+    let k_total = anchors.total();
+    let t_f = anchors.steps();
+    let bad = |m: String| Err(DganError::Inference(m));
+    if class_logits.dim() != (n, c) {
+        return bad(format!("class_logits has shape {:?}, expected ({n}, {c})", class_logits.dim()));
+    }
+    if anchor_logits.dim() != (n, k_total) {
+        return bad(format!("anchor_logits has shape {:?}, expected ({n}, {k_total})", anchor_logits.dim()));
+    }
+    if offsets.dim() != (n, k_total, t_f, 2) {
+        return bad(format!("offsets has shape {:?}, expected ({n}, {k_total}, {t_f}, 2)", offsets.dim()));
+    }
+    if class_logits.iter().chain(anchor_logits.iter()).chain(offsets.iter()).any(|v| !v.is_finite()) {
+        return bad("the model produced NaN or infinite values".into());
+    }
+    let m = modes.clamp(1, k_total);
+    let per_class = anchors.per_class();
+    let class_of = anchors.class_of_anchor();
+    let mut out = Decoded {
+        trajectories: Array4::zeros((n, m, t_f, 2)),
+        probabilities: Array2::zeros((n, m)),
+        class_probabilities: Array2::zeros((n, c)),
+        mode_classes: Array2::zeros((n, m)),
+        mode_anchors: Array2::zeros((n, m)),
+    };
+    for (i, pose) in poses.iter().enumerate() {
+        let pc = softmax(class_logits.row(i).iter().map(|&v| f64::from(v)));
+        let mut p = Vec::with_capacity(k_total);
+        let mut start = 0;
+        for (ci, &kc) in per_class.iter().enumerate() {
+            let pk = softmax((start..start + kc).map(|k| f64::from(anchor_logits[[i, k]])));
+            p.extend(pk.into_iter().map(|v| v * pc[ci]));
+            start += kc;
+        }
+        let mut order: Vec<usize> = (0..k_total).collect();
+        // Stable: equal probabilities keep anchor order.
+        order.sort_by(|&a, &b| p[b].total_cmp(&p[a]));
+        for (ci, v) in pc.iter().enumerate() {
+            out.class_probabilities[[i, ci]] = *v;
+        }
+        for (mi, &k) in order.iter().take(m).enumerate() {
+            out.probabilities[[i, mi]] = p[k];
+            out.mode_classes[[i, mi]] = class_of[k] as i64;
+            out.mode_anchors[[i, mi]] = k as i64;
+            let Some(anchor) = anchors.anchor(k) else { continue };
+            for t in 0..t_f {
+                let local = [
+                    anchor[[t, 0]] + f64::from(offsets[[i, k, t, 0]]),
+                    anchor[[t, 1]] + f64::from(offsets[[i, k, t, 1]]),
+                ];
+                let w = pose.to_world(local);
+                out.trajectories[[i, mi, t, 0]] = w[0];
+                out.trajectories[[i, mi, t, 1]] = w[1];
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::{array, Array4};
+
+    #[test]
+    fn hand_computed_case() {
+        // Two classes: vehicle with 2 anchors, pedestrian with 1; T_f = 1.
+        let anchors = Anchors::new(
+            vec![AgentClass::Vehicle, AgentClass::Pedestrian],
+            vec![array![[[1.0, 0.0]], [[2.0, 0.0]]], array![[[0.0, 1.0]]]],
+        )
+        .unwrap();
+        // p(c) = softmax(ln 3, 0) = (0.75, 0.25); p(k | vehicle) = softmax(0, ln 2) = (1/3, 2/3).
+        let class_logits = array![[3f32.ln(), 0.0]];
+        let anchor_logits = array![[0.0, 2f32.ln(), 5.0]];
+        let mut offsets = Array4::<f32>::zeros((1, 3, 1, 2));
+        offsets[[0, 1, 0, 1]] = 0.5;
+        // Agent at (10, 20) facing +y: local (x, y) → world (10 - y, 20 + x).
+        let pose = AgentPose::new([10.0, 20.0], std::f64::consts::FRAC_PI_2);
+        let d = decode(class_logits.view(), anchor_logits.view(), offsets.view(), &anchors, &[pose], 3).unwrap();
+        let expect_p = [0.5, 0.25, 0.25];
+        for (got, want) in d.probabilities.iter().zip(expect_p) {
+            assert!((got - want).abs() < 1e-6, "{got} vs {want}");
+        }
+        // Mode 0 = vehicle anchor 1 (2, 0) + (0, 0.5) → local (2, 0.5) → world (9.5, 22).
+        assert!((d.trajectories[[0, 0, 0, 0]] - 9.5).abs() < 1e-6);
+        assert!((d.trajectories[[0, 0, 0, 1]] - 22.0).abs() < 1e-6);
+        // Ties keep anchor order: vehicle anchor 0 (local (1, 0) → world (10, 21)), then the pedestrian anchor.
+        assert_eq!(d.mode_anchors.row(0).to_vec(), vec![1, 0, 2]);
+        assert_eq!(d.mode_classes.row(0).to_vec(), vec![0, 0, 1]);
+        assert!((d.trajectories[[0, 1, 0, 1]] - 21.0).abs() < 1e-6);
+        assert!((d.trajectories[[0, 2, 0, 0]] - 9.0).abs() < 1e-6);
+        assert!((d.class_probabilities[[0, 0]] - 0.75).abs() < 1e-6);
+    }
+
+    #[test]
+    fn top_m_and_bad_outputs() {
+        let anchors = Anchors::new(vec![AgentClass::Pedestrian], vec![array![[[1.0, 0.0]], [[2.0, 0.0]]]]).unwrap();
+        let pose = AgentPose::new([0.0, 0.0], 0.0);
+        let offsets = Array4::<f32>::zeros((1, 2, 1, 2));
+        let d = decode(array![[0.0f32]].view(), array![[0.0f32, 1.0]].view(), offsets.view(), &anchors, &[pose], 1)
+            .unwrap();
+        assert_eq!(d.trajectories.dim(), (1, 1, 1, 2));
+        assert_eq!(d.trajectories[[0, 0, 0, 0]], 2.0);
+        let nan = decode(array![[f32::NAN]].view(), array![[0.0f32, 1.0]].view(), offsets.view(), &anchors, &[pose], 1);
+        assert!(matches!(nan, Err(DganError::Inference(_))));
+        let shape = decode(array![[0.0f32]].view(), array![[0.0f32]].view(), offsets.view(), &anchors, &[pose], 1);
+        assert!(matches!(shape, Err(DganError::Inference(_))));
+    }
+}

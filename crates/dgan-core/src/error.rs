@@ -1,0 +1,48 @@
+//! The one error type of the engine.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in `dgan-core`. Each variant maps to its own Python exception class in the
+/// bindings, so a caller can tell bad input from a bad model from a runtime failure.
+#[derive(Debug, thiserror::Error)]
+pub enum DganError {
+    /// The frame's arrays are inconsistent or hold invalid values (NaN, infinities, wrong shapes, empty histories).
+    #[error("invalid frame: {0}")]
+    InvalidFrame(String),
+    /// A class name or index that neither the engine nor the model knows.
+    #[error("unknown class: {0}")]
+    UnknownClass(String),
+    /// A raster or vector map that cannot be used (bad image shape, singular homography, degenerate geometry).
+    #[error("invalid map: {0}")]
+    InvalidMap(String),
+    /// A preprocessing or model specification that cannot be satisfied (e.g. zero steps, a negative resolution).
+    #[error("invalid specification: {0}")]
+    InvalidSpec(String),
+    /// The model file does not exist.
+    #[error("model file not found: {}", .0.display())]
+    ModelNotFound(PathBuf),
+    /// The model file exists but ONNX Runtime cannot read it (corrupt, truncated, not ONNX).
+    #[error("cannot load model {}: {reason}", path.display())]
+    ModelLoad {
+        /// The file that failed to load.
+        path: PathBuf,
+        /// What ONNX Runtime said.
+        reason: String,
+    },
+    /// The model loads but breaks the model contract (inputs, outputs or metadata); see `docs/model-contract.md`.
+    #[error("model breaks the dgan model contract: {0}")]
+    Contract(String),
+    /// The ONNX Runtime shared library could not be found or loaded.
+    #[error("ONNX Runtime library: {0}")]
+    RuntimeLibrary(String),
+    /// ONNX Runtime failed while running a loaded, contract-checked model.
+    #[error("inference failed: {0}")]
+    Inference(String),
+}
+
+/// Result alias of the engine.
+pub type Result<T> = std::result::Result<T, DganError>;
+
+pub(crate) fn invalid_frame(msg: impl Into<String>) -> DganError {
+    DganError::InvalidFrame(msg.into())
+}

@@ -1,0 +1,274 @@
+//! The scene at the current time t_obs: every agent's observed history and optional state, plus an optional map.
+
+use crate::class::AgentClass;
+use crate::error::{invalid_frame, Result};
+use crate::map::SceneMap;
+use ndarray::{Array2, Array3, ArrayView2};
+use std::collections::HashSet;
+use std::sync::Arc;
+
+/// The scene at the current time. Positions are world metres, oldest step first; the last step is t_obs.
+///
+/// Optional per-agent values use NaN for "not given for this agent": headings then come from the motion,
+/// velocities from the history, lengths and widths from the class defaults.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    ids: Vec<i64>,
+    classes: Vec<AgentClass>,
+    positions: Array3<f64>,
+    mask: Array2<bool>,
+    headings: Vec<Option<f64>>,
+    velocities: Vec<Option<[f64; 2]>>,
+    lengths: Vec<f64>,
+    widths: Vec<f64>,
+    map: Option<Arc<SceneMap>>,
+}
+
+impl Frame {
+    /// A frame of `N` agents from positions `(N, T, 2)`, a validity mask `(N, T)` (all valid if `None`) and
+    /// one class per agent. Every agent needs at least one valid step, and valid positions must be finite.
+    /// Ids default to `0..N`.
+    pub fn new(positions: Array3<f64>, mask: Option<Array2<bool>>, classes: Vec<AgentClass>) -> Result<Self> {
+        let (n, t, d) = positions.dim();
+        if d != 2 {
+            return Err(invalid_frame(format!("positions must have shape (N, T, 2), got ({n}, {t}, {d})")));
+        }
+        if n > 0 && t == 0 {
+            return Err(invalid_frame("positions have no time steps (T = 0)"));
+        }
+        let mask = match mask {
+            Some(m) => {
+                if m.dim() != (n, t) {
+                    return Err(invalid_frame(format!("mask must have shape (N, T) = ({n}, {t}), got {:?}", m.dim())));
+                }
+                m
+            }
+            None => Array2::from_elem((n, t), true),
+        };
+        if classes.len() != n {
+            return Err(invalid_frame(format!("{} classes given for {n} agents", classes.len())));
+        }
+        for i in 0..n {
+            let mut any = false;
+            for s in 0..t {
+                if !mask[[i, s]] {
+                    continue;
+                }
+                any = true;
+                let (x, y) = (positions[[i, s, 0]], positions[[i, s, 1]]);
+                if !x.is_finite() || !y.is_finite() {
+                    return Err(invalid_frame(format!(
+                        "agent {i} has a non-finite position ({x}, {y}) at valid step {s}; mark the step invalid in \
+                         the mask or fix the value"
+                    )));
+                }
+            }
+            if !any {
+                return Err(invalid_frame(format!("agent {i} has no valid step in its mask")));
+            }
+        }
+        let lengths = classes.iter().map(|c| c.default_length_m()).collect();
+        let widths = classes.iter().map(|c| c.default_width_m()).collect();
+        Ok(Self {
+            ids: (0..n as i64).collect(),
+            classes,
+            positions: positions.as_standard_layout().to_owned(),
+            mask: mask.as_standard_layout().to_owned(),
+            headings: vec![None; n],
+            velocities: vec![None; n],
+            lengths,
+            widths,
+            map: None,
+        })
+    }
+
+    /// Sets the agents' ids, which must be unique.
+    pub fn with_ids(mut self, ids: Vec<i64>) -> Result<Self> {
+        self.check_len("ids", ids.len())?;
+        let mut seen = HashSet::with_capacity(ids.len());
+        if let Some(dup) = ids.iter().find(|id| !seen.insert(**id)) {
+            return Err(invalid_frame(format!("agent id {dup} appears more than once")));
+        }
+        self.ids = ids;
+        Ok(self)
+    }
+
+    /// Sets headings in radians (world frame); NaN means "not given" for that agent.
+    pub fn with_headings(mut self, headings: &[f64]) -> Result<Self> {
+        self.check_len("headings", headings.len())?;
+        if let Some(i) = headings.iter().position(|h| h.is_infinite()) {
+            return Err(invalid_frame(format!("heading of agent {i} is infinite")));
+        }
+        self.headings = headings.iter().map(|h| (!h.is_nan()).then_some(*h)).collect();
+        Ok(self)
+    }
+
+    /// Sets current velocities `(N, 2)` in m/s (world frame); a NaN row means "not given" for that agent.
+    pub fn with_velocities(mut self, velocities: ArrayView2<'_, f64>) -> Result<Self> {
+        if velocities.ncols() != 2 {
+            return Err(invalid_frame(format!("velocities must have shape (N, 2), got {:?}", velocities.dim())));
+        }
+        self.check_len("velocities", velocities.nrows())?;
+        let mut out = Vec::with_capacity(velocities.nrows());
+        for (i, row) in velocities.rows().into_iter().enumerate() {
+            let (vx, vy) = (row[0], row[1]);
+            if vx.is_nan() || vy.is_nan() {
+                out.push(None);
+            } else if vx.is_infinite() || vy.is_infinite() {
+                return Err(invalid_frame(format!("velocity of agent {i} is infinite")));
+            } else {
+                out.push(Some([vx, vy]));
+            }
+        }
+        self.velocities = out;
+        Ok(self)
+    }
+
+    /// Sets lengths in metres; NaN keeps the class default.
+    pub fn with_lengths(mut self, lengths: &[f64]) -> Result<Self> {
+        self.check_len("lengths", lengths.len())?;
+        Self::merge_sizes("length", &mut self.lengths, lengths)?;
+        Ok(self)
+    }
+
+    /// Sets widths in metres; NaN keeps the class default.
+    pub fn with_widths(mut self, widths: &[f64]) -> Result<Self> {
+        self.check_len("widths", widths.len())?;
+        Self::merge_sizes("width", &mut self.widths, widths)?;
+        Ok(self)
+    }
+
+    /// Attaches the scene's map.
+    pub fn with_map(mut self, map: Arc<SceneMap>) -> Self {
+        self.map = Some(map);
+        self
+    }
+
+    fn merge_sizes(what: &str, target: &mut [f64], given: &[f64]) -> Result<()> {
+        for (i, (t, g)) in target.iter_mut().zip(given).enumerate() {
+            if g.is_nan() {
+                continue;
+            }
+            if !g.is_finite() || *g <= 0.0 {
+                return Err(invalid_frame(format!("{what} of agent {i} must be a positive number of metres, got {g}")));
+            }
+            *t = *g;
+        }
+        Ok(())
+    }
+
+    fn check_len(&self, what: &str, len: usize) -> Result<()> {
+        if len != self.len() {
+            return Err(invalid_frame(format!("{len} {what} given for {} agents", self.len())));
+        }
+        Ok(())
+    }
+
+    /// Number of agents N.
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Whether the scene has no agent.
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    /// Number of observed steps T.
+    pub fn steps(&self) -> usize {
+        self.positions.dim().1
+    }
+
+    /// Agent ids.
+    pub fn ids(&self) -> &[i64] {
+        &self.ids
+    }
+
+    /// Agent classes.
+    pub fn classes(&self) -> &[AgentClass] {
+        &self.classes
+    }
+
+    /// Observed world positions `(N, T, 2)`.
+    pub fn positions(&self) -> &Array3<f64> {
+        &self.positions
+    }
+
+    /// Validity mask `(N, T)`.
+    pub fn mask(&self) -> &Array2<bool> {
+        &self.mask
+    }
+
+    /// Given headings (world radians), `None` where not given.
+    pub fn headings(&self) -> &[Option<f64>] {
+        &self.headings
+    }
+
+    /// Given velocities (world m/s), `None` where not given.
+    pub fn velocities(&self) -> &[Option<[f64; 2]>] {
+        &self.velocities
+    }
+
+    /// Lengths in metres (given or class default).
+    pub fn lengths(&self) -> &[f64] {
+        &self.lengths
+    }
+
+    /// Widths in metres (given or class default).
+    pub fn widths(&self) -> &[f64] {
+        &self.widths
+    }
+
+    /// The scene's map, if any.
+    pub fn map(&self) -> Option<&SceneMap> {
+        self.map.as_deref()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::error::DganError;
+    use ndarray::{array, Array3};
+
+    fn two_agents() -> Array3<f64> {
+        Array3::from_shape_fn((2, 3, 2), |(i, t, d)| (i * 10 + t) as f64 + d as f64 * 0.5)
+    }
+
+    #[test]
+    fn accepts_a_valid_frame_and_fills_defaults() {
+        let f = Frame::new(two_agents(), None, vec![AgentClass::Vehicle, AgentClass::Pedestrian]).unwrap();
+        assert_eq!(f.len(), 2);
+        assert_eq!(f.lengths(), &[4.5, 0.5]);
+        let f = f.with_lengths(&[f64::NAN, 0.7]).unwrap().with_headings(&[0.3, f64::NAN]).unwrap();
+        assert_eq!(f.lengths(), &[4.5, 0.7]);
+        assert_eq!(f.headings(), &[Some(0.3), None]);
+    }
+
+    #[test]
+    fn rejects_bad_frames() {
+        let classes = vec![AgentClass::Vehicle, AgentClass::Pedestrian];
+        let mut p = two_agents();
+        p[[1, 2, 0]] = f64::NAN;
+        assert!(matches!(Frame::new(p.clone(), None, classes.clone()), Err(DganError::InvalidFrame(_))));
+        // The same NaN at a masked-out step is fine.
+        let mask = array![[true, true, true], [true, true, false]];
+        assert!(Frame::new(p, Some(mask), classes.clone()).is_ok());
+        let empty = array![[true, true, true], [false, false, false]];
+        let err = Frame::new(two_agents(), Some(empty), classes.clone()).unwrap_err();
+        assert!(err.to_string().contains("agent 1 has no valid step"), "{err}");
+        assert!(Frame::new(two_agents(), None, vec![AgentClass::Vehicle]).is_err());
+        assert!(Frame::new(Array3::zeros((2, 3, 3)), None, classes.clone()).is_err());
+        let f = Frame::new(two_agents(), None, classes).unwrap();
+        assert!(f.clone().with_ids(vec![4, 4]).is_err());
+        assert!(f.clone().with_lengths(&[1.0, -1.0]).is_err());
+        assert!(f.clone().with_headings(&[f64::INFINITY, 0.0]).is_err());
+        assert!(f.with_widths(&[1.0]).is_err());
+    }
+
+    #[test]
+    fn empty_frame_is_valid() {
+        let f = Frame::new(Array3::zeros((0, 8, 2)), None, vec![]).unwrap();
+        assert!(f.is_empty());
+    }
+}

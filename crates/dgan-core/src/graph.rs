@@ -1,0 +1,109 @@
+//! The dynamic attention-zone graph: each agent has a circle of radius r_i = speed_i · T_f + λ · length_i around
+//! its position at t_obs, and two agents are joined when their circles intersect (touching counts).
+//!
+//! [`attention_zone_edges`] gives exactly the edges of the O(N²) definition ([`attention_zone_edges_brute_force`])
+//! from an R-tree of the circles' bounding boxes: O(N log N + E).
+
+use crate::error::{DganError, Result};
+use rayon::prelude::*;
+use rstar::primitives::{GeomWithData, Rectangle};
+use rstar::{RTree, AABB};
+
+/// The attention radius r = speed · horizon + λ · length, in metres.
+pub fn attention_radius(speed_mps: f64, horizon_s: f64, lambda: f64, length_m: f64) -> f64 {
+    speed_mps * horizon_s + lambda * length_m
+}
+
+fn check(centres: &[[f64; 2]], radii: &[f64]) -> Result<()> {
+    if centres.len() != radii.len() {
+        return Err(DganError::InvalidFrame(format!("{} centres but {} radii", centres.len(), radii.len())));
+    }
+    if centres.len() > u32::MAX as usize {
+        return Err(DganError::InvalidFrame("too many agents for a u32 graph index".into()));
+    }
+    if let Some(i) = radii.iter().position(|r| !(r.is_finite() && *r >= 0.0)) {
+        return Err(DganError::InvalidFrame(format!("attention radius of agent {i} is {}", radii[i])));
+    }
+    if let Some(i) = centres.iter().position(|c| !(c[0].is_finite() && c[1].is_finite())) {
+        return Err(DganError::InvalidFrame(format!("position of agent {i} is not finite")));
+    }
+    Ok(())
+}
+
+#[inline]
+fn intersects(a: [f64; 2], ra: f64, b: [f64; 2], rb: f64) -> bool {
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    let r = ra + rb;
+    dx * dx + dy * dy <= r * r
+}
+
+/// Undirected edges `[i, j]` with `i < j`, sorted, between agents whose attention circles intersect.
+pub fn attention_zone_edges(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[u32; 2]>> {
+    check(centres, radii)?;
+    let boxes: Vec<GeomWithData<Rectangle<[f64; 2]>, u32>> = centres
+        .iter()
+        .zip(radii)
+        .enumerate()
+        .map(|(i, (c, r))| {
+            GeomWithData::new(Rectangle::from_corners([c[0] - r, c[1] - r], [c[0] + r, c[1] + r]), i as u32)
+        })
+        .collect();
+    let tree = RTree::bulk_load(boxes);
+    let per_agent: Vec<Vec<[u32; 2]>> = (0..centres.len())
+        .into_par_iter()
+        .map(|i| {
+            let (c, r) = (centres[i], radii[i]);
+            let envelope = AABB::from_corners([c[0] - r, c[1] - r], [c[0] + r, c[1] + r]);
+            let mut out: Vec<[u32; 2]> = tree
+                .locate_in_envelope_intersecting(&envelope)
+                .map(|g| g.data)
+                .filter(|&j| (j as usize) > i && intersects(c, r, centres[j as usize], radii[j as usize]))
+                .map(|j| [i as u32, j])
+                .collect();
+            out.sort_unstable();
+            out
+        })
+        .collect();
+    Ok(per_agent.concat())
+}
+
+/// The O(N²) definition, for tests and benchmarks.
+pub fn attention_zone_edges_brute_force(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[u32; 2]>> {
+    check(centres, radii)?;
+    let mut out = Vec::new();
+    for i in 0..centres.len() {
+        for j in i + 1..centres.len() {
+            if intersects(centres[i], radii[i], centres[j], radii[j]) {
+                out.push([i as u32, j as u32]);
+            }
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn touching_circles_are_joined() {
+        let c = [[0.0, 0.0], [3.0, 0.0], [10.0, 0.0]];
+        let r = [1.0, 2.0, 1.0];
+        assert_eq!(attention_zone_edges(&c, &r).unwrap(), vec![[0, 1]]);
+        assert_eq!(attention_zone_edges_brute_force(&c, &r).unwrap(), vec![[0, 1]]);
+    }
+
+    #[test]
+    fn radius_follows_the_paper() {
+        // 1.5 m/s over 4.8 s plus 0.5 × 0.5 m.
+        assert!((attention_radius(1.5, 4.8, 0.5, 0.5) - 7.45).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_radii_are_errors() {
+        assert!(attention_zone_edges(&[[0.0, 0.0]], &[f64::NAN]).is_err());
+        assert!(attention_zone_edges(&[[0.0, 0.0]], &[-1.0]).is_err());
+        assert!(attention_zone_edges(&[[0.0, 0.0]], &[]).is_err());
+        assert!(attention_zone_edges(&[], &[]).unwrap().is_empty());
+    }
+}

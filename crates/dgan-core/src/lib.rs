@@ -1,0 +1,48 @@
+//! # dgan-core
+//!
+//! The engine of DGAN, the Dynamic Graph Attention Network for multi-modal trajectory prediction
+//! (Dong et al., 2020): everything around the network, in pure Rust.
+//!
+//! - [`frame`]: the scene at t_obs, validated; [`map`]: raster and vector maps.
+//! - [`state`]: speed, acceleration, heading and yaw rate from the history; [`transform`]: agent-centric SE(2).
+//! - [`graph`]: the attention-zone graph r = v · T_f + λ · length, sub-quadratic and exact.
+//! - [`raster`]: agent-centric RGB map crops in the paper's colours.
+//! - [`preprocess`]: frame → network inputs; [`decode`]: p(c) · p(k | c), anchors + offsets → world modes.
+//! - [`contract`]: the model contract; [`runtime`]: the ONNX Runtime session and [`Predictor`].
+//!
+//! ```no_run
+//! use dgan_core::{AgentClass, Frame, Predictor};
+//! use ndarray::Array3;
+//!
+//! # fn main() -> dgan_core::Result<()> {
+//! let predictor = Predictor::load("model.onnx")?; // ONNX Runtime from ORT_DYLIB_PATH
+//! let positions = Array3::<f64>::zeros((1, 8, 2));
+//! let frame = Frame::new(positions, None, vec![AgentClass::Pedestrian])?;
+//! let prediction = predictor.predict(&frame)?;
+//! println!("{:?}", prediction.probabilities);
+//! # Ok(())
+//! # }
+//! ```
+#![warn(missing_docs)]
+
+pub mod class;
+pub mod contract;
+pub mod decode;
+pub mod error;
+pub mod frame;
+pub mod graph;
+pub mod map;
+pub mod preprocess;
+pub mod raster;
+pub mod runtime;
+pub mod spec;
+pub mod state;
+pub mod transform;
+
+pub use class::AgentClass;
+pub use contract::ModelContract;
+pub use error::{DganError, Result};
+pub use frame::Frame;
+pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
+pub use runtime::{init_onnxruntime, Prediction, Predictor, PredictorOptions};
+pub use spec::{InputSpec, MapSpec};

@@ -1,0 +1,259 @@
+//! Scene maps: a raster map (an RGB image and its world→pixel homography, as ETH/UCY and Stanford Drone provide)
+//! or a vector map (typed polylines and polygons of a semantic HD map, in world metres).
+
+use crate::error::{DganError, Result};
+use nalgebra::{Matrix3, Vector3};
+use ndarray::Array3;
+use std::fmt;
+use std::str::FromStr;
+
+/// A map of the scene, shared by every frame of it.
+#[derive(Debug, Clone)]
+pub enum SceneMap {
+    /// An image of the scene with its homography.
+    Raster(RasterMap),
+    /// Typed polylines and polygons in world metres.
+    Vector(VectorMap),
+}
+
+/// An RGB image of the scene and the homography from world metres to its pixels.
+///
+/// Pixel coordinates are `(u, v)` = (column, row), with integer values at pixel centres.
+#[derive(Debug, Clone)]
+pub struct RasterMap {
+    image: Array3<u8>,
+    world_to_pixel: Matrix3<f64>,
+}
+
+impl RasterMap {
+    /// Checks and wraps an `(H, W, 3)` RGB image and its 3×3 world→pixel homography (row-major).
+    pub fn new(image: Array3<u8>, world_to_pixel: [[f64; 3]; 3]) -> Result<Self> {
+        let (h, w, c) = image.dim();
+        if h == 0 || w == 0 || c != 3 {
+            return Err(DganError::InvalidMap(format!(
+                "raster image must have shape (H, W, 3) with H, W > 0, got ({h}, {w}, {c})"
+            )));
+        }
+        let m = Matrix3::from_row_slice(&world_to_pixel.concat());
+        if m.iter().any(|v| !v.is_finite()) {
+            return Err(DganError::InvalidMap("world_to_pixel holds NaN or infinite values".into()));
+        }
+        let det = m.determinant();
+        if !det.is_normal() {
+            return Err(DganError::InvalidMap(format!("world_to_pixel is singular (determinant {det:e})")));
+        }
+        Ok(Self { image: image.as_standard_layout().to_owned(), world_to_pixel: m })
+    }
+
+    /// The image, `(H, W, 3)`.
+    pub fn image(&self) -> &Array3<u8> {
+        &self.image
+    }
+
+    /// The world→pixel homography.
+    pub fn world_to_pixel(&self) -> &Matrix3<f64> {
+        &self.world_to_pixel
+    }
+
+    /// Projects a world point to continuous pixel coordinates `(u, v)`; `None` behind the projection's horizon.
+    pub fn project(&self, world: [f64; 2]) -> Option<[f64; 2]> {
+        let p = self.world_to_pixel * Vector3::new(world[0], world[1], 1.0);
+        if p.z.abs() < 1e-12 || !p.z.is_finite() {
+            return None;
+        }
+        Some([p.x / p.z, p.y / p.z])
+    }
+
+    /// Bilinear sample of the image at continuous pixel `(u, v)`; black outside the image.
+    pub fn sample(&self, uv: [f64; 2]) -> [f32; 3] {
+        let (h, w, _) = self.image.dim();
+        let (u, v) = (uv[0], uv[1]);
+        if !(u > -1.0 && v > -1.0 && u < w as f64 && v < h as f64) {
+            return [0.0; 3];
+        }
+        let (u0, v0) = (u.floor(), v.floor());
+        let (fu, fv) = ((u - u0) as f32, (v - v0) as f32);
+        let mut out = [0.0f32; 3];
+        for (dv, wv) in [(0i64, 1.0 - fv), (1, fv)] {
+            for (du, wu) in [(0i64, 1.0 - fu), (1, fu)] {
+                let (row, col) = (v0 as i64 + dv, u0 as i64 + du);
+                let wgt = wu * wv;
+                if wgt == 0.0 || row < 0 || col < 0 || row >= h as i64 || col >= w as i64 {
+                    continue;
+                }
+                for (ch, o) in out.iter_mut().enumerate() {
+                    *o += wgt * f32::from(self.image[[row as usize, col as usize, ch]]);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The element types of a vector map, each drawn in the paper's colour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MapElementKind {
+    /// Lane centre line (polyline, green).
+    LaneCenterline,
+    /// Dashed lane line (polyline, dotted white).
+    LaneLineDashed,
+    /// Solid lane or edge line (polyline, solid white).
+    LaneLineSolid,
+    /// Road boundary or curb (polyline, yellow).
+    RoadEdge,
+    /// Pedestrian crossing (polygon, grey).
+    Crosswalk,
+    /// Bicycle lane (polygon, white region).
+    BikeLane,
+    /// Median, barrier or other static obstacle (polygon, pink).
+    Obstacle,
+}
+
+impl MapElementKind {
+    /// Every kind, in drawing order (regions first, then lines).
+    pub const ALL: [MapElementKind; 7] = [
+        MapElementKind::BikeLane,
+        MapElementKind::Crosswalk,
+        MapElementKind::Obstacle,
+        MapElementKind::RoadEdge,
+        MapElementKind::LaneLineSolid,
+        MapElementKind::LaneLineDashed,
+        MapElementKind::LaneCenterline,
+    ];
+
+    /// The name used in the Python API.
+    pub fn name(self) -> &'static str {
+        match self {
+            MapElementKind::LaneCenterline => "lane_centerline",
+            MapElementKind::LaneLineDashed => "lane_line_dashed",
+            MapElementKind::LaneLineSolid => "lane_line_solid",
+            MapElementKind::RoadEdge => "road_edge",
+            MapElementKind::Crosswalk => "crosswalk",
+            MapElementKind::BikeLane => "bike_lane",
+            MapElementKind::Obstacle => "obstacle",
+        }
+    }
+
+    /// Whether the element is a filled polygon (else a polyline).
+    pub fn is_polygon(self) -> bool {
+        matches!(self, MapElementKind::Crosswalk | MapElementKind::BikeLane | MapElementKind::Obstacle)
+    }
+}
+
+impl fmt::Display for MapElementKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for MapElementKind {
+    type Err = DganError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == s.trim()).ok_or_else(|| {
+            let names: Vec<_> = Self::ALL.iter().map(|k| k.name()).collect();
+            DganError::InvalidMap(format!("unknown map element kind {s:?}; known kinds: {}", names.join(", ")))
+        })
+    }
+}
+
+/// One typed polyline or polygon, in world metres.
+#[derive(Debug, Clone)]
+pub struct MapElement {
+    kind: MapElementKind,
+    points: Vec<[f64; 2]>,
+    bbox: [f64; 4],
+}
+
+impl MapElement {
+    /// Checks an element: finite points, at least 2 for a polyline and 3 for a polygon.
+    pub fn new(kind: MapElementKind, points: Vec<[f64; 2]>) -> Result<Self> {
+        let min = if kind.is_polygon() { 3 } else { 2 };
+        if points.len() < min {
+            return Err(DganError::InvalidMap(format!("a {kind} needs at least {min} points, got {}", points.len())));
+        }
+        if points.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(DganError::InvalidMap(format!("a {kind} has NaN or infinite coordinates")));
+        }
+        let mut bbox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for p in &points {
+            bbox = [bbox[0].min(p[0]), bbox[1].min(p[1]), bbox[2].max(p[0]), bbox[3].max(p[1])];
+        }
+        Ok(Self { kind, points, bbox })
+    }
+
+    /// Its kind.
+    pub fn kind(&self) -> MapElementKind {
+        self.kind
+    }
+
+    /// Its vertices, world metres.
+    pub fn points(&self) -> &[[f64; 2]] {
+        &self.points
+    }
+
+    /// Axis-aligned bounds `[min_x, min_y, max_x, max_y]`.
+    pub fn bbox(&self) -> [f64; 4] {
+        self.bbox
+    }
+}
+
+/// A semantic vector map: typed polylines and polygons in world metres.
+#[derive(Debug, Clone, Default)]
+pub struct VectorMap {
+    elements: Vec<MapElement>,
+}
+
+impl VectorMap {
+    /// A map of the given elements, kept in drawing order (regions under lines).
+    pub fn new(mut elements: Vec<MapElement>) -> Self {
+        elements.sort_by_key(|e| MapElementKind::ALL.iter().position(|k| *k == e.kind));
+        Self { elements }
+    }
+
+    /// The elements, in drawing order.
+    pub fn elements(&self) -> &[MapElement] {
+        &self.elements
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array3;
+
+    #[test]
+    fn raster_rejects_bad_inputs() {
+        let ident = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        assert!(RasterMap::new(Array3::zeros((4, 4, 3)), ident).is_ok());
+        assert!(matches!(RasterMap::new(Array3::zeros((4, 4, 1)), ident), Err(DganError::InvalidMap(_))));
+        assert!(matches!(RasterMap::new(Array3::zeros((0, 4, 3)), ident), Err(DganError::InvalidMap(_))));
+        let singular = [[1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        assert!(matches!(RasterMap::new(Array3::zeros((4, 4, 3)), singular), Err(DganError::InvalidMap(_))));
+        let nan = [[f64::NAN, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        assert!(matches!(RasterMap::new(Array3::zeros((4, 4, 3)), nan), Err(DganError::InvalidMap(_))));
+    }
+
+    #[test]
+    fn bilinear_sample_interpolates_between_centres() {
+        let mut img = Array3::<u8>::zeros((1, 2, 3));
+        img[[0, 1, 0]] = 200;
+        let m = RasterMap::new(img, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]).unwrap();
+        assert_eq!(m.sample([0.0, 0.0])[0], 0.0);
+        assert_eq!(m.sample([1.0, 0.0])[0], 200.0);
+        assert!((m.sample([0.5, 0.0])[0] - 100.0).abs() < 1e-4);
+        assert_eq!(m.sample([5.0, 0.0]), [0.0; 3]);
+    }
+
+    #[test]
+    fn elements_are_checked_and_ordered() {
+        assert!(MapElement::new(MapElementKind::Crosswalk, vec![[0.0, 0.0], [1.0, 0.0]]).is_err());
+        assert!(MapElement::new(MapElementKind::RoadEdge, vec![[0.0, 0.0], [f64::NAN, 0.0]]).is_err());
+        let line = MapElement::new(MapElementKind::LaneCenterline, vec![[0.0, 0.0], [1.0, 0.0]]).unwrap();
+        let poly = MapElement::new(MapElementKind::Crosswalk, vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]).unwrap();
+        let map = VectorMap::new(vec![line, poly]);
+        assert_eq!(map.elements()[0].kind(), MapElementKind::Crosswalk);
+        assert_eq!("road_edge".parse::<MapElementKind>().unwrap(), MapElementKind::RoadEdge);
+        assert!("river".parse::<MapElementKind>().is_err());
+    }
+}

@@ -1,0 +1,194 @@
+//! Frame → the exact tensors the network receives. Training calls this same code through the Python bindings, so
+//! training and inference cannot drift.
+
+use crate::error::{invalid_frame, Result};
+use crate::frame::Frame;
+use crate::graph::{attention_radius, attention_zone_edges};
+use crate::raster::rasterize;
+use crate::spec::{InputSpec, EDGE_FEATURES, STATE_FEATURES};
+use crate::state::{traffic_states, TrafficState};
+use crate::transform::{wrap_angle, AgentPose};
+use ndarray::{Array2, Array3, Array4};
+
+/// The network's input tensors (see `docs/model-contract.md`).
+#[derive(Debug, Clone)]
+pub struct NetworkInputs {
+    /// `(N, T_obs, 2)` agent-centric observed positions, zero at invalid steps.
+    pub trajectory: Array3<f32>,
+    /// `(N, T_obs)` 1 where a step was observed, else 0.
+    pub trajectory_mask: Array2<f32>,
+    /// `(N, 7 + C)` traffic state: speed, acceleration, yaw rate, direction of motion in the agent frame (cos, sin),
+    /// length, width, one-hot class.
+    pub state: Array2<f32>,
+    /// `(E, 2)` directed edges `[receiver, sender]`, self-loops included, sorted.
+    pub edge_index: Array2<i64>,
+    /// `(E, 6)` the sender's position, velocity relative to the receiver's, and heading, in the receiver's frame.
+    pub edge_features: Array2<f32>,
+    /// `(N, 3, H, W)` agent-centric map crops, for models with a map branch.
+    pub map: Option<Array4<f32>>,
+}
+
+/// A preprocessed frame: network inputs plus the geometry needed to decode and inspect the outputs.
+#[derive(Debug, Clone)]
+pub struct Preprocessed {
+    /// The network inputs.
+    pub inputs: NetworkInputs,
+    /// Each agent's frame at t_obs.
+    pub poses: Vec<AgentPose>,
+    /// Each agent's traffic state.
+    pub states: Vec<TrafficState>,
+    /// Each agent's attention radius, metres.
+    pub radii: Vec<f64>,
+    /// Undirected attention-zone edges `[i, j]`, `i < j`.
+    pub edges: Vec<[u32; 2]>,
+}
+
+/// Builds the network inputs of a frame.
+pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
+    spec.validate()?;
+    let n = frame.len();
+    if n > 0 && frame.steps() != spec.t_obs {
+        return Err(invalid_frame(format!(
+            "the frame has {} observed steps but the model observes T_obs = {}",
+            frame.steps(),
+            spec.t_obs
+        )));
+    }
+    let class_idx: Vec<usize> = frame.classes().iter().map(|c| spec.class_index(*c)).collect::<Result<_>>()?;
+    let states = traffic_states(frame, spec.dt_s);
+    let poses: Vec<AgentPose> = states.iter().map(TrafficState::pose).collect();
+
+    let mut trajectory = Array3::<f32>::zeros((n, spec.t_obs, 2));
+    let mut trajectory_mask = Array2::<f32>::zeros((n, spec.t_obs));
+    let (pos, mask) = (frame.positions(), frame.mask());
+    for (i, pose) in poses.iter().enumerate() {
+        for t in 0..spec.t_obs {
+            if mask[[i, t]] {
+                let l = pose.to_local([pos[[i, t, 0]], pos[[i, t, 1]]]);
+                trajectory[[i, t, 0]] = l[0] as f32;
+                trajectory[[i, t, 1]] = l[1] as f32;
+                trajectory_mask[[i, t]] = 1.0;
+            }
+        }
+    }
+
+    let mut state = Array2::<f32>::zeros((n, spec.state_dim()));
+    for (i, (s, pose)) in states.iter().zip(&poses).enumerate() {
+        let v = pose.vector_to_local(s.velocity);
+        let (mc, ms) = if s.speed > 0.0 { (v[0] / s.speed, v[1] / s.speed) } else { (1.0, 0.0) };
+        let row = [s.speed, s.acceleration, s.yaw_rate, mc, ms, s.length, s.width];
+        debug_assert_eq!(row.len(), STATE_FEATURES.len());
+        for (k, v) in row.iter().enumerate() {
+            state[[i, k]] = *v as f32;
+        }
+        state[[i, STATE_FEATURES.len() + class_idx[i]]] = 1.0;
+    }
+
+    let centres: Vec<[f64; 2]> = states.iter().map(|s| s.position).collect();
+    let radii: Vec<f64> =
+        states.iter().map(|s| attention_radius(s.speed, spec.horizon_s(), spec.attention_lambda, s.length)).collect();
+    let edges = attention_zone_edges(&centres, &radii)?;
+
+    let mut neighbours: Vec<Vec<usize>> = (0..n).map(|i| vec![i]).collect();
+    for [i, j] in &edges {
+        neighbours[*i as usize].push(*j as usize);
+        neighbours[*j as usize].push(*i as usize);
+    }
+    let e = n + 2 * edges.len();
+    let mut edge_index = Array2::<i64>::zeros((e, 2));
+    let mut edge_features = Array2::<f32>::zeros((e, EDGE_FEATURES.len()));
+    let mut row = 0;
+    for (i, senders) in neighbours.iter_mut().enumerate() {
+        senders.sort_unstable();
+        let (pi, si) = (poses[i], states[i]);
+        for &j in senders.iter() {
+            let sj = states[j];
+            let d = pi.to_local(sj.position);
+            let dv = pi.vector_to_local([sj.velocity[0] - si.velocity[0], sj.velocity[1] - si.velocity[1]]);
+            let dh = wrap_angle(sj.heading - si.heading);
+            edge_index[[row, 0]] = i as i64;
+            edge_index[[row, 1]] = j as i64;
+            for (k, v) in [d[0], d[1], dv[0], dv[1], dh.cos(), dh.sin()].iter().enumerate() {
+                edge_features[[row, k]] = *v as f32;
+            }
+            row += 1;
+        }
+    }
+
+    let map = match &spec.map {
+        Some(m) => Some(rasterize(frame, &states, m)?),
+        None => None,
+    };
+    Ok(Preprocessed {
+        inputs: NetworkInputs { trajectory, trajectory_mask, state, edge_index, edge_features, map },
+        poses,
+        states,
+        radii,
+        edges,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::class::AgentClass;
+    use crate::error::DganError;
+    use crate::spec::MapSpec;
+    use ndarray::Array3;
+
+    fn spec(map: bool) -> InputSpec {
+        InputSpec {
+            dt_s: 0.5,
+            t_obs: 3,
+            t_f: 4,
+            classes: vec![AgentClass::Vehicle, AgentClass::Pedestrian],
+            attention_lambda: 0.5,
+            map: map.then_some(MapSpec {
+                height_px: 8,
+                width_px: 8,
+                resolution_m: 1.0,
+                agent_row: 6,
+                agent_col: 4,
+                draw_agents: true,
+            }),
+        }
+    }
+
+    #[test]
+    fn builds_inputs() {
+        // Agent 0 walks +x at 1 m/s; agent 1 stands 2 m ahead of it at t_obs; agent 2 is 1 km away.
+        let mut p = Array3::zeros((3, 3, 2));
+        for t in 0..3 {
+            p[[0, t, 0]] = 0.5 * t as f64;
+            p[[1, t, 0]] = 3.0;
+            p[[2, t, 0]] = 1000.0;
+        }
+        let f = Frame::new(p, None, vec![AgentClass::Pedestrian, AgentClass::Pedestrian, AgentClass::Vehicle]).unwrap();
+        let pre = preprocess(&f, &spec(true)).unwrap();
+        let x = &pre.inputs;
+        assert_eq!(x.trajectory.dim(), (3, 3, 2));
+        assert_eq!(x.trajectory[[0, 0, 0]], -1.0);
+        assert_eq!(x.state.row(0).to_vec(), vec![1.0, 0.0, 0.0, 1.0, 0.0, 0.5, 0.5, 0.0, 1.0]);
+        assert_eq!(x.state[[2, 7]], 1.0);
+        // r0 = 1 m/s · 2 s + 0.5 · 0.5 m = 2.25, r1 = 0.25: 2 m apart, they meet; agent 2 is alone.
+        assert_eq!(pre.edges, vec![[0, 1]]);
+        let ei: Vec<[i64; 2]> = x.edge_index.rows().into_iter().map(|r| [r[0], r[1]]).collect();
+        assert_eq!(ei, vec![[0, 0], [0, 1], [1, 0], [1, 1], [2, 2]]);
+        // Agent 1 seen from agent 0: 2 m ahead, closing at 1 m/s.
+        assert_eq!(x.edge_features.row(1).to_vec(), vec![2.0, 0.0, -1.0, 0.0, 1.0, 0.0]);
+        assert_eq!(x.map.as_ref().map(|m| m.dim()), Some((3, 3, 8, 8)));
+        assert!(preprocess(&f, &spec(false)).unwrap().inputs.map.is_none());
+    }
+
+    #[test]
+    fn rejects_mismatches() {
+        let f = Frame::new(Array3::zeros((1, 5, 2)), None, vec![AgentClass::Pedestrian]).unwrap();
+        assert!(matches!(preprocess(&f, &spec(false)), Err(DganError::InvalidFrame(_))));
+        let f = Frame::new(Array3::zeros((1, 3, 2)), None, vec![AgentClass::Cyclist]).unwrap();
+        assert!(matches!(preprocess(&f, &spec(false)), Err(DganError::UnknownClass(_))));
+        let empty = Frame::new(Array3::zeros((0, 3, 2)), None, vec![]).unwrap();
+        let pre = preprocess(&empty, &spec(true)).unwrap();
+        assert_eq!(pre.inputs.edge_index.dim(), (0, 2));
+        assert_eq!(pre.inputs.map.map(|m| m.dim()), Some((0, 3, 8, 8)));
+    }
+}

@@ -1,0 +1,195 @@
+//! What the network expects of its inputs: time base, classes, attention-zone λ and the map crop.
+//! Written into every model's metadata (see `docs/model-contract.md`) and used by preprocessing.
+
+use crate::class::AgentClass;
+use crate::error::{DganError, Result};
+use serde::{Deserialize, Serialize};
+
+/// The agent-centric map crop each agent's map branch sees.
+///
+/// The crop is `height_px × width_px` at `resolution_m` metres per pixel, heading-aligned: the agent's x axis
+/// (forward) points up the image and its y axis (left) to the image's left. The agent sits at the centre of pixel
+/// `(agent_row, agent_col)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MapSpec {
+    /// Crop height in pixels.
+    pub height_px: usize,
+    /// Crop width in pixels.
+    pub width_px: usize,
+    /// Metres per pixel.
+    pub resolution_m: f64,
+    /// Row of the agent's pixel (0 = top).
+    pub agent_row: usize,
+    /// Column of the agent's pixel (0 = left).
+    pub agent_col: usize,
+    /// Whether the agents are drawn into the crop as blue boxes.
+    #[serde(default = "default_true")]
+    pub draw_agents: bool,
+}
+
+fn default_true() -> bool {
+    true
+}
+
+impl MapSpec {
+    /// Checks the crop's size, resolution and agent pixel.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(DganError::InvalidSpec(m));
+        if !(1..=2048).contains(&self.height_px) || !(1..=2048).contains(&self.width_px) {
+            return bad(format!("map crop must be 1..=2048 pixels a side, got {}×{}", self.height_px, self.width_px));
+        }
+        if !(self.resolution_m.is_finite() && self.resolution_m > 0.0) {
+            return bad(format!("map resolution must be a positive number of metres, got {}", self.resolution_m));
+        }
+        if self.agent_row >= self.height_px || self.agent_col >= self.width_px {
+            return bad(format!(
+                "agent pixel ({}, {}) is outside the {}×{} crop",
+                self.agent_row, self.agent_col, self.height_px, self.width_px
+            ));
+        }
+        Ok(())
+    }
+
+    /// The continuous image coordinates `(col, row)` of a point in the agent's frame (pixel centres at +0.5).
+    pub fn local_to_pixel(&self, local: [f64; 2]) -> [f64; 2] {
+        [
+            self.agent_col as f64 + 0.5 - local[1] / self.resolution_m,
+            self.agent_row as f64 + 0.5 - local[0] / self.resolution_m,
+        ]
+    }
+
+    /// The point of the agent's frame at the centre of pixel `(row, col)`.
+    pub fn pixel_to_local(&self, row: usize, col: usize) -> [f64; 2] {
+        [
+            (self.agent_row as f64 - row as f64) * self.resolution_m,
+            (self.agent_col as f64 - col as f64) * self.resolution_m,
+        ]
+    }
+
+    /// Radius (metres) of a circle around the agent that contains the whole crop.
+    pub fn reach_m(&self) -> f64 {
+        let dr = self.agent_row.max(self.height_px - self.agent_row) as f64 + 1.0;
+        let dc = self.agent_col.max(self.width_px - self.agent_col) as f64 + 1.0;
+        dr.hypot(dc) * self.resolution_m
+    }
+}
+
+/// Everything preprocessing needs to build the network's inputs from a frame.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InputSpec {
+    /// Seconds between steps.
+    pub dt_s: f64,
+    /// Observed steps T_obs (the last is t_obs).
+    pub t_obs: usize,
+    /// Predicted steps T_f.
+    pub t_f: usize,
+    /// The classes the model knows, in the order of its class logits and one-hot state features.
+    pub classes: Vec<AgentClass>,
+    /// λ of the attention zone r = speed · T_f · dt + λ · length.
+    pub attention_lambda: f64,
+    /// The map crop, or `None` for a model without a map branch.
+    pub map: Option<MapSpec>,
+}
+
+impl InputSpec {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(DganError::InvalidSpec(m));
+        if !(self.dt_s.is_finite() && self.dt_s > 0.0) {
+            return bad(format!("dt_s must be a positive number of seconds, got {}", self.dt_s));
+        }
+        if self.t_obs == 0 || self.t_f == 0 {
+            return bad(format!("t_obs and t_f must be at least 1, got {} and {}", self.t_obs, self.t_f));
+        }
+        if self.classes.is_empty() {
+            return bad("a model needs at least one class".into());
+        }
+        let mut sorted = self.classes.clone();
+        sorted.sort();
+        sorted.dedup();
+        if sorted.len() != self.classes.len() {
+            return bad(format!("classes repeat: {:?}", self.classes));
+        }
+        if !(self.attention_lambda.is_finite() && self.attention_lambda >= 0.0) {
+            return bad(format!("attention_lambda must be finite and >= 0, got {}", self.attention_lambda));
+        }
+        if let Some(m) = &self.map {
+            m.validate()?;
+        }
+        Ok(())
+    }
+
+    /// The prediction horizon T_f · dt in seconds.
+    pub fn horizon_s(&self) -> f64 {
+        self.t_f as f64 * self.dt_s
+    }
+
+    /// Index of a class in this model's class order.
+    pub fn class_index(&self, class: AgentClass) -> Result<usize> {
+        self.classes.iter().position(|c| *c == class).ok_or_else(|| {
+            let names: Vec<_> = self.classes.iter().map(|c| c.name()).collect();
+            DganError::UnknownClass(format!("{class}: this model knows only [{}]", names.join(", ")))
+        })
+    }
+
+    /// Width of the traffic-state vector: 7 kinematic and size features plus one one-hot slot per class.
+    pub fn state_dim(&self) -> usize {
+        STATE_FEATURES.len() + self.classes.len()
+    }
+}
+
+/// Names of the kinematic and size features at the start of each agent's traffic-state vector; a one-hot class
+/// vector follows them.
+pub const STATE_FEATURES: [&str; 7] =
+    ["speed_mps", "acceleration_mps2", "yaw_rate_radps", "motion_cos", "motion_sin", "length_m", "width_m"];
+
+/// Names of the per-edge features: the sender's position, velocity and heading in the receiver's frame.
+pub const EDGE_FEATURES: [&str; 6] = ["dx_m", "dy_m", "dvx_mps", "dvy_mps", "heading_cos", "heading_sin"];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    pub(crate) fn spec() -> InputSpec {
+        InputSpec {
+            dt_s: 0.4,
+            t_obs: 8,
+            t_f: 12,
+            classes: vec![AgentClass::Pedestrian],
+            attention_lambda: 0.5,
+            map: Some(MapSpec {
+                height_px: 32,
+                width_px: 32,
+                resolution_m: 0.5,
+                agent_row: 24,
+                agent_col: 16,
+                draw_agents: true,
+            }),
+        }
+    }
+
+    #[test]
+    fn validates() {
+        assert!(spec().validate().is_ok());
+        let mut s = spec();
+        s.dt_s = 0.0;
+        assert!(s.validate().is_err());
+        let mut s = spec();
+        s.classes = vec![AgentClass::Vehicle, AgentClass::Vehicle];
+        assert!(s.validate().is_err());
+        let mut s = spec();
+        s.map.as_mut().unwrap().agent_row = 32;
+        assert!(s.validate().is_err());
+        assert!(spec().class_index(AgentClass::Vehicle).is_err());
+    }
+
+    #[test]
+    fn pixel_and_local_agree() {
+        let m = spec().map.unwrap();
+        let local = m.pixel_to_local(3, 20);
+        let px = m.local_to_pixel(local);
+        assert!((px[0] - 20.5).abs() < 1e-12 && (px[1] - 3.5).abs() < 1e-12);
+        // Straight ahead is straight up.
+        assert_eq!(m.local_to_pixel([2.0, 0.0]), [16.5, 20.5]);
+    }
+}

@@ -1,0 +1,143 @@
+//! Traffic state (speed, acceleration, heading, yaw rate, size) from each agent's history, robust to missing steps.
+
+use crate::frame::Frame;
+use crate::transform::{wrap_angle, AgentPose};
+
+/// Below this speed (m/s) the direction of motion is too noisy to define a heading.
+pub const MIN_MOVING_SPEED_MPS: f64 = 0.2;
+
+/// One agent's state at t_obs, in the world frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrafficState {
+    /// Last observed position (world metres).
+    pub position: [f64; 2],
+    /// Velocity at t_obs (world m/s): given, or from the last two valid steps.
+    pub velocity: [f64; 2],
+    /// |velocity| in m/s.
+    pub speed: f64,
+    /// Tangential acceleration in m/s² (0 with fewer than three valid steps).
+    pub acceleration: f64,
+    /// Heading in world radians: given, else the direction of motion, else the direction of the whole observed
+    /// displacement, else 0.
+    pub heading: f64,
+    /// Rate of change of the direction of motion, rad/s (0 when not moving or too few steps).
+    pub yaw_rate: f64,
+    /// Length in metres.
+    pub length: f64,
+    /// Width in metres.
+    pub width: f64,
+}
+
+impl TrafficState {
+    /// The agent-centric frame at t_obs.
+    pub fn pose(&self) -> AgentPose {
+        AgentPose::new(self.position, self.heading)
+    }
+}
+
+fn finite_diff(a: [f64; 2], b: [f64; 2], dt: f64) -> [f64; 2] {
+    [(b[0] - a[0]) / dt, (b[1] - a[1]) / dt]
+}
+
+/// The traffic state of every agent of a frame whose steps are `dt_s` seconds apart.
+pub fn traffic_states(frame: &Frame, dt_s: f64) -> Vec<TrafficState> {
+    let pos = frame.positions();
+    let mask = frame.mask();
+    (0..frame.len())
+        .map(|i| {
+            let valid: Vec<usize> = (0..frame.steps()).filter(|&s| mask[[i, s]]).collect();
+            let p = |s: usize| [pos[[i, s, 0]], pos[[i, s, 1]]];
+            // `Frame` guarantees at least one valid step.
+            let last = valid.last().copied().unwrap_or(0);
+            let velocity_between = |a: usize, b: usize| finite_diff(p(a), p(b), (b - a) as f64 * dt_s);
+            let n = valid.len();
+            let v_hist = (n >= 2).then(|| velocity_between(valid[n - 2], last));
+            let v_prev = (n >= 3).then(|| velocity_between(valid[n - 3], valid[n - 2]));
+            let velocity = frame.velocities()[i].or(v_hist).unwrap_or([0.0, 0.0]);
+            let speed = velocity[0].hypot(velocity[1]);
+            let mut acceleration = 0.0;
+            let mut yaw_rate = 0.0;
+            if let (Some(v1), Some(v0)) = (v_hist, v_prev) {
+                // Velocities live at the midpoints of their segments.
+                let span = (last as f64 - valid[n - 3] as f64) * 0.5 * dt_s;
+                let (s1, s0) = (v1[0].hypot(v1[1]), v0[0].hypot(v0[1]));
+                acceleration = (s1 - s0) / span;
+                if s1 >= MIN_MOVING_SPEED_MPS && s0 >= MIN_MOVING_SPEED_MPS {
+                    yaw_rate = wrap_angle(v1[1].atan2(v1[0]) - v0[1].atan2(v0[0])) / span;
+                }
+            }
+            let first = p(valid[0]);
+            let disp = [p(last)[0] - first[0], p(last)[1] - first[1]];
+            let heading = frame.headings()[i].unwrap_or_else(|| {
+                if speed >= MIN_MOVING_SPEED_MPS {
+                    velocity[1].atan2(velocity[0])
+                } else if disp[0].hypot(disp[1]) >= MIN_MOVING_SPEED_MPS * dt_s * n as f64 {
+                    disp[1].atan2(disp[0])
+                } else {
+                    0.0
+                }
+            });
+            TrafficState {
+                position: p(last),
+                velocity,
+                speed,
+                acceleration,
+                heading: wrap_angle(heading),
+                yaw_rate,
+                length: frame.lengths()[i],
+                width: frame.widths()[i],
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::class::AgentClass;
+    use ndarray::{array, Array3};
+
+    #[test]
+    fn constant_acceleration_along_y() {
+        // y = t² (dt = 1): velocities 1, 3, 5 at midpoints → speed 5 at the end, acceleration 2, heading +y.
+        let p = Array3::from_shape_fn((1, 4, 2), |(_, t, d)| if d == 1 { (t * t) as f64 } else { 0.0 });
+        let f = Frame::new(p, None, vec![AgentClass::Cyclist]).unwrap();
+        let s = traffic_states(&f, 1.0)[0];
+        assert_eq!(s.velocity, [0.0, 5.0]);
+        assert!((s.acceleration - 2.0).abs() < 1e-12);
+        assert!((s.heading - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        assert_eq!(s.length, 1.8);
+    }
+
+    #[test]
+    fn missing_steps_use_the_real_time_gap() {
+        let p = array![[[0.0, 0.0], [f64::NAN, f64::NAN], [2.0, 0.0], [3.0, 0.0]]];
+        let mask = array![[true, false, false, true]];
+        let f = Frame::new(p, Some(mask), vec![AgentClass::Pedestrian]).unwrap();
+        let s = traffic_states(&f, 0.5)[0];
+        // 3 m over 3 steps of 0.5 s.
+        assert!((s.speed - 2.0).abs() < 1e-12);
+        assert_eq!(s.acceleration, 0.0);
+        assert_eq!(s.position, [3.0, 0.0]);
+    }
+
+    #[test]
+    fn single_step_agent_is_at_rest() {
+        let f = Frame::new(Array3::from_elem((1, 1, 2), 4.0), None, vec![AgentClass::Pedestrian]).unwrap();
+        let s = traffic_states(&f, 0.4)[0];
+        assert_eq!((s.speed, s.heading, s.yaw_rate), (0.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn given_values_win() {
+        let p = Array3::from_shape_fn((1, 3, 2), |(_, t, d)| if d == 0 { t as f64 } else { 0.0 });
+        let f = Frame::new(p, None, vec![AgentClass::Vehicle])
+            .unwrap()
+            .with_headings(&[1.0])
+            .unwrap()
+            .with_velocities(array![[0.0, 3.0]].view())
+            .unwrap();
+        let s = traffic_states(&f, 1.0)[0];
+        assert_eq!((s.heading, s.velocity, s.speed), (1.0, [0.0, 3.0], 3.0));
+    }
+}

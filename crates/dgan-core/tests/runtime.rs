@@ -1,0 +1,83 @@
+//! The ONNX Runtime session against the contract fixtures (`tests/fixtures/make_fixtures.py`).
+
+mod common;
+
+use common::{fixture, onnxruntime_library};
+use dgan_core::{AgentClass, DganError, Frame, Predictor, PredictorOptions};
+use ndarray::Array3;
+
+fn load(name: &str) -> dgan_core::Result<Predictor> {
+    let options = PredictorOptions { onnxruntime_library: Some(onnxruntime_library()), ..Default::default() };
+    Predictor::load_with(fixture(name), &options)
+}
+
+fn walkers(n: usize) -> Frame {
+    let p = Array3::from_shape_fn((n, 8, 2), |(i, t, d)| {
+        if d == 0 {
+            i as f64 * 1.5 + t as f64 * 0.5
+        } else {
+            i as f64 * 0.7 - t as f64 * 0.1
+        }
+    });
+    Frame::new(p, None, (0..n).map(|i| AgentClass::ALL[i % 3]).collect()).unwrap()
+}
+
+#[test]
+fn predicts_sorted_normalised_modes() {
+    for name in ["contract_nomap.onnx", "contract_map.onnx"] {
+        let p = load(name).unwrap();
+        assert_eq!(p.anchors().total(), 7);
+        let out = p.predict(&walkers(5)).unwrap();
+        assert_eq!(out.trajectories.dim(), (5, 7, 12, 2));
+        for i in 0..5 {
+            let row = out.probabilities.row(i);
+            assert!((row.sum() - 1.0).abs() < 1e-9, "{name}: all modes sum to 1");
+            assert!(row.windows(2).into_iter().all(|w| w[0] >= w[1]), "{name}: sorted");
+            assert!((out.class_probabilities.row(i).sum() - 1.0).abs() < 1e-9);
+        }
+        let top = p.predict_modes(&walkers(5), 3).unwrap();
+        assert_eq!(top.trajectories.dim(), (5, 3, 12, 2));
+        assert_eq!(top.trajectories, out.trajectories.slice(ndarray::s![.., ..3, .., ..]).to_owned());
+    }
+}
+
+#[test]
+fn empty_scene_gives_an_empty_prediction() {
+    let p = load("contract_map.onnx").unwrap();
+    let out = p.predict(&Frame::new(Array3::zeros((0, 8, 2)), None, vec![]).unwrap()).unwrap();
+    assert_eq!(out.trajectories.dim(), (0, 7, 12, 2));
+    assert_eq!(out.edges.dim(), (0, 2));
+}
+
+#[test]
+fn bad_models_fail_at_load_with_a_reason() {
+    let cases: [(&str, &str); 8] = [
+        ("bad_no_metadata.onnx", "no \"dgan_contract\" metadata"),
+        ("bad_contract_version.onnx", "contract_version 99"),
+        ("bad_metadata_json.onnx", "not a valid contract"),
+        ("bad_fixed_agent_axis.onnx", "must be dynamic"),
+        ("bad_anchor_count.onnx", "anchor_logits"),
+        ("bad_missing_input.onnx", "missing input \"edge_features\""),
+        ("bad_map_without_input.onnx", "missing input \"map\""),
+        ("bad_truncated.onnx", "cannot load model"),
+    ];
+    for (name, needle) in cases {
+        let err = load(name).unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains(needle), "{name}: {msg:?} should mention {needle:?}");
+        let kind_ok = match name {
+            "bad_truncated.onnx" => matches!(err, DganError::ModelLoad { .. }),
+            _ => matches!(err, DganError::Contract(_)),
+        };
+        assert!(kind_ok, "{name}: wrong error kind {err:?}");
+    }
+    assert!(matches!(load("does_not_exist.onnx"), Err(DganError::ModelNotFound(_))));
+}
+
+#[test]
+fn bad_frames_are_typed_errors() {
+    let p = load("contract_nomap.onnx").unwrap();
+    let short = Frame::new(Array3::zeros((2, 5, 2)), None, vec![AgentClass::Vehicle; 2]).unwrap();
+    assert!(matches!(p.predict(&short), Err(DganError::InvalidFrame(_))));
+    assert!(matches!(p.predict_modes(&walkers(2), 0), Err(DganError::InvalidSpec(_))));
+}
