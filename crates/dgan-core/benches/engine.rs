@@ -1,1 +1,117 @@
-fn main() {}
+//! Latency of the engine's parts: `cargo bench -p dgan-core`.
+//!
+//! - `graph/rtree/{1000,10000}` vs `graph/brute_force/{1000,10000}`: the attention-zone graph at constant density
+//!   (one agent per 100 m², a mix of pedestrian and vehicle radii), so 10× the agents means ~10× the edges.
+//! - `raster/vector_map/32` and `raster/raster_map/32`: 32 agent crops of 64×64 px.
+//! - `decode/100`: 100 agents, K = 60 anchors, T_f = 12.
+//! - `predict/contract_map/32`: one whole predict (preprocess, raster, ONNX Runtime, decode) with the map fixture;
+//!   needs `ORT_DYLIB_PATH`.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use dgan_core::decode::{decode, Anchors};
+use dgan_core::graph::{attention_zone_edges, attention_zone_edges_brute_force};
+use dgan_core::raster::rasterize;
+use dgan_core::state::traffic_states;
+use dgan_core::transform::AgentPose;
+use dgan_core::{AgentClass, Frame, MapElement, MapElementKind, MapSpec, Predictor, RasterMap, SceneMap, VectorMap};
+use ndarray::{Array2, Array3, Array4};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+fn scene(n: usize) -> (Vec<[f64; 2]>, Vec<f64>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(n as u64);
+    let side = (n as f64 * 100.0).sqrt();
+    let c = (0..n).map(|_| [rng.random_range(0.0..side), rng.random_range(0.0..side)]).collect();
+    let r = (0..n).map(|i| if i % 5 == 0 { rng.random_range(5.0..20.0) } else { rng.random_range(0.5..6.0) }).collect();
+    (c, r)
+}
+
+fn bench_graph(c: &mut Criterion) {
+    let mut g = c.benchmark_group("graph");
+    for n in [1_000usize, 10_000] {
+        let (centres, radii) = scene(n);
+        g.bench_with_input(BenchmarkId::new("rtree", n), &n, |b, _| {
+            b.iter(|| attention_zone_edges(black_box(&centres), black_box(&radii)))
+        });
+        g.bench_with_input(BenchmarkId::new("brute_force", n), &n, |b, _| {
+            b.iter(|| attention_zone_edges_brute_force(black_box(&centres), black_box(&radii)))
+        });
+    }
+    g.finish();
+}
+
+/// 32 agents driving along a straight 4-lane road with lane lines, edges, a crosswalk and a median.
+fn road_frame(map: SceneMap) -> Frame {
+    let n = 32;
+    let p = Array3::from_shape_fn((n, 8, 2), |(i, t, d)| {
+        if d == 0 {
+            (i as f64) * 6.0 + t as f64 * 1.6
+        } else {
+            ((i % 4) as f64 - 1.5) * 3.5
+        }
+    });
+    Frame::new(p, None, vec![AgentClass::Vehicle; n]).expect("valid frame").with_map(Arc::new(map))
+}
+
+fn vector_map() -> SceneMap {
+    let mut el = vec![];
+    let line = |k, y: f64| MapElement::new(k, (0..=60).map(|i| [i as f64 * 5.0 - 50.0, y]).collect());
+    for lane in 0..4 {
+        let y = (lane as f64 - 1.5) * 3.5;
+        el.push(line(MapElementKind::LaneCenterline, y));
+        el.push(line(MapElementKind::LaneLineDashed, y + 1.75));
+    }
+    el.push(line(MapElementKind::RoadEdge, -7.0));
+    el.push(line(MapElementKind::RoadEdge, 7.0));
+    for x in (0..250).step_by(50) {
+        let x = x as f64;
+        el.push(MapElement::new(MapElementKind::Crosswalk, vec![[x, -7.0], [x + 4.0, -7.0], [x + 4.0, 7.0], [x, 7.0]]));
+    }
+    el.push(MapElement::new(MapElementKind::Obstacle, vec![[-50.0, -0.2], [250.0, -0.2], [250.0, 0.2], [-50.0, 0.2]]));
+    SceneMap::Vector(VectorMap::new(el.into_iter().collect::<Result<_, _>>().expect("valid map")))
+}
+
+fn bench_raster(c: &mut Criterion) {
+    let spec =
+        MapSpec { height_px: 64, width_px: 64, resolution_m: 0.5, agent_row: 48, agent_col: 32, draw_agents: true };
+    let mut g = c.benchmark_group("raster");
+    let frame = road_frame(vector_map());
+    let states = traffic_states(&frame, 0.2);
+    g.bench_function("vector_map/32", |b| b.iter(|| rasterize(black_box(&frame), &states, &spec)));
+    let image = Array3::from_shape_fn((576, 720, 3), |(r, c, ch)| ((r * 7 + c * 3 + ch * 50) % 256) as u8);
+    let raster = RasterMap::new(image, [[2.0, 0.0, 100.0], [0.0, 2.0, 300.0], [0.0, 0.0, 1.0]]).expect("valid map");
+    let frame = road_frame(SceneMap::Raster(raster));
+    g.bench_function("raster_map/32", |b| b.iter(|| rasterize(black_box(&frame), &states, &spec)));
+    g.finish();
+}
+
+fn bench_decode(c: &mut Criterion) {
+    let (n, t_f) = (100, 12);
+    let sets = (0..3).map(|c| Array3::from_shape_fn((20, t_f, 2), |(k, t, d)| (c * k * t + d) as f64 * 0.1)).collect();
+    let anchors = Anchors::new(AgentClass::ALL.to_vec(), sets).expect("valid anchors");
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let cl = Array2::from_shape_fn((n, 3), |_| rng.random_range(-2.0f32..2.0));
+    let al = Array2::from_shape_fn((n, 60), |_| rng.random_range(-2.0f32..2.0));
+    let off = Array4::from_shape_fn((n, 60, t_f, 2), |_| rng.random_range(-0.5f32..0.5));
+    let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, 0.0], i as f64 * 0.1)).collect();
+    c.bench_function("decode/100", |b| b.iter(|| decode(cl.view(), al.view(), off.view(), &anchors, &poses, 60)));
+}
+
+fn bench_predict(c: &mut Criterion) {
+    if std::env::var_os("ORT_DYLIB_PATH").is_none() {
+        eprintln!("predict bench skipped: set ORT_DYLIB_PATH to the onnxruntime wheel's libonnxruntime.so.*");
+        return;
+    }
+    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/contract_map.onnx");
+    let predictor = Predictor::load(model).expect("fixture loads");
+    let mut frame = road_frame(vector_map());
+    // The fixture's crop is 16×16 at 1 m; the scene is the same road.
+    frame = frame.with_ids((0..32).collect()).expect("unique ids");
+    c.bench_function("predict/contract_map/32", |b| b.iter(|| predictor.predict(black_box(&frame))));
+}
+
+criterion_group!(benches, bench_graph, bench_raster, bench_decode, bench_predict);
+criterion_main!(benches);

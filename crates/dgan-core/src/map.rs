@@ -45,6 +45,18 @@ impl RasterMap {
         Ok(Self { image: image.as_standard_layout().to_owned(), world_to_pixel: m })
     }
 
+    /// Reads a PNG or JPEG image (converted to RGB) and pairs it with its world→pixel homography.
+    pub fn from_file(path: impl AsRef<std::path::Path>, world_to_pixel: [[f64; 3]; 3]) -> Result<Self> {
+        let path = path.as_ref();
+        let img = image::open(path)
+            .map_err(|e| DganError::InvalidMap(format!("cannot read image {}: {e}", path.display())))?
+            .into_rgb8();
+        let (w, h) = img.dimensions();
+        let image = Array3::from_shape_vec((h as usize, w as usize, 3), img.into_raw())
+            .map_err(|e| DganError::InvalidMap(format!("image {}: {e}", path.display())))?;
+        Self::new(image, world_to_pixel)
+    }
+
     /// The image, `(H, W, 3)`.
     pub fn image(&self) -> &Array3<u8> {
         &self.image
@@ -232,6 +244,15 @@ mod tests {
         assert!(matches!(RasterMap::new(Array3::zeros((4, 4, 3)), singular), Err(DganError::InvalidMap(_))));
         let nan = [[f64::NAN, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         assert!(matches!(RasterMap::new(Array3::zeros((4, 4, 3)), nan), Err(DganError::InvalidMap(_))));
+    }
+
+    #[test]
+    fn reads_images_from_files() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/zara1_rgb.jpg");
+        let ident = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let m = RasterMap::from_file(&path, ident).unwrap();
+        assert_eq!(m.image().dim(), (576, 720, 3));
+        assert!(matches!(RasterMap::from_file("/nonexistent.png", ident), Err(DganError::InvalidMap(_))));
     }
 
     #[test]

@@ -15,7 +15,7 @@ fn rigid(p: [f64; 2], angle: f64, shift: [f64; 2]) -> [f64; 2] {
 
 fn map(angle: f64, shift: [f64; 2]) -> SceneMap {
     let t = |pts: &[[f64; 2]]| pts.iter().map(|p| rigid(*p, angle, shift)).collect::<Vec<_>>();
-    let el = |k, pts: &[[f64; 2]]| MapElement::new(k, t(pts)).unwrap();
+    let el = |k, pts: &[[f64; 2]]| MapElement::new(k, t(pts)).expect("valid element");
     SceneMap::Vector(VectorMap::new(vec![
         el(MapElementKind::LaneCenterline, &[[-50.0, 1.75], [50.0, 1.75]]),
         el(MapElementKind::LaneLineDashed, &[[-50.0, 3.5], [50.0, 3.5]]),
@@ -58,11 +58,11 @@ fn frame(angle: f64, shift: [f64; 2]) -> Frame {
         classes.push(AgentClass::ALL[i % 3]);
     }
     Frame::new(p, Some(mask), classes)
-        .unwrap()
+        .expect("valid frame")
         .with_headings(&headings)
-        .unwrap()
+        .expect("valid headings")
         .with_velocities(vel.view())
-        .unwrap()
+        .expect("valid velocities")
         .with_map(Arc::new(map(angle, shift)))
 }
 

@@ -19,7 +19,7 @@ fn walkers(n: usize) -> Frame {
             i as f64 * 0.7 - t as f64 * 0.1
         }
     });
-    Frame::new(p, None, (0..n).map(|i| AgentClass::ALL[i % 3]).collect()).unwrap()
+    Frame::new(p, None, (0..n).map(|i| AgentClass::ALL[i % 3]).collect()).expect("valid frame")
 }
 
 #[test]

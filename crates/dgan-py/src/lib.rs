@@ -1,1 +1,33 @@
-pub fn y() {}
+//! The native module `dgan._dgan`: a thin shell over `dgan-core`. Each file wraps one area of the core; this file
+//! only assembles them. The Python package `dgan` adds the Pythonic surface.
+
+mod error;
+mod frame;
+mod geometry;
+mod predictor;
+mod preprocess;
+
+use pyo3::prelude::*;
+
+/// Loads the ONNX Runtime library (absolute path) once per process; returns the path in use.
+#[pyfunction]
+fn init_onnxruntime(path: Option<std::path::PathBuf>) -> PyResult<std::path::PathBuf> {
+    use error::IntoPyResult;
+    dgan_core::init_onnxruntime(path.as_deref()).py()
+}
+
+#[pymodule]
+fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_class::<frame::PyFrame>()?;
+    m.add_class::<frame::PyRasterMap>()?;
+    m.add_class::<frame::PyVectorMap>()?;
+    m.add_class::<predictor::PyPredictor>()?;
+    m.add_function(wrap_pyfunction!(preprocess::preprocess, m)?)?;
+    m.add_function(wrap_pyfunction!(preprocess::validate_spec, m)?)?;
+    m.add_function(wrap_pyfunction!(geometry::to_agent_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(geometry::to_world_frame, m)?)?;
+    m.add_function(wrap_pyfunction!(geometry::attention_graph, m)?)?;
+    m.add_function(wrap_pyfunction!(init_onnxruntime, m)?)?;
+    Ok(())
+}

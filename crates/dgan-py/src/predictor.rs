@@ -1,0 +1,67 @@
+//! `Predictor`: a loaded, contract-checked model; `predict` runs with the GIL released.
+
+use crate::error::IntoPyResult;
+use crate::frame::PyFrame;
+use dgan_core::{Prediction, Predictor, PredictorOptions};
+use numpy::IntoPyArray;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::PathBuf;
+
+/// A DGAN model around an ONNX Runtime session (see `dgan.Predictor`).
+#[derive(Debug)]
+#[pyclass(name = "Predictor", module = "dgan._dgan", frozen)]
+pub struct PyPredictor {
+    inner: Predictor,
+}
+
+fn prediction_dict<'py>(py: Python<'py>, p: Prediction) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("agent_ids", p.agent_ids.into_pyarray(py))?;
+    d.set_item("trajectories", p.trajectories.into_pyarray(py))?;
+    d.set_item("probabilities", p.probabilities.into_pyarray(py))?;
+    d.set_item("class_probabilities", p.class_probabilities.into_pyarray(py))?;
+    d.set_item("mode_classes", p.mode_classes.into_pyarray(py))?;
+    d.set_item("edges", p.edges.into_pyarray(py))?;
+    Ok(d)
+}
+
+#[pymethods]
+impl PyPredictor {
+    #[new]
+    #[pyo3(signature = (path, onnxruntime_library, intra_threads = 1))]
+    fn new(
+        py: Python<'_>,
+        path: PathBuf,
+        onnxruntime_library: Option<PathBuf>,
+        intra_threads: usize,
+    ) -> PyResult<Self> {
+        let options = PredictorOptions { onnxruntime_library, intra_threads };
+        let inner = py.detach(|| Predictor::load_with(&path, &options)).py()?;
+        Ok(Self { inner })
+    }
+
+    /// The model contract as JSON.
+    #[getter]
+    fn contract_json(&self) -> PyResult<String> {
+        self.inner.contract().to_json().py()
+    }
+
+    /// K = Σ K_c.
+    #[getter]
+    fn num_modes(&self) -> usize {
+        self.inner.anchors().total()
+    }
+
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.inner.path().to_path_buf()
+    }
+
+    /// Predicts the top `modes` modes of every agent; returns a dict of numpy arrays.
+    fn predict<'py>(&self, py: Python<'py>, frame: &PyFrame, modes: usize) -> PyResult<Bound<'py, PyDict>> {
+        let frame = &frame.inner;
+        let p = py.detach(|| self.inner.predict_modes(frame, modes)).py()?;
+        prediction_dict(py, p)
+    }
+}

@@ -1,0 +1,51 @@
+//! `preprocess`: the exact tensors the network receives, for training and inspection.
+
+use crate::error::IntoPyResult;
+use crate::frame::PyFrame;
+use dgan_core::preprocess::preprocess as core_preprocess;
+use dgan_core::{DganError, InputSpec};
+use ndarray::Array2;
+use numpy::IntoPyArray;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+pub(crate) fn parse_spec(json: &str) -> dgan_core::Result<InputSpec> {
+    let spec: InputSpec =
+        serde_json::from_str(json).map_err(|e| DganError::InvalidSpec(format!("not an input specification: {e}")))?;
+    spec.validate()?;
+    Ok(spec)
+}
+
+/// Checks an input specification given as JSON; returns it normalised.
+#[pyfunction]
+pub fn validate_spec(json: &str) -> PyResult<String> {
+    let spec = parse_spec(json).py()?;
+    serde_json::to_string(&spec).map_err(|e| crate::error::to_py(DganError::InvalidSpec(e.to_string())))
+}
+
+/// The network inputs of `frame` under the JSON input specification, plus the agent-centric frames (`origin`,
+/// `heading`), traffic states, attention radii and undirected `edges`.
+#[pyfunction]
+pub fn preprocess<'py>(py: Python<'py>, frame: &PyFrame, spec_json: &str) -> PyResult<Bound<'py, PyDict>> {
+    let spec = parse_spec(spec_json).py()?;
+    let frame = &frame.inner;
+    let pre = py.detach(|| core_preprocess(frame, &spec)).py()?;
+    let d = PyDict::new(py);
+    let x = pre.inputs;
+    d.set_item("trajectory", x.trajectory.into_pyarray(py))?;
+    d.set_item("trajectory_mask", x.trajectory_mask.into_pyarray(py))?;
+    d.set_item("state", x.state.into_pyarray(py))?;
+    d.set_item("edge_index", x.edge_index.into_pyarray(py))?;
+    d.set_item("edge_features", x.edge_features.into_pyarray(py))?;
+    if let Some(m) = x.map {
+        d.set_item("map", m.into_pyarray(py))?;
+    }
+    let n = pre.poses.len();
+    d.set_item("origin", Array2::from_shape_fn((n, 2), |(i, k)| pre.poses[i].origin()[k]).into_pyarray(py))?;
+    d.set_item("heading", pre.poses.iter().map(|p| p.heading()).collect::<Vec<_>>().into_pyarray(py))?;
+    d.set_item("speed", pre.states.iter().map(|s| s.speed).collect::<Vec<_>>().into_pyarray(py))?;
+    d.set_item("radius", pre.radii.into_pyarray(py))?;
+    let edges = Array2::from_shape_fn((pre.edges.len(), 2), |(e, k)| i64::from(pre.edges[e][k]));
+    d.set_item("edges", edges.into_pyarray(py))?;
+    Ok(d)
+}

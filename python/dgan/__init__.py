@@ -1,0 +1,34 @@
+"""dgan: multi-modal trajectory prediction with the Dynamic Graph Attention Network.
+
+>>> import dgan
+>>> predictor = dgan.Predictor("model.onnx")          # doctest: +SKIP
+>>> prediction = predictor.predict(dgan.Frame(positions))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from dgan import exceptions
+from dgan._dgan import __version__
+from dgan.exceptions import DganError
+from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
+from dgan.predictor import Prediction, Predictor
+from dgan.spec import InputSpec, MapSpec, attention_graph, preprocess, to_agent_frame, to_world_frame
+
+__all__ = [
+    "CLASSES",
+    "MAP_ELEMENT_KINDS",
+    "DganError",
+    "Frame",
+    "InputSpec",
+    "MapSpec",
+    "Prediction",
+    "Predictor",
+    "RasterMap",
+    "VectorMap",
+    "__version__",
+    "attention_graph",
+    "exceptions",
+    "preprocess",
+    "to_agent_frame",
+    "to_world_frame",
+]

@@ -1,0 +1,60 @@
+"""The exceptions of dgan. Each subclasses :class:`DganError` and the matching built-in, so ``except ValueError``
+keeps working for callers who do not know dgan's own classes.
+
+The native engine maps each of its error kinds to exactly one of these classes.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ContractError",
+    "DganError",
+    "InferenceError",
+    "InvalidFrameError",
+    "InvalidMapError",
+    "InvalidSpecError",
+    "ModelLoadError",
+    "ModelNotFoundError",
+    "RuntimeLibraryError",
+    "UnknownClassError",
+]
+
+
+class DganError(Exception):
+    """Base class of every dgan error."""
+
+
+class InvalidFrameError(DganError, ValueError):
+    """A frame's arrays are inconsistent or hold invalid values (NaN, wrong shapes, no valid step)."""
+
+
+class UnknownClassError(DganError, ValueError):
+    """A class name or code that dgan or the model does not know."""
+
+
+class InvalidMapError(DganError, ValueError):
+    """A raster or vector map that cannot be used."""
+
+
+class InvalidSpecError(DganError, ValueError):
+    """An input specification or option that cannot be satisfied."""
+
+
+class ModelNotFoundError(DganError, FileNotFoundError):
+    """The model file does not exist."""
+
+
+class ModelLoadError(DganError, ValueError):
+    """The model file exists but is not a readable ONNX model (corrupt, truncated)."""
+
+
+class ContractError(DganError, ValueError):
+    """The model loads but breaks the dgan model contract (inputs, outputs or metadata)."""
+
+
+class RuntimeLibraryError(DganError, OSError):
+    """The ONNX Runtime shared library cannot be found or loaded."""
+
+
+class InferenceError(DganError, RuntimeError):
+    """ONNX Runtime failed while running a loaded model."""

@@ -1,0 +1,132 @@
+""":class:`Predictor`, a DGAN model in ONNX Runtime, and its :class:`Prediction`."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan import _dgan
+from dgan._runtime import onnxruntime_library
+from dgan.exceptions import InvalidSpecError
+from dgan.frame import Frame
+from dgan.spec import InputSpec
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Every agent's modes, most probable first. Positions are world metres.
+
+    Attributes:
+        agent_ids: ``(N,)`` the frame's ids, in row order.
+        trajectories: ``(N, M, T_f, 2)`` future positions of each mode.
+        probabilities: ``(N, M)`` p(c) · p(k | c) of each mode.
+        class_probabilities: ``(N, C)`` p(c), columns in ``classes`` order.
+        mode_classes: ``(N, M)`` index into ``classes`` of each mode's anchor class.
+        edges: ``(E, 2)`` undirected attention-zone edges between frame rows ``i < j``.
+        classes: the model's class names.
+    """
+
+    agent_ids: npt.NDArray[np.int64]
+    trajectories: npt.NDArray[np.float64]
+    probabilities: npt.NDArray[np.float64]
+    class_probabilities: npt.NDArray[np.float64]
+    mode_classes: npt.NDArray[np.int64]
+    edges: npt.NDArray[np.int64]
+    classes: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return int(self.agent_ids.shape[0])
+
+    @property
+    def most_likely(self) -> npt.NDArray[np.float64]:
+        """``(N, T_f, 2)`` the top-1 mode of each agent."""
+        return self.trajectories[:, 0]
+
+
+class Predictor:
+    """A DGAN model: an ONNX file that follows the model contract, served by the Rust engine.
+
+    Args:
+        model: path of the ``.onnx`` file.
+        modes: how many modes :meth:`predict` returns by default (all K = Σ K_c if None).
+        threads: threads ONNX Runtime may use inside one operator.
+        onnxruntime_library: absolute path of ``libonnxruntime``; found in the ``onnxruntime`` wheel if None.
+
+    Raises:
+        ModelNotFoundError, ModelLoadError, ContractError, RuntimeLibraryError: at load, never later.
+    """
+
+    def __init__(
+        self,
+        model: str | os.PathLike[str],
+        *,
+        modes: int | None = None,
+        threads: int = 1,
+        onnxruntime_library: str | os.PathLike[str] | None = None,
+    ) -> None:
+        lib = Path(onnxruntime_library) if onnxruntime_library is not None else _default_library()
+        if threads < 1:
+            raise InvalidSpecError(f"threads must be at least 1, got {threads}")
+        self._predictor = _dgan.Predictor(os.fspath(model), os.fspath(lib), threads)
+        self._contract: dict[str, Any] = json.loads(self._predictor.contract_json)
+        self._spec = InputSpec.from_dict(self._contract)
+        self._modes = self._check_modes(modes)
+
+    def _check_modes(self, modes: int | None) -> int:
+        k: int = self._predictor.num_modes
+        if modes is None:
+            return k
+        if not 1 <= modes <= k:
+            raise InvalidSpecError(f"modes must be in 1..={k} (the model's anchors), got {modes}")
+        return modes
+
+    @property
+    def spec(self) -> InputSpec:
+        """The model's input specification."""
+        return self._spec
+
+    @property
+    def contract(self) -> dict[str, Any]:
+        """The full model contract from the model's metadata."""
+        return self._contract
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """The model's classes, in the order of its class probabilities."""
+        return tuple(self._spec.classes)
+
+    @property
+    def anchors(self) -> dict[str, npt.NDArray[np.float64]]:
+        """Anchors per class, ``(K_c, T_f, 2)`` in the agent-centric frame."""
+        return {c: np.asarray(self._contract["anchors"][c], dtype=np.float64) for c in self.classes}
+
+    @property
+    def path(self) -> Path:
+        return Path(self._predictor.path)
+
+    def predict(self, frame: Frame, *, modes: int | None = None) -> Prediction:
+        """Predicts every agent of ``frame``. Releases the GIL while the engine runs.
+
+        An empty frame gives an empty prediction.
+
+        Raises:
+            InvalidFrameError: the frame does not fit the model (e.g. a different T_obs).
+            UnknownClassError: a class the model does not know.
+            InferenceError: ONNX Runtime failed.
+        """
+        m = self._modes if modes is None else self._check_modes(modes)
+        out = self._predictor.predict(frame._frame, m)
+        return Prediction(classes=self.classes, **out)
+
+    def __repr__(self) -> str:
+        return f"Predictor({str(self.path)!r}, classes={self.classes}, modes={self._modes})"
+
+
+def _default_library() -> Path:
+    return onnxruntime_library()

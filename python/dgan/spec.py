@@ -1,0 +1,100 @@
+"""What a network expects of its inputs (:class:`InputSpec`, :class:`MapSpec`) and :func:`preprocess`, the exact
+tensors it receives. Training uses :func:`preprocess` so that training and inference run one implementation."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan import _dgan
+from dgan.frame import Frame
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """The agent-centric, heading-aligned map crop: ``height_px × width_px`` at ``resolution_m`` metres per pixel,
+    the agent at the centre of pixel ``(agent_row, agent_col)``, its heading pointing up."""
+
+    height_px: int = 64
+    width_px: int = 64
+    resolution_m: float = 0.5
+    agent_row: int = 48
+    agent_col: int = 32
+    draw_agents: bool = True
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """Time base, classes, attention-zone λ and map crop of a model (the input half of the model contract)."""
+
+    dt_s: float
+    t_obs: int
+    t_f: int
+    classes: Sequence[str] = ("vehicle", "cyclist", "pedestrian")
+    attention_lambda: float = 0.5
+    map: MapSpec | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "classes", tuple(self.classes))
+        _dgan.validate_spec(self.to_json())
+
+    def to_json(self) -> str:
+        d = asdict(self)
+        d["classes"] = list(self.classes)
+        return json.dumps(d)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> InputSpec:
+        m = d.get("map")
+        return cls(
+            dt_s=float(d["dt_s"]),
+            t_obs=int(d["t_obs"]),
+            t_f=int(d["t_f"]),
+            classes=tuple(d["classes"]),
+            attention_lambda=float(d["attention_lambda"]),
+            map=None if m is None else MapSpec(**m),
+        )
+
+    @property
+    def state_dim(self) -> int:
+        """Width of the traffic-state vector: 7 features and a one-hot class."""
+        return 7 + len(self.classes)
+
+
+def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:
+    """The network inputs of ``frame`` (see ``docs/model-contract.md``) plus its geometry.
+
+    Returns ``trajectory (N, T_obs, 2)``, ``trajectory_mask (N, T_obs)``, ``state (N, 7 + C)``,
+    ``edge_index (E, 2)``, ``edge_features (E, 6)``, ``map (N, 3, H, W)`` for map models, and ``origin (N, 2)``,
+    ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and undirected ``edges``.
+    """
+    out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, spec.to_json())
+    return out
+
+
+def to_agent_frame(
+    points_world: npt.ArrayLike, origins: npt.ArrayLike, headings: npt.ArrayLike
+) -> npt.NDArray[np.float64]:
+    """World points ``(N, T, 2)`` in each agent's frame (``origins (N, 2)``, ``headings (N,)``)."""
+    return _dgan.to_agent_frame(*(np.ascontiguousarray(a, dtype=np.float64) for a in (points_world, origins, headings)))
+
+
+def to_world_frame(
+    points_local: npt.ArrayLike, origins: npt.ArrayLike, headings: npt.ArrayLike
+) -> npt.NDArray[np.float64]:
+    """Agent-frame points ``(N, T, 2)`` back in the world frame."""
+    return _dgan.to_world_frame(*(np.ascontiguousarray(a, dtype=np.float64) for a in (points_local, origins, headings)))
+
+
+def attention_graph(
+    centres: npt.ArrayLike, radii: npt.ArrayLike, *, brute_force: bool = False
+) -> npt.NDArray[np.int64]:
+    """Undirected edges ``(E, 2)``, ``i < j``, between circles that intersect (touching counts)."""
+    c = np.ascontiguousarray(centres, dtype=np.float64)
+    r = np.ascontiguousarray(radii, dtype=np.float64)
+    return _dgan.attention_graph(c, r, brute_force)
