@@ -1,13 +1,28 @@
 """Type stubs of the native module ``dgan._dgan`` (checked against the module by ``mypy.stubtest``)."""
 
 import os
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
 
+__all__ = [
+    "Frame",
+    "Predictor",
+    "RasterMap",
+    "VectorMap",
+    "__version__",
+    "attention_graph",
+    "init_onnxruntime",
+    "preprocess",
+    "to_agent_frame",
+    "to_world_frame",
+    "validate_spec",
+]
+
 __version__: str
 
+@final
 class Frame:
     def __new__(
         cls,
@@ -37,6 +52,7 @@ class Frame:
     @property
     def has_map(self) -> bool: ...
 
+@final
 class RasterMap:
     def __new__(cls, image: npt.NDArray[np.uint8], world_to_pixel: npt.NDArray[np.float64]) -> RasterMap: ...
     @staticmethod
@@ -46,11 +62,13 @@ class RasterMap:
     @property
     def world_to_pixel(self) -> npt.NDArray[np.float64] | None: ...
 
+@final
 class VectorMap:
     def __new__(cls, elements: list[tuple[str, npt.NDArray[np.float64]]]) -> VectorMap: ...
     def __len__(self) -> int: ...
     def elements(self) -> list[tuple[str, npt.NDArray[np.float64]]]: ...
 
+@final
 class Predictor:
     def __new__(
         cls, path: str | os.PathLike[str], onnxruntime_library: str | os.PathLike[str] | None, intra_threads: int = 1

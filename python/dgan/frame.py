@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, Final, Union
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
@@ -25,7 +25,7 @@ MAP_ELEMENT_KINDS: Final = (
     "obstacle",
 )
 
-ClassLike = Union[str, int]
+ClassLike = str | int
 
 
 def _array(name: str, value: Any, dtype: npt.DTypeLike, error: type[Exception] = InvalidFrameError) -> Any:
@@ -158,7 +158,7 @@ class Frame:
         velocities: npt.ArrayLike | None = None,
         lengths: npt.ArrayLike | None = None,
         widths: npt.ArrayLike | None = None,
-        map: RasterMap | VectorMap | None = None,  # noqa: A002 - the documented keyword
+        map: RasterMap | VectorMap | None = None,
     ) -> None:
         pos = _array("positions", positions, np.float64)
         if map is not None and not isinstance(map, (RasterMap, VectorMap)):
@@ -195,7 +195,7 @@ class Frame:
         width: str = "width",
         velocity: tuple[str, str] = ("vx", "vy"),
         default_class: ClassLike = "pedestrian",
-        map: RasterMap | VectorMap | None = None,  # noqa: A002
+        map: RasterMap | VectorMap | None = None,
     ) -> Frame:
         """A frame from a long table, one row per agent and time.
 

@@ -25,11 +25,20 @@ pub const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";
 static RUNTIME: Mutex<Option<PathBuf>> = Mutex::new(None);
 
 /// Loads the ONNX Runtime shared library once per process: from `path`, else from `ORT_DYLIB_PATH`.
-/// Later calls return the library already loaded.
+/// Later calls return the library already loaded; asking for a different file then is an error, since a process
+/// holds one ONNX Runtime.
 pub fn init_onnxruntime(path: Option<&Path>) -> Result<PathBuf> {
     let mut loaded = RUNTIME.lock().map_err(|_| DganError::RuntimeLibrary("runtime lock poisoned".into()))?;
-    if let Some(p) = loaded.as_ref() {
-        return Ok(p.clone());
+    if let Some(current) = loaded.as_ref() {
+        let same = path.is_none_or(|p| p.canonicalize().ok().as_deref() == current.canonicalize().ok().as_deref());
+        if !same {
+            return Err(DganError::RuntimeLibrary(format!(
+                "ONNX Runtime is already loaded from {} in this process; it cannot also load {}",
+                current.display(),
+                path.map(|p| p.display().to_string()).unwrap_or_default()
+            )));
+        }
+        return Ok(current.clone());
     }
     let path = match path {
         Some(p) => p.to_path_buf(),

@@ -1,0 +1,5 @@
+"""``python -m dgan``."""
+
+from dgan.cli import main
+
+raise SystemExit(main())

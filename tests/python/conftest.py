@@ -1,0 +1,40 @@
+"""Shared fixtures: the contract models of ``tests/fixtures`` and a real frame from the bundled zara1 excerpt."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import dgan
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+FIXTURES = ROOT / "tests" / "fixtures"
+DATA = ROOT / "python" / "dgan" / "data" / "zara1"
+sys.path.insert(0, str(FIXTURES))
+
+
+@pytest.fixture(scope="session")
+def nomap_model() -> Path:
+    return FIXTURES / "contract_nomap.onnx"
+
+
+@pytest.fixture(scope="session")
+def map_model() -> Path:
+    return FIXTURES / "contract_map.onnx"
+
+
+def zara1_records() -> dict[str, np.ndarray]:
+    rows = np.loadtxt(DATA / "frames_5430_5620.txt")
+    return {"time": rows[:, 0], "agent_id": rows[:, 1].astype(np.int64), "x": rows[:, 2], "y": rows[:, 3]}
+
+
+def zara1_raster_map() -> dgan.RasterMap:
+    return dgan.RasterMap.from_pixel_to_world(DATA / "rgb.jpg", np.loadtxt(DATA / "H.txt"))
+
+
+@pytest.fixture
+def zara1_frame() -> dgan.Frame:
+    """Every pedestrian seen at frame 5500 of zara1, 8 steps of 0.4 s (frame ids step by 10)."""
+    return dgan.Frame.from_records(zara1_records(), t_obs=8, dt=10.0, current_time=5500.0)

@@ -1,0 +1,109 @@
+"""dgan.RasterMap and dgan.VectorMap, and the crops the engine draws from them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import dgan
+import numpy as np
+import pytest
+from conftest import DATA, zara1_raster_map
+from dgan import exceptions as exc
+
+
+def test_raster_map_from_a_real_scene() -> None:
+    m = zara1_raster_map()
+    assert m.image.shape == (576, 720, 3)
+    h = np.loadtxt(DATA / "H.txt")
+    np.testing.assert_allclose(m.world_to_pixel @ h, np.eye(3), atol=1e-9)
+
+
+def test_raster_map_errors(tmp_path: Path) -> None:
+    with pytest.raises(exc.InvalidMapError, match=r"\(H, W, 3\)"):
+        dgan.RasterMap(np.zeros((4, 4)), np.eye(3))
+    with pytest.raises(exc.InvalidMapError, match="3×3"):
+        dgan.RasterMap(np.zeros((4, 4, 3)), np.eye(2))
+    with pytest.raises(exc.InvalidMapError, match="singular"):
+        dgan.RasterMap(np.zeros((4, 4, 3)), np.zeros((3, 3)))
+    with pytest.raises(exc.InvalidMapError, match="cannot read image"):
+        dgan.RasterMap.from_file(tmp_path / "missing.png", np.eye(3))
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not a png")
+    with pytest.raises(exc.InvalidMapError, match="cannot read image"):
+        dgan.RasterMap.from_file(bad, np.eye(3))
+
+
+def test_vector_map_kinds_and_errors() -> None:
+    m = dgan.VectorMap([("lane_centerline", [[0, 0], [1, 0]]), ("crosswalk", [[0, 0], [1, 0], [1, 1]])])
+    assert len(m) == 2
+    assert [k for k, _ in m.elements()] == ["crosswalk", "lane_centerline"]  # regions drawn under lines
+    with pytest.raises(exc.InvalidMapError, match="unknown map element kind"):
+        dgan.VectorMap([("river", [[0, 0], [1, 0]])])
+    with pytest.raises(exc.InvalidMapError, match="at least 3 points"):
+        dgan.VectorMap([("obstacle", [[0, 0], [1, 0]])])
+    with pytest.raises(exc.InvalidMapError, match=r"\(P, 2\)"):
+        dgan.VectorMap([("road_edge", [0, 1, 2])])
+    with pytest.raises(exc.InvalidMapError, match="NaN"):
+        dgan.VectorMap([("road_edge", np.array([[0, 0], [np.nan, 1]]))])
+    with pytest.raises(exc.InvalidMapError, match="pair"):
+        dgan.VectorMap([("road_edge",)])  # type: ignore[list-item]
+
+
+SPEC = dgan.InputSpec(
+    dt_s=0.4,
+    t_obs=2,
+    t_f=12,
+    classes=("pedestrian", "vehicle"),
+    map=dgan.MapSpec(height_px=20, width_px=20, resolution_m=1.0, agent_row=10, agent_col=10, draw_agents=False),
+)
+
+
+def test_crop_colours_and_orientation() -> None:
+    # An agent at the origin walking +x: ahead is image-up, its left (+y) is image-left.
+    vmap = dgan.VectorMap(
+        [
+            ("lane_centerline", [[-30, 0], [30, 0]]),  # along the agent's path: column 10
+            ("road_edge", [[-30, 6.0], [30, 6.0]]),  # 6 m to its left: continuous column 4.5, pixel 4
+            ("obstacle", [[4.5, -6.5], [6.5, -6.5], [6.5, -4.5], [4.5, -4.5]]),  # ahead-right: rows 4..5, cols 15..16
+        ]
+    )
+    frame = dgan.Frame([[[-1.0, 0.0], [0.0, 0.0]]], map=vmap)
+    crop = dgan.preprocess(frame, SPEC)["map"][0]
+
+    def rgb(r: int, c: int) -> tuple[int, ...]:
+        return tuple(int(v) for v in np.round(crop[:, r, c] * 255))
+
+    assert rgb(2, 10) == (0, 255, 0)
+    assert rgb(15, 4) == (255, 255, 0)
+    assert rgb(4, 15) == (255, 105, 180)
+    assert rgb(5, 16) == (255, 105, 180)
+    assert rgb(15, 15) == (0, 0, 0)
+
+
+def test_agents_are_drawn_as_blue_boxes() -> None:
+    spec = dgan.InputSpec(dt_s=0.4, t_obs=2, t_f=12, classes=("vehicle",), map=dgan.MapSpec(20, 20, 1.0, 10, 10, True))
+    frame = dgan.Frame(
+        [[[-1.0, 0.0], [0.0, 0.0]], [[3.0, -3.0], [4.0, -3.0]]], classes=["vehicle", "vehicle"], map=dgan.VectorMap()
+    )
+    crop = dgan.preprocess(frame, spec)["map"][0]
+    blue = (crop[0] == 0) & (crop[1] == 0) & (crop[2] > 0.99)
+    # The 4.5 × 1.9 m car at the origin spans continuous rows 8.25..12.75 (the agent's pixel centre is 10.5):
+    # rows 9..11 are fully blue and rows 8 and 12 three-quarters, anti-aliased.
+    assert blue[9, 10]
+    assert blue[10, 10]
+    assert blue[11, 10]
+    assert 0.6 < crop[2, 8, 10] < 0.9
+    assert 0.6 < crop[2, 12, 10] < 0.9
+    # The other car is 4 m ahead and 3 m to the right: centred on pixel (6, 13).
+    assert blue[6, 13]
+    assert not blue[10, 5]
+
+
+def test_raster_crop_resamples_the_real_image() -> None:
+    frame = dgan.Frame([[[5.0, 5.0], [6.0, 5.0]]], map=zara1_raster_map())
+    crop = dgan.preprocess(frame, SPEC)["map"][0]
+    assert crop.shape == (3, 20, 20)
+    assert 0.05 < crop.mean() < 0.95
+    # A crop far outside the image is black.
+    far = dgan.Frame([[[500.0, 500.0], [501.0, 500.0]]], map=zara1_raster_map())
+    assert dgan.preprocess(far, SPEC)["map"].max() == 0.0

@@ -1,0 +1,167 @@
+"""dgan.Predictor: end-to-end against an independent numpy computation, and every way a model can be wrong."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import dgan
+import numpy as np
+import pytest
+import reference
+from dgan import exceptions as exc
+from make_fixtures import reference_outputs
+
+FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
+
+
+def mixed_frame() -> tuple[np.ndarray, np.ndarray, list[str]]:
+    rng = np.random.default_rng(4)
+    n = 12
+    start = rng.uniform(-15, 15, (n, 2))
+    vel = rng.uniform(-4, 4, (n, 2))
+    t = np.arange(8)[None, :, None] * 0.4
+    positions = start[:, None] + vel[:, None] * t + 0.3 * rng.normal(size=(n, 8, 2)) * t
+    mask = np.ones((n, 8), dtype=bool)
+    mask[3, :4] = False
+    mask[7, ::2] = False
+    mask[9, :7] = False  # a single observation
+    classes = [dgan.CLASSES[i % 3] for i in range(n)]
+    return positions, mask, classes
+
+
+def test_predict_equals_an_independent_numpy_decode(nomap_model: Path, zara1_frame: dgan.Frame) -> None:
+    predictor = dgan.Predictor(nomap_model)
+    positions, mask, classes = mixed_frame()
+    frames = [
+        (dgan.Frame(positions, mask=mask, classes=classes), positions, mask, classes),
+        (zara1_frame, zara1_frame.positions, zara1_frame.mask, zara1_frame.classes),
+    ]
+    for frame, pos, m, cls in frames:
+        ref_in = reference.preprocess(pos, m, cls, predictor.contract)
+        outputs = reference_outputs(ref_in, with_map=False)
+        want = reference.decode(outputs, predictor.contract, ref_in["origin"], ref_in["heading"])
+        got = predictor.predict(frame)
+        assert got.trajectories.shape == (len(frame), 7, 12, 2)
+        np.testing.assert_allclose(got.probabilities, want["probabilities"], atol=1e-5)
+        np.testing.assert_allclose(got.trajectories, want["trajectories"], atol=1e-4)
+        np.testing.assert_array_equal(got.edges, ref_in["edges"])
+        np.testing.assert_array_equal(got.agent_ids, frame.ids)
+
+
+def test_engine_inputs_equal_the_reference(nomap_model: Path) -> None:
+    predictor = dgan.Predictor(nomap_model)
+    positions, mask, classes = mixed_frame()
+    got = dgan.preprocess(dgan.Frame(positions, mask=mask, classes=classes), predictor.spec)
+    want = reference.preprocess(positions, mask, classes, predictor.contract)
+    for key in ("trajectory", "trajectory_mask", "state", "edge_features", "origin", "heading"):
+        np.testing.assert_allclose(got[key], want[key], atol=1e-5, err_msg=key)
+    np.testing.assert_array_equal(got["edge_index"], want["edge_index"])
+
+
+def test_map_model_uses_the_engine_raster(map_model: Path) -> None:
+    predictor = dgan.Predictor(map_model)
+    positions, mask, classes = mixed_frame()
+    vmap = dgan.VectorMap([("lane_centerline", [[-50, 0], [50, 0]]), ("crosswalk", [[0, -5], [3, -5], [3, 5], [0, 5]])])
+    frame = dgan.Frame(positions, mask=mask, classes=classes, map=vmap)
+    inputs = dgan.preprocess(frame, predictor.spec)
+    assert inputs["map"].shape == (12, 3, 16, 16)
+    assert inputs["map"].max() > 0.5
+    outputs = reference_outputs(inputs, with_map=True)
+    want = reference.decode(outputs, predictor.contract, inputs["origin"], inputs["heading"])
+    got = predictor.predict(frame)
+    np.testing.assert_allclose(got.trajectories, want["trajectories"], atol=1e-4)
+
+
+def test_modes_are_sorted_and_truncated(nomap_model: Path, zara1_frame: dgan.Frame) -> None:
+    predictor = dgan.Predictor(nomap_model, modes=3)
+    top3 = predictor.predict(zara1_frame)
+    assert top3.trajectories.shape == (len(zara1_frame), 3, 12, 2)
+    assert np.all(np.diff(top3.probabilities, axis=1) <= 0)
+    full = predictor.predict(zara1_frame, modes=7)
+    np.testing.assert_allclose(full.probabilities.sum(axis=1), 1.0, atol=1e-9)
+    np.testing.assert_allclose(full.class_probabilities.sum(axis=1), 1.0, atol=1e-9)
+    np.testing.assert_array_equal(full.trajectories[:, :3], top3.trajectories)
+    np.testing.assert_array_equal(full.most_likely, full.trajectories[:, 0])
+    assert full.classes == ("vehicle", "cyclist", "pedestrian")
+    with pytest.raises(exc.InvalidSpecError, match="modes"):
+        predictor.predict(zara1_frame, modes=0)
+    with pytest.raises(exc.InvalidSpecError, match="modes"):
+        dgan.Predictor(nomap_model, modes=8)
+
+
+def test_empty_scene_returns_an_empty_prediction(map_model: Path) -> None:
+    p = dgan.Predictor(map_model).predict(dgan.Frame(np.zeros((0, 8, 2))))
+    assert len(p) == 0
+    assert p.trajectories.shape == (0, 7, 12, 2)
+    assert p.edges.shape == (0, 2)
+
+
+def test_frame_that_does_not_fit_the_model(nomap_model: Path) -> None:
+    predictor = dgan.Predictor(nomap_model)
+    with pytest.raises(exc.InvalidFrameError, match="T_obs = 8"):
+        predictor.predict(dgan.Frame(np.zeros((2, 5, 2))))
+
+
+@pytest.mark.parametrize(
+    ("name", "error", "match"),
+    [
+        ("does_not_exist.onnx", exc.ModelNotFoundError, "not found"),
+        ("bad_truncated.onnx", exc.ModelLoadError, "cannot load model"),
+        ("make_fixtures.py", exc.ModelLoadError, "cannot load model"),
+        ("bad_no_metadata.onnx", exc.ContractError, 'no "dgan_contract" metadata'),
+        ("bad_metadata_json.onnx", exc.ContractError, "not a valid contract"),
+        ("bad_contract_version.onnx", exc.ContractError, "contract_version 99"),
+        ("bad_fixed_agent_axis.onnx", exc.ContractError, "must be dynamic"),
+        ("bad_anchor_count.onnx", exc.ContractError, "anchor_logits"),
+        ("bad_missing_input.onnx", exc.ContractError, 'missing input "edge_features"'),
+        ("bad_map_without_input.onnx", exc.ContractError, 'missing input "map"'),
+    ],
+)
+def test_bad_models_fail_at_load(name: str, error: type[Exception], match: str) -> None:
+    with pytest.raises(error, match=match):
+        dgan.Predictor(FIXTURES / name)
+
+
+def test_model_errors_are_builtin_subclasses() -> None:
+    with pytest.raises(FileNotFoundError):
+        dgan.Predictor(FIXTURES / "nope.onnx")
+    with pytest.raises(ValueError, match="contract"):
+        dgan.Predictor(FIXTURES / "bad_no_metadata.onnx")
+
+
+def test_threads_share_one_predictor(nomap_model: Path, zara1_frame: dgan.Frame) -> None:
+    predictor = dgan.Predictor(nomap_model)
+    want = predictor.predict(zara1_frame).trajectories
+    results: list[np.ndarray] = []
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            for _ in range(20):
+                results.append(predictor.predict(zara1_frame).trajectories)
+        except BaseException as e:  # pragma: no cover - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+    assert len(results) == 80
+    for r in results:
+        np.testing.assert_array_equal(r, want)
+
+
+def test_contract_is_exposed(nomap_model: Path) -> None:
+    predictor = dgan.Predictor(nomap_model)
+    assert predictor.spec.t_obs == 8
+    assert predictor.spec.t_f == 12
+    assert predictor.spec.map is None
+    assert {k: v.shape for k, v in predictor.anchors.items()} == {
+        "vehicle": (3, 12, 2),
+        "cyclist": (2, 12, 2),
+        "pedestrian": (2, 12, 2),
+    }
+    assert "contract-fixture" in repr(predictor.contract["name"])
