@@ -7,11 +7,12 @@
 
 from __future__ import annotations
 
-from dgan import exceptions
+from dgan import exceptions, models
 from dgan._dgan import __version__
 from dgan.exceptions import DganError
 from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
 from dgan.predictor import Prediction, Predictor
+from dgan.scenes import scene_map
 from dgan.spec import InputSpec, MapSpec, attention_graph, preprocess, to_agent_frame, to_world_frame
 
 __all__ = [
@@ -28,7 +29,9 @@ __all__ = [
     "__version__",
     "attention_graph",
     "exceptions",
+    "models",
     "preprocess",
+    "scene_map",
     "to_agent_frame",
     "to_world_frame",
 ]

@@ -53,7 +53,7 @@ class Predictor:
     """A DGAN model: an ONNX file that follows the model contract, served by the Rust engine.
 
     Args:
-        model: path of the ``.onnx`` file.
+        model: path of the ``.onnx`` file, or the name of a bundled model (:func:`dgan.models.list`).
         modes: how many modes :meth:`predict` returns by default (all K = Σ K_c if None).
         threads: threads ONNX Runtime may use inside one operator.
         onnxruntime_library: absolute path of ``libonnxruntime``; found in the ``onnxruntime`` wheel if None.
@@ -73,7 +73,7 @@ class Predictor:
         lib = Path(onnxruntime_library) if onnxruntime_library is not None else _default_library()
         if threads < 1:
             raise InvalidSpecError(f"threads must be at least 1, got {threads}")
-        self._predictor = _dgan.Predictor(os.fspath(model), os.fspath(lib), threads)
+        self._predictor = _dgan.Predictor(os.fspath(_resolve(model)), os.fspath(lib), threads)
         self._contract: dict[str, Any] = json.loads(self._predictor.contract_json)
         self._spec = InputSpec.from_dict(self._contract)
         self._modes = self._check_modes(modes)
@@ -126,6 +126,17 @@ class Predictor:
 
     def __repr__(self) -> str:
         return f"Predictor({str(self.path)!r}, classes={self.classes}, modes={self._modes})"
+
+
+def _resolve(model: str | os.PathLike[str]) -> Path:
+    """A path as given, or a bundled model's file when ``model`` is a bundled name and no such file exists."""
+    p = Path(model)
+    if isinstance(model, str) and not p.exists() and p.suffix == "" and "/" not in model:
+        from dgan import models
+
+        if model in models.list():
+            return models.path(model)
+    return p
 
 
 def _default_library() -> Path:

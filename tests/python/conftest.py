@@ -5,13 +5,15 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import dgan
 import numpy as np
 import pytest
+
+import dgan
 
 ROOT = Path(__file__).resolve().parents[2]
 FIXTURES = ROOT / "tests" / "fixtures"
 DATA = ROOT / "python" / "dgan" / "data" / "zara1"
+SCENES = ROOT / "python" / "dgan" / "data" / "scenes"
 sys.path.insert(0, str(FIXTURES))
 
 
@@ -31,7 +33,7 @@ def zara1_records() -> dict[str, np.ndarray]:
 
 
 def zara1_raster_map() -> dgan.RasterMap:
-    return dgan.RasterMap.from_pixel_to_world(DATA / "rgb.jpg", np.loadtxt(DATA / "H.txt"))
+    return dgan.RasterMap.from_pixel_to_world(SCENES / "zara1" / "rgb.jpg", np.loadtxt(SCENES / "zara1" / "H.txt"))
 
 
 @pytest.fixture

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from conftest import DATA
+
 from dgan.cli import main
 
 SCENE = DATA / "frames_5430_5620.txt"

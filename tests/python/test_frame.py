@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import dgan
 import numpy as np
 import pytest
 from conftest import zara1_records
+
+import dgan
 from dgan import exceptions as exc
 
 

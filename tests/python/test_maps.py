@@ -4,17 +4,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import dgan
 import numpy as np
 import pytest
-from conftest import DATA, zara1_raster_map
+from conftest import SCENES, zara1_raster_map
+
+import dgan
 from dgan import exceptions as exc
 
 
 def test_raster_map_from_a_real_scene() -> None:
     m = zara1_raster_map()
     assert m.image.shape == (576, 720, 3)
-    h = np.loadtxt(DATA / "H.txt")
+    h = np.loadtxt(SCENES / "zara1" / "H.txt")
     np.testing.assert_allclose(m.world_to_pixel @ h, np.eye(3), atol=1e-9)
 
 

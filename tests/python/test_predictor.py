@@ -5,12 +5,13 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
-import dgan
 import numpy as np
 import pytest
 import reference
-from dgan import exceptions as exc
 from make_fixtures import reference_outputs
+
+import dgan
+from dgan import exceptions as exc
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures"
 

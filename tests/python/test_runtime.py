@@ -7,8 +7,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import dgan
 import pytest
+
+import dgan
 from dgan import exceptions as exc
 from dgan._runtime import onnxruntime_library
 

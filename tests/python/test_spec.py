@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import dgan
 import numpy as np
 import pytest
-from dgan import exceptions as exc
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+import dgan
+from dgan import exceptions as exc
 
 SPEC = dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("pedestrian",))
 

@@ -1,0 +1,74 @@
+"""ETH/UCY scene maps: each scene's semantic mask, colourised, with its world→pixel homography.
+
+The masks (``eth_ucy_scene_maps/semantic_masks`` of the shared data; MG-GAN layout) label each pixel 0..5; class 1 is
+the walkable ground (97-98% of the pedestrians' points on eth, hotel and zara; 71% on univ, which has another 24% on
+class 4). The other ids are undocumented, so each gets a distinct colour of the paper's palette. Their homographies
+map pixels to the Social-GAN world metres; for eth and hotel the pixel vector is (row, column), for the UCY scenes
+(column, row).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan.exceptions import InvalidMapError
+from dgan.frame import RasterMap
+
+#: Colour of each mask id: 0 unknown/outside black, 1 walkable grey, then pink, yellow, green, white.
+MASK_PALETTE: Final = np.array(
+    [[0, 0, 0], [128, 128, 128], [255, 105, 180], [255, 255, 0], [0, 255, 0], [255, 255, 255]], dtype=np.uint8
+)
+#: Scenes whose homography takes (row, column) rather than (column, row).
+ROW_MAJOR_SCENES: Final = frozenset({"eth", "hotel"})
+#: The ETH/UCY scenes.
+ETH_UCY_SCENES: Final = ("eth", "hotel", "univ", "zara1", "zara2")
+
+
+def colourise_mask(labels: npt.NDArray[np.integer]) -> npt.NDArray[np.uint8]:
+    """``(H, W)`` mask ids → ``(H, W, 3)`` RGB in :data:`MASK_PALETTE`."""
+    ids = np.asarray(labels)
+    if ids.ndim == 3:
+        ids = ids[..., 0]
+    if ids.min() < 0 or ids.max() >= len(MASK_PALETTE):
+        raise InvalidMapError(f"mask ids must be in 0..{len(MASK_PALETTE) - 1}, found {ids.min()}..{ids.max()}")
+    return MASK_PALETTE[ids]
+
+
+def world_to_pixel(scene: str, pixel_to_world: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """The world → (column, row) homography of a scene from its ``H.txt`` (pixel → world)."""
+    h = np.asarray(pixel_to_world, dtype=np.float64)
+    inv = np.linalg.inv(h)
+    if scene in ROW_MAJOR_SCENES:
+        inv = inv[[1, 0, 2]]
+    return np.asarray(inv, dtype=np.float64)
+
+
+def scene_map(scene: str) -> RasterMap:
+    """The raster map a bundled ETH/UCY model was trained with: ``dgan.scene_map("zara1")``."""
+    if scene not in ETH_UCY_SCENES:
+        raise InvalidMapError(f"no bundled scene {scene!r}; bundled scenes: {', '.join(ETH_UCY_SCENES)}")
+    return scene_raster_map(scene, Path(__file__).parent / "data" / "scenes" / scene)
+
+
+def scene_image(scene: str) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.float64]] | None:
+    """The bundled camera image of a scene and its world → (column, row) homography, if bundled."""
+    folder = Path(__file__).parent / "data" / "scenes" / scene
+    if not (folder / "rgb.jpg").is_file():
+        return None
+    image = RasterMap.from_file(folder / "rgb.jpg", np.eye(3)).image
+    return image, world_to_pixel(scene, np.loadtxt(folder / "H.txt"))
+
+
+def scene_raster_map(scene: str, folder: str | os.PathLike[str]) -> RasterMap:
+    """The colourised mask of ``scene`` from a folder holding ``<scene>_mask.png`` (or ``mask.png``) and ``H.txt``."""
+    folder = Path(folder)
+    mask_path = next((p for p in (folder / f"{scene}_mask.png", folder / "mask.png") if p.is_file()), None)
+    if mask_path is None:
+        raise InvalidMapError(f"no mask for scene {scene!r} in {folder}")
+    labels = RasterMap.from_file(mask_path, np.eye(3)).image
+    return RasterMap(colourise_mask(labels), world_to_pixel(scene, np.loadtxt(folder / "H.txt")))

@@ -1,0 +1,164 @@
+"""The training side: typed config, loss, the engine–PyTorch parity of exported models, and DDP on two CPU
+processes (gloo). Needs torch (``pip install -e ".[train]"``; ``./dev test`` installs it) and the shared data."""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import dgan
+from training.config import Config
+from training.export import export_model, load_checkpoint
+from training.loss import closest_anchor, decode_torch, dgan_loss
+from training.train import build_model, input_spec
+
+ROOT = Path(__file__).resolve().parents[2]
+CHECKPOINTS = ROOT / "training" / "checkpoints"
+CONFIG = ROOT / "training" / "configs" / "ethucy_zara1.toml"
+INPUTS = ["trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "map"]
+
+
+def data_root() -> Path:
+    root = Path(os.environ.get("DGAN_DATA_ROOT", ROOT.parent / "shared" / "data"))
+    if not (root / "eth_ucy").is_dir():
+        pytest.fail(f"ETH/UCY data not found under {root}; set DGAN_DATA_ROOT to the folder holding eth_ucy/")
+    return root
+
+
+def test_config_is_typed() -> None:
+    cfg = Config.load(CONFIG, {"train.epochs": 3, "model.use_gat": False})
+    assert cfg.train.epochs == 3
+    assert not cfg.model.use_gat
+    assert cfg.data.scene == "zara1"
+    with pytest.raises(ValueError, match="unknown keys"):
+        Config.load(CONFIG, {"train.epoch": 3})
+    with pytest.raises(ValueError, match="must be int"):
+        Config.load(CONFIG, {"train.epochs": "three"})
+    with pytest.raises(ValueError, match="unknown config section"):
+        Config.from_dict({"optimizer": {}})
+
+
+def test_loss_picks_the_closest_anchor_of_the_class() -> None:
+    anchors = torch.tensor([[[1.0, 0.0]], [[2.0, 0.0]], [[0.0, 5.0]]])
+    class_of = torch.tensor([0, 0, 1])
+    future = torch.tensor([[[0.0, 4.0]], [[0.0, 4.0]]])
+    # Agent 0 is class 0: anchors 0 and 1 only (anchor 2 is closer but belongs to class 1).
+    k = closest_anchor(future, anchors, class_of, torch.tensor([0, 1]))
+    assert k.tolist() == [0, 2]
+    zeros = torch.zeros(2, 3, 1, 2)
+    loss, parts = dgan_loss(
+        torch.zeros(2, 2), torch.zeros(2, 3), zeros, future, torch.tensor([0, 1]), anchors, class_of, 1.0
+    )
+    # −log(½ · ½) for agent 0, −log(½ · 1) for agent 1; errors √17 and 1.
+    assert parts["cls"] == pytest.approx((np.log(4) + np.log(2)) / 2, rel=1e-6)
+    assert parts["reg"] == pytest.approx((np.sqrt(17) + 1) / 2, rel=1e-6)
+    assert float(loss) == pytest.approx(parts["cls"] + parts["reg"], rel=1e-6)
+    _, prob = decode_torch(torch.zeros(2, 2), torch.zeros(2, 3), zeros, anchors, class_of)
+    assert prob.sum(dim=1).tolist() == pytest.approx([1.0, 1.0])
+
+
+def real_frames(spec: dgan.InputSpec) -> list[dgan.Frame]:
+    rows = np.loadtxt(ROOT / "python" / "dgan" / "data" / "zara1" / "frames_5430_5620.txt")
+    cols = {"time": rows[:, 0], "agent_id": rows[:, 1].astype(np.int64), "x": rows[:, 2], "y": rows[:, 3]}
+    smap = dgan.scene_map("zara1") if spec.map is not None else None
+    return [dgan.Frame.from_records(cols, t_obs=8, dt=10.0, current_time=t, map=smap) for t in (5500.0, 5510.0)]
+
+
+def assert_parity(model: torch.nn.Module, spec: dgan.InputSpec, anchors: np.ndarray, onnx_path: Path) -> None:
+    predictor = dgan.Predictor(onnx_path)
+    for frame in real_frames(spec):
+        x = dgan.preprocess(frame, spec)
+        with torch.no_grad():
+            cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
+            traj, prob = decode_torch(
+                cl, al, off, torch.from_numpy(anchors), torch.zeros(len(anchors), dtype=torch.long)
+            )
+        n, k = traj.shape[:2]
+        flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
+        world = dgan.to_world_frame(flat, x["origin"], x["heading"]).reshape(n, k, -1, 2)
+        got = predictor.predict(frame)
+        np.testing.assert_allclose(got.trajectories, world, atol=1e-4)
+        np.testing.assert_allclose(got.probabilities, prob.numpy(), atol=1e-4)
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in CHECKPOINTS.glob("*.pt")))
+def test_bundled_models_match_pytorch(name: str) -> None:
+    model, spec, anchors, _ = load_checkpoint(CHECKPOINTS / f"{name}.pt")
+    assert_parity(model, spec, anchors, dgan.models.path(name))
+
+
+def test_every_bundled_model_has_a_checkpoint() -> None:
+    assert set(dgan.models.list()) <= {p.stem for p in CHECKPOINTS.glob("*.pt")}
+
+
+@pytest.mark.parametrize("variant", [{}, {"model.use_map": False}, {"model.use_gat": False}])
+def test_fresh_exports_match_pytorch(variant: dict[str, bool], tmp_path: Path) -> None:
+    torch.manual_seed(1)
+    cfg = Config.load(CONFIG, variant)
+    spec = input_spec(cfg)
+    anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (20, 12, 2)), axis=1).astype(np.float32)
+    model = build_model(cfg, spec, 20).eval()
+    for m in model.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            assert m.running_mean is not None
+            assert m.running_var is not None
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+    assert_parity(model, spec, anchors, export_model(model, spec, anchors, tmp_path / "m.onnx", "fresh"))
+
+
+def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
+    from training.data import cached_windows
+
+    root = data_root()
+    cfg = Config.load(CONFIG)
+    cache = Path(cfg.data.cache_dir).expanduser()
+    for split in ("train", "val"):  # build the cache once, before two processes read it
+        cached_windows(root, "zara1", split, input_spec(cfg), cache, progress=False)
+    out = tmp_path / "run"
+    common = [
+        "-m",
+        "training.train",
+        "--config",
+        str(CONFIG),
+        "--out",
+        str(out),
+        "--no-export",
+        "--set",
+        f"data.root={root}",
+        "--set",
+        "train.max_train_windows=24",
+        "--set",
+        "train.batch_windows=4",
+    ]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    torchrun = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2"]
+    first = subprocess.run(
+        [*torchrun, *common, "--set", "train.epochs=2", "--stop-after", "1"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert first.returncode == 0, first.stdout[-3000:] + first.stderr[-3000:]
+    assert "2 process(es)" in first.stdout
+    second = subprocess.run(
+        [*torchrun, *common, "--set", "train.epochs=2", "--resume"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert second.returncode == 0, second.stdout[-3000:] + second.stderr[-3000:]
+    rows = list(csv.DictReader((out / "log.csv").open()))
+    assert [r["epoch"] for r in rows] == ["1", "2"]
+    assert np.isfinite(float(rows[-1]["val_min_ade20"]))

@@ -1,0 +1,81 @@
+"""Typed training configuration, read from TOML (see ``training/configs/``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import tomllib
+
+from training.model import ModelConfig
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    root: str = "../shared/data"  # the folder holding eth_ucy/ and eth_ucy_scene_maps/
+    scene: str = "zara1"  # the held-out ETH/UCY scene
+    cache_dir: str = "~/.cache/dgan/windows"
+    use_map: bool = True
+    map_height_px: int = 32
+    map_width_px: int = 31
+    map_resolution_m: float = 0.5
+    map_agent_row: int = 24
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    epochs: int = 30
+    batch_windows: int = 32
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    alpha: float = 1.0
+    anchors_per_class: int = 20
+    mirror: bool = True
+    seed: int = 0
+    threads: int = 2
+    max_train_windows: int = 0  # 0 = all; a positive number subsamples (quick tests)
+
+
+@dataclass(frozen=True)
+class Config:
+    name: str = "ethucy"
+    data: DataConfig = field(default_factory=DataConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    @classmethod
+    def load(cls, path: str | Path, overrides: dict[str, Any] | None = None) -> Config:
+        """Reads a TOML file; unknown keys are errors. ``overrides`` maps ``section.key`` to values."""
+        raw = tomllib.loads(Path(path).read_text())
+        for dotted, value in (overrides or {}).items():
+            section, _, key = dotted.partition(".")
+            raw.setdefault(section, {})[key] = value
+        return cls.from_dict(raw)
+
+    @classmethod
+    def from_dict(cls, raw: dict[str, Any]) -> Config:
+        sections = {"data": DataConfig, "model": ModelConfig, "train": TrainConfig}
+        kwargs: dict[str, Any] = {}
+        for key, value in raw.items():
+            if key == "name":
+                kwargs["name"] = str(value)
+                continue
+            if key not in sections:
+                raise ValueError(f"unknown config section [{key}]; known: name, {', '.join(sections)}")
+            dc = sections[key]
+            known = {f.name: f.type for f in fields(dc)}
+            unknown = set(value) - set(known)
+            if unknown:
+                raise ValueError(f"unknown keys in [{key}]: {sorted(unknown)}; known: {sorted(known)}")
+            defaults = dc()
+            typed = {}
+            for k, v in value.items():
+                want = type(getattr(defaults, k))
+                if want is float and isinstance(v, int) and not isinstance(v, bool):
+                    v = float(v)
+                if not isinstance(v, want):
+                    raise ValueError(f"[{key}] {k} must be {want.__name__}, got {v!r}")
+                typed[k] = v
+            kwargs[key] = replace(defaults, **typed)
+        return cls(**kwargs)

@@ -1,0 +1,53 @@
+"""The paper's loss: hierarchical classification −log(p(c*) · p(k* | c*)) plus α times the mean L2 error of the
+offset-corrected closest anchor k* (closest to the ground truth by summed squared distance, among c*'s anchors)."""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+
+def closest_anchor(future: Tensor, anchors: Tensor, class_of_anchor: Tensor, class_index: Tensor) -> Tensor:
+    """``(N,)`` index k* of the anchor of the agent's class closest to its future."""
+    d = ((anchors.unsqueeze(0) - future.unsqueeze(1)) ** 2).sum(dim=(-1, -2))  # (N, K)
+    d = d.masked_fill(class_of_anchor.unsqueeze(0) != class_index.unsqueeze(1), float("inf"))
+    return d.argmin(dim=1)
+
+
+def dgan_loss(
+    class_logits: Tensor,
+    anchor_logits: Tensor,
+    offsets: Tensor,
+    future: Tensor,
+    class_index: Tensor,
+    anchors: Tensor,
+    class_of_anchor: Tensor,
+    alpha: float,
+) -> tuple[Tensor, dict[str, float]]:
+    """Mean loss over the given (target) agents, and its parts."""
+    k_star = closest_anchor(future, anchors, class_of_anchor, class_index)
+    rows = torch.arange(len(future))
+    log_pc = torch.log_softmax(class_logits, dim=1)[rows, class_index]
+    in_class = class_of_anchor.unsqueeze(0) == class_index.unsqueeze(1)
+    log_pk = torch.log_softmax(anchor_logits.masked_fill(~in_class, float("-inf")), dim=1)[rows, k_star]
+    cls = -(log_pc + log_pk)
+    pred = anchors[k_star] + offsets[rows, k_star]
+    reg = torch.linalg.norm(pred - future, dim=-1).mean(dim=-1)
+    loss = (cls + alpha * reg).mean()
+    return loss, {"cls": float(cls.mean().detach()), "reg": float(reg.mean().detach())}
+
+
+def decode_torch(
+    class_logits: Tensor, anchor_logits: Tensor, offsets: Tensor, anchors: Tensor, class_of_anchor: Tensor
+) -> tuple[Tensor, Tensor]:
+    """Agent-frame modes ``(N, K, T, 2)`` sorted by p(c) · p(k | c), and those probabilities ``(N, K)``."""
+    pc = torch.softmax(class_logits, dim=1)[:, class_of_anchor]
+    num_classes = class_logits.shape[1]
+    pk = torch.zeros_like(anchor_logits)
+    for c in range(num_classes):
+        sel = class_of_anchor == c
+        pk[:, sel] = torch.softmax(anchor_logits[:, sel], dim=1)
+    p = pc * pk
+    order = torch.argsort(-p, dim=1, stable=True)
+    traj = (anchors.unsqueeze(0) + offsets).gather(1, order[..., None, None].expand(-1, -1, *offsets.shape[2:]))
+    return traj, p.gather(1, order)

@@ -1,0 +1,174 @@
+"""The DGAN network (Dong et al. 2020): a map CNN over the agent's raster crop, a shared LSTM over MLP-embedded
+observed positions, a traffic-state MLP, their concatenation as node features, L stacked multi-head graph attention
+layers masked by the attention-zone graph, and heads for class logits, anchor logits and per-anchor offsets.
+
+Node features are agent-centric, so neighbour geometry travels on the edges: each edge carries the sender's position,
+velocity and heading in the receiver's frame (``edge_features``), which enters both the attention score and the
+message. Graph softmax uses scatter-add only (exported as ONNX ScatterElements), with scores clamped to ±20.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Sizes of the network."""
+
+    embed_dim: int = 32
+    lstm_dim: int = 64
+    state_dim_out: int = 64
+    map_channels: int = 8  # width multiplier of the map CNN (sized to train on a CPU)
+    map_dim: int = 64
+    node_dim: int = 128
+    gat_layers: int = 2
+    gat_heads: int = 4
+    head_dim: int = 256
+    use_map: bool = True
+    use_gat: bool = True
+    use_edge_features: bool = True  # False: the attention sees no neighbour geometry (ablation)
+
+
+class ResBlock(nn.Module):
+    def __init__(self, c: int) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Conv2d(c, c, 3, padding=1),
+            nn.BatchNorm2d(c),
+            nn.ReLU(),
+            nn.Conv2d(c, c, 3, padding=1),
+            nn.BatchNorm2d(c),
+        )
+
+    def forward(self, x: Tensor) -> Tensor:
+        out: Tensor = torch.relu(x + self.body(x))
+        return out
+
+
+class MapEncoder(nn.Module):
+    """A small ResNet over the ``(3, H, W)`` crop; the flattened 4× downsampled map keeps where things are."""
+
+    def __init__(self, c: int, out: int, h: int, w: int) -> None:
+        super().__init__()
+        self.net = nn.Sequential(
+            nn.Conv2d(3, c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(c),
+            nn.ReLU(),
+            ResBlock(c),
+            nn.Conv2d(c, 2 * c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(2 * c),
+            nn.ReLU(),
+            ResBlock(2 * c),
+            nn.Conv2d(2 * c, 2 * c, 3, stride=2, padding=1),
+            nn.ReLU(),
+        )
+        hh, ww = h, w
+        for _ in range(3):
+            hh, ww = (hh + 1) // 2, (ww + 1) // 2
+        self.proj = nn.Sequential(nn.Flatten(), nn.Linear(2 * c * hh * ww, out), nn.ReLU())
+
+    def forward(self, x: Tensor) -> Tensor:
+        out: Tensor = self.proj(self.net(x))
+        return out
+
+
+class GATLayer(nn.Module):
+    """Multi-head graph attention over directed edges ``[receiver, sender]`` with edge features."""
+
+    def __init__(self, dim: int, heads: int, edge_dim: int) -> None:
+        super().__init__()
+        self.heads, self.dh = heads, dim // heads
+        self.w = nn.Linear(dim, dim, bias=False)
+        self.we = nn.Sequential(nn.Linear(edge_dim, dim), nn.ReLU(), nn.Linear(dim, dim))
+        self.a_recv = nn.Parameter(torch.randn(heads, self.dh) * 0.1)
+        self.a_send = nn.Parameter(torch.randn(heads, self.dh) * 0.1)
+        self.out = nn.Linear(dim, dim)
+        self.norm = nn.LayerNorm(dim)
+
+    def forward(self, h: Tensor, edge_index: Tensor, edge_features: Tensor) -> Tensor:
+        n = h.shape[0]
+        recv, send = edge_index[:, 0], edge_index[:, 1]
+        wh = self.w(h).view(n, self.heads, self.dh)
+        msg = wh[send] + self.we(edge_features).view(-1, self.heads, self.dh)
+        score = nn.functional.leaky_relu((wh[recv] * self.a_recv).sum(-1) + (msg * self.a_send).sum(-1), 0.2)
+        weight = torch.exp(torch.clamp(score, -20.0, 20.0))  # (E, H)
+        # scatter_add, not index_add: the ONNX export of index_add mishandles repeated receivers.
+        r2 = recv.unsqueeze(-1).expand(-1, self.heads)
+        denom = torch.zeros(n, self.heads, dtype=h.dtype).scatter_add(0, r2, weight)
+        alpha = weight / (torch.gather(denom, 0, r2) + 1e-9)
+        r3 = recv.view(-1, 1, 1).expand(-1, self.heads, self.dh)
+        agg = torch.zeros(n, self.heads, self.dh, dtype=h.dtype).scatter_add(0, r3, alpha.unsqueeze(-1) * msg)
+        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
+        return out
+
+
+class DGAN(nn.Module):
+    """Inputs and outputs follow the dgan model contract (``docs/model-contract.md``)."""
+
+    def __init__(
+        self,
+        cfg: ModelConfig,
+        t_obs: int,
+        t_f: int,
+        state_dim: int,
+        num_classes: int,
+        num_anchors: int,
+        map_hw: tuple[int, int] | None,
+    ) -> None:
+        super().__init__()
+        self.cfg, self.t_f, self.k = cfg, t_f, num_anchors
+        self.embed = nn.Sequential(nn.Linear(3, cfg.embed_dim), nn.ReLU())
+        self.lstm = nn.LSTM(cfg.embed_dim, cfg.lstm_dim, batch_first=True)
+        self.state_mlp = nn.Sequential(
+            nn.Linear(state_dim, cfg.state_dim_out),
+            nn.ReLU(),
+            nn.Linear(cfg.state_dim_out, cfg.state_dim_out),
+            nn.ReLU(),
+        )
+        self.map_enc = MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw) if (cfg.use_map and map_hw) else None
+        node_in = cfg.lstm_dim + cfg.state_dim_out + (cfg.map_dim if self.map_enc is not None else 0)
+        self.node = nn.Sequential(nn.Linear(node_in, cfg.node_dim), nn.ReLU())
+        self.gat = nn.ModuleList(
+            [GATLayer(cfg.node_dim, cfg.gat_heads, 6) for _ in range(cfg.gat_layers)] if cfg.use_gat else []
+        )
+        head_in = cfg.node_dim * (2 if cfg.use_gat else 1)
+        self.trunk = nn.Sequential(
+            nn.Linear(head_in, cfg.head_dim), nn.ReLU(), nn.Linear(cfg.head_dim, cfg.head_dim), nn.ReLU()
+        )
+        self.class_head = nn.Linear(cfg.head_dim, num_classes)
+        self.anchor_head = nn.Linear(cfg.head_dim, num_anchors)
+        self.offset_head = nn.Linear(cfg.head_dim, num_anchors * t_f * 2)
+
+    def forward(
+        self,
+        trajectory: Tensor,
+        trajectory_mask: Tensor,
+        state: Tensor,
+        edge_index: Tensor,
+        edge_features: Tensor,
+        map: Tensor | None = None,
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        x = torch.cat([trajectory, trajectory_mask.unsqueeze(-1)], dim=-1)
+        _, (h_n, _) = self.lstm(self.embed(x))
+        parts = [h_n[-1], self.state_mlp(state)]
+        if self.map_enc is not None:
+            assert map is not None, "this model has a map branch"
+            parts.append(self.map_enc(map))
+        v = self.node(torch.cat(parts, dim=-1))
+        if not self.cfg.use_edge_features:
+            edge_features = edge_features * 0.0
+        p = v
+        for layer in self.gat:
+            p = layer(p, edge_index, edge_features)
+        if self.cfg.use_gat:
+            z = self.trunk(torch.cat([p, v], dim=-1))
+        else:
+            # The contract's edge inputs stay in the exported graph (an exporter drops unused inputs).
+            unused = (edge_features.sum() + edge_index.sum().to(v.dtype)) * 0.0
+            z = self.trunk(v + unused)
+        offsets = self.offset_head(z).view(-1, self.k, self.t_f, 2)
+        return self.class_head(z), self.anchor_head(z), offsets

@@ -1,0 +1,240 @@
+"""Train DGAN on one ETH/UCY leave-one-scene-out fold.
+
+    python -m training.train --config training/configs/ethucy_zara1.toml --out runs/zara1
+    torchrun --nproc_per_node 2 -m training.train --config ... --out ...   # DDP on CPU (gloo)
+
+Writes ``<out>/config.json``, ``log.csv`` (one row per epoch), ``last.pt`` and ``best.pt`` (by validation loss).
+``--resume`` continues from ``last.pt``. The best checkpoint is exported to ``<out>/model.onnx`` under the model
+contract at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import random
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.distributed as dist
+
+import dgan
+from training.anchors import kmeans_anchors
+from training.config import Config
+from training.data import Windows, cached_windows
+from training.loss import decode_torch, dgan_loss
+from training.model import DGAN
+
+
+def input_spec(cfg: Config) -> dgan.InputSpec:
+    d = cfg.data
+    map_spec = None
+    if d.use_map and cfg.model.use_map:
+        map_spec = dgan.MapSpec(
+            d.map_height_px, d.map_width_px, d.map_resolution_m, d.map_agent_row, d.map_width_px // 2
+        )
+    return dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("pedestrian",), attention_lambda=0.5, map=map_spec)
+
+
+def to_tensors(batch: dict[str, Any]) -> dict[str, torch.Tensor]:
+    return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in batch.items()}
+
+
+def model_inputs(b: dict[str, torch.Tensor]) -> list[torch.Tensor]:
+    keys = ["trajectory", "trajectory_mask", "state", "edge_index", "edge_features"]
+    return [b[k] for k in keys] + ([b["map"]] if "map" in b else [])
+
+
+def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
+    hw = (spec.map.height_px, spec.map.width_px) if spec.map else None
+    return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw)
+
+
+def fit_anchors(cfg: Config, train: Windows) -> np.ndarray:
+    fut = train.future[train.target]
+    if cfg.train.mirror:
+        flipped = fut.copy()
+        flipped[..., 1] *= -1
+        fut = np.concatenate([fut, flipped])
+    return kmeans_anchors(fut, cfg.train.anchors_per_class, cfg.train.seed).astype(np.float32)
+
+
+@torch.no_grad()
+def validate(model: DGAN, w: Windows, anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config) -> dict[str, float]:
+    model.eval()
+    losses, ade1, fde1, ade20, fde20, n = [], [], [], [], [], 0
+    for start in range(0, w.num_windows, 64):
+        b = to_tensors(w.batch(range(start, min(start + 64, w.num_windows))))
+        cl, al, off = model(*model_inputs(b))
+        t = b["target"]
+        loss, _ = dgan_loss(
+            cl[t], al[t], off[t], b["future"][t], b["class_index"][t], anchors, class_of, cfg.train.alpha
+        )
+        traj, _ = decode_torch(cl[t], al[t], off[t], anchors, class_of)
+        d = torch.linalg.norm(traj - b["future"][t].unsqueeze(1), dim=-1)  # (n, K, T)
+        losses.append(float(loss) * int(t.sum()))
+        ade1.append(d[:, 0].mean(-1).sum())
+        fde1.append(d[:, 0, -1].sum())
+        ade20.append(d[:, :20].mean(-1).min(1).values.sum())
+        fde20.append(d[:, :20, -1].min(1).values.sum())
+        n += int(t.sum())
+    model.train()
+    return {
+        "val_loss": sum(losses) / n,
+        "val_ade": float(sum(ade1)) / n,
+        "val_fde": float(sum(fde1)) / n,
+        "val_min_ade20": float(sum(ade20)) / n,
+        "val_min_fde20": float(sum(fde20)) / n,
+    }
+
+
+def main(argv: list[str] | None = None) -> Path:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--config", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="override a config value")
+    ap.add_argument("--no-export", action="store_true")
+    ap.add_argument(
+        "--stop-after", type=int, default=0, metavar="EPOCH", help="stop after this epoch (as if preempted)"
+    )
+    args = ap.parse_args(argv)
+
+    overrides: dict[str, Any] = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        try:
+            overrides[key] = json.loads(value)
+        except json.JSONDecodeError:
+            overrides[key] = value
+    cfg = Config.load(args.config, overrides)
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    rank = int(os.environ.get("RANK", "0"))
+    if world > 1:
+        dist.init_process_group("gloo")
+    torch.set_num_threads(max(1, cfg.train.threads // world))
+    random.seed(cfg.train.seed)
+    torch.manual_seed(cfg.train.seed)
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    spec = input_spec(cfg)
+    root = Path(cfg.data.root).expanduser()
+    cache = Path(cfg.data.cache_dir).expanduser()
+    show = rank == 0
+    bars = show and sys.stderr.isatty()
+    train = cached_windows(root, cfg.data.scene, "train", spec, cache, progress=bars)
+    val = cached_windows(root, cfg.data.scene, "val", spec, cache, progress=bars)
+
+    if args.resume and (out / "last.pt").is_file():
+        ckpt = torch.load(out / "last.pt", weights_only=False)
+        anchors_np = ckpt["anchors"]
+    else:
+        ckpt = None
+        anchors_np = fit_anchors(cfg, train)
+    anchors = torch.from_numpy(anchors_np)
+    class_of = torch.zeros(len(anchors), dtype=torch.long)
+    model = build_model(cfg, spec, len(anchors))
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.train.lr, total_steps=cfg.train.epochs, pct_start=0.1)
+    start_epoch, best = 0, float("inf")
+    if ckpt is not None:
+        model.load_state_dict(ckpt["model"])
+        opt.load_state_dict(ckpt["optimizer"])
+        sched.load_state_dict(ckpt["scheduler"])
+        start_epoch, best = ckpt["epoch"] + 1, ckpt["best"]
+        torch.set_rng_state(ckpt["rng"])
+    net: torch.nn.Module = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
+
+    if show:
+        (out / "config.json").write_text(
+            json.dumps({"config": asdict(cfg), "spec": json.loads(spec.to_json())}, indent=2)
+        )
+        print(
+            f"fold {cfg.data.scene}: {train.num_windows} train windows ({train.num_targets} targets), "
+            f"{val.num_windows} val windows ({val.num_targets} targets); {len(anchors)} anchors; "
+            f"{sum(p.numel() for p in model.parameters()):,} parameters; {world} process(es)"
+        )
+    from tqdm import tqdm
+
+    log_path = out / "log.csv"
+    rng = np.random.default_rng(cfg.train.seed)
+    windows = np.arange(train.num_windows)
+    if cfg.train.max_train_windows:
+        windows = rng.choice(windows, min(cfg.train.max_train_windows, len(windows)), replace=False)
+    last_epoch = min(cfg.train.epochs, args.stop_after) if args.stop_after else cfg.train.epochs
+    for epoch in range(start_epoch, last_epoch):
+        t0 = time.perf_counter()
+        order = np.random.default_rng(cfg.train.seed + epoch).permutation(windows)
+        batches = [order[i : i + cfg.train.batch_windows] for i in range(0, len(order), cfg.train.batch_windows)]
+        batches = batches[rank::world]
+        if world > 1:  # equal step counts on every rank
+            steps = torch.tensor(len(batches))
+            dist.all_reduce(steps, op=dist.ReduceOp.MIN)
+            batches = batches[: int(steps)]
+        totals = {"loss": 0.0, "cls": 0.0, "reg": 0.0}
+        bar = tqdm(batches, desc=f"epoch {epoch + 1}/{cfg.train.epochs}", disable=not bars, leave=False)
+        for idx in bar:
+            flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
+            b = to_tensors(train.batch(idx, flip))
+            cl, al, off = net(*model_inputs(b))
+            t = b["target"]
+            loss, parts = dgan_loss(
+                cl[t], al[t], off[t], b["future"][t], b["class_index"][t], anchors, class_of, cfg.train.alpha
+            )
+            opt.zero_grad()
+            loss.backward()  # type: ignore[no-untyped-call]
+            torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
+            opt.step()
+            totals["loss"] += float(loss)
+            totals["cls"] += parts["cls"]
+            totals["reg"] += parts["reg"]
+            bar.set_postfix(loss=f"{float(loss):.3f}")
+        sched.step()
+        if not show:
+            continue
+        row = {"epoch": epoch + 1, **{k: v / max(1, len(batches)) for k, v in totals.items()}}
+        row.update(validate(model, val, anchors, class_of, cfg))
+        row["lr"] = sched.get_last_lr()[0]
+        row["seconds"] = time.perf_counter() - t0
+        new = not log_path.exists() or epoch == 0
+        with log_path.open("w" if new else "a", newline="") as f:
+            wr = csv.DictWriter(f, fieldnames=list(row))
+            if new:
+                wr.writeheader()
+            wr.writerow(row)
+        print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
+        state = {
+            "model": model.state_dict(),
+            "optimizer": opt.state_dict(),
+            "scheduler": sched.state_dict(),
+            "epoch": epoch,
+            "best": min(best, row["val_loss"]),
+            "anchors": anchors_np,
+            "config": asdict(cfg),
+            "rng": torch.get_rng_state(),
+        }
+        torch.save(state, out / "last.pt")
+        if row["val_loss"] < best:
+            best = row["val_loss"]
+            torch.save(state, out / "best.pt")
+    if world > 1:
+        dist.barrier()
+        dist.destroy_process_group()
+    if show and not args.no_export and last_epoch == cfg.train.epochs:
+        from training.export import export_checkpoint
+
+        path = export_checkpoint(out / "best.pt", out / "model.onnx", name=f"dgan-ethucy-{cfg.data.scene}")
+        print(f"exported {path}")
+    return out
+
+
+if __name__ == "__main__":
+    main()
