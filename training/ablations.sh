@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The ablations of docs/results.md on one fold (default zara1), each trained for the same budget (10 epochs):
 # the full model; without the map branch; without the GAT (map and anchors alone, close to MultiPath); without
-# neighbour geometry on the edges; and K_c = 5 and 10 anchors. Then each is evaluated with the engine.
+# neighbour geometry on the edges; K_c = 5 and 10 anchors; and the paper's loss alone (no top-mode term, β = 0).
+# Then each is evaluated with the engine.
 #   bash training/ablations.sh [SCENE] [DATA_ROOT]
 set -euo pipefail
 scene="${1:-zara1}"
@@ -15,8 +16,9 @@ declare -A variants=(
   [no_edge_geometry]="--set model.use_edge_features=false"
   [k5]="--set train.anchors_per_class=5"
   [k10]="--set train.anchors_per_class=10"
+  [paper_loss]="--set train.beta=0"
 )
-for name in full no_map no_gat no_edge_geometry k5 k10; do
+for name in full no_map no_gat no_edge_geometry k5 k10 paper_loss; do
   out="runs/ablation_${scene}_${name}"
   if [ ! -f "$out/model.onnx" ]; then
     # shellcheck disable=SC2086

@@ -46,6 +46,8 @@ training.
 - **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP, map CNN (ResNet-style, width
   {m["map_channels"]}), {m["gat_layers"]} GAT layers × {m["gat_heads"]} heads over the attention-zone graph (λ = 0.5)
   with neighbour geometry on the edges, {cfg["train"]["anchors_per_class"]} k-means anchors with offset regression.
+  Loss: the paper's hierarchical classification and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
+  β = {cfg["train"]["beta"]} times the error of the most probable mode (see `docs/results.md`).
   One class (pedestrian).
 - **Training**: {len(rows)} epochs, best at epoch {best["epoch"]}, {seconds / 60:.1f} min on 2 CPU cores; seed
   {cfg["train"]["seed"]}; left-right mirroring.

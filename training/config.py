@@ -30,6 +30,7 @@ class TrainConfig:
     lr: float = 2e-3
     weight_decay: float = 1e-4
     alpha: float = 1.0
+    beta: float = 1.0  # weight of the most probable mode's regression (0 = the paper's loss alone)
     anchors_per_class: int = 20
     mirror: bool = True
     seed: int = 0

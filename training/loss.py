@@ -23,8 +23,13 @@ def dgan_loss(
     anchors: Tensor,
     class_of_anchor: Tensor,
     alpha: float,
+    beta: float = 0.0,
 ) -> tuple[Tensor, dict[str, float]]:
-    """Mean loss over the given (target) agents, and its parts."""
+    """Mean loss over the given (target) agents, and its parts.
+
+    ``beta`` > 0 adds the mean L2 error of the most probable mode (its selection carries no gradient), so the offset
+    of the mode a user sees first also learns to correct a wrong anchor choice; the other modes keep their diversity.
+    """
     k_star = closest_anchor(future, anchors, class_of_anchor, class_index)
     rows = torch.arange(len(future))
     log_pc = torch.log_softmax(class_logits, dim=1)[rows, class_index]
@@ -34,7 +39,19 @@ def dgan_loss(
     pred = anchors[k_star] + offsets[rows, k_star]
     reg = torch.linalg.norm(pred - future, dim=-1).mean(dim=-1)
     loss = (cls + alpha * reg).mean()
-    return loss, {"cls": float(cls.mean().detach()), "reg": float(reg.mean().detach())}
+    parts = {"cls": float(cls.mean().detach()), "reg": float(reg.mean().detach())}
+    if beta > 0:
+        with torch.no_grad():
+            pc = torch.softmax(class_logits, dim=1)[:, class_of_anchor]
+            pk = torch.zeros_like(anchor_logits)
+            for c in range(class_logits.shape[1]):
+                sel = class_of_anchor == c
+                pk[:, sel] = torch.softmax(anchor_logits[:, sel], dim=1)
+            top = (pc * pk).argmax(dim=1)
+        top_err = torch.linalg.norm(anchors[top] + offsets[rows, top] - future, dim=-1).mean(dim=-1)
+        loss = loss + beta * top_err.mean()
+        parts["top1"] = float(top_err.mean().detach())
+    return loss, parts
 
 
 def decode_torch(

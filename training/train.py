@@ -75,7 +75,15 @@ def validate(model: DGAN, w: Windows, anchors: torch.Tensor, class_of: torch.Ten
         cl, al, off = model(*model_inputs(b))
         t = b["target"]
         loss, _ = dgan_loss(
-            cl[t], al[t], off[t], b["future"][t], b["class_index"][t], anchors, class_of, cfg.train.alpha
+            cl[t],
+            al[t],
+            off[t],
+            b["future"][t],
+            b["class_index"][t],
+            anchors,
+            class_of,
+            cfg.train.alpha,
+            cfg.train.beta,
         )
         traj, _ = decode_torch(cl[t], al[t], off[t], anchors, class_of)
         d = torch.linalg.norm(traj - b["future"][t].unsqueeze(1), dim=-1)  # (n, K, T)
@@ -143,7 +151,9 @@ def main(argv: list[str] | None = None) -> Path:
     class_of = torch.zeros(len(anchors), dtype=torch.long)
     model = build_model(cfg, spec, len(anchors))
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.train.lr, total_steps=cfg.train.epochs, pct_start=0.1)
+    # OneCycleLR divides by pct_start * total - 1, which is 0 at exactly 10 epochs: nudge only that case.
+    pct = 0.1 if abs(0.1 * cfg.train.epochs - 1.0) > 1e-9 else 0.15
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.train.lr, total_steps=cfg.train.epochs, pct_start=pct)
     start_epoch, best = 0, float("inf")
     if ckpt is not None:
         model.load_state_dict(ckpt["model"])
@@ -187,7 +197,15 @@ def main(argv: list[str] | None = None) -> Path:
             cl, al, off = net(*model_inputs(b))
             t = b["target"]
             loss, parts = dgan_loss(
-                cl[t], al[t], off[t], b["future"][t], b["class_index"][t], anchors, class_of, cfg.train.alpha
+                cl[t],
+                al[t],
+                off[t],
+                b["future"][t],
+                b["class_index"][t],
+                anchors,
+                class_of,
+                cfg.train.alpha,
+                cfg.train.beta,
             )
             opt.zero_grad()
             loss.backward()  # type: ignore[no-untyped-call]

@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-from dgan import exceptions, models
+from dgan import demo, exceptions, models, scenes
 from dgan._dgan import __version__
 from dgan.exceptions import DganError
 from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
@@ -28,10 +28,12 @@ __all__ = [
     "VectorMap",
     "__version__",
     "attention_graph",
+    "demo",
     "exceptions",
     "models",
     "preprocess",
     "scene_map",
+    "scenes",
     "to_agent_frame",
     "to_world_frame",
 ]

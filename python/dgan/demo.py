@@ -50,7 +50,7 @@ def draw(frame: Frame, pred: Prediction, futures: dict[int, np.ndarray], out: Pa
     ax.imshow(image)
     ax.set_xlim(0, wid)
     ax.set_ylim(hgt, 0)
-    cmap = plt.get_cmap("plasma")
+    cmap = plt.get_cmap("cool")
     modes = pred.trajectories.shape[1]
     for i, pid in enumerate(frame.ids):
         obs = px(frame.positions[i][frame.mask[i]])

@@ -134,8 +134,7 @@ def _resolve(model: str | os.PathLike[str]) -> Path:
     if isinstance(model, str) and not p.exists() and p.suffix == "" and "/" not in model:
         from dgan import models
 
-        if model in models.list():
-            return models.path(model)
+        return models.path(model)  # a bundled name, or ModelNotFoundError listing them
     return p
 
 

@@ -47,3 +47,12 @@ def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys:
     bad.write_text("1 2\n3 4\n")
     assert main(["predict", str(nomap_model), str(bad)]) == 2
     assert "expected 4 columns" in capsys.readouterr().err
+
+
+def test_demo_prints_and_draws(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo.png"
+    assert main(["demo", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "18 pedestrians of zara1 at frame 5500" in text
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out.stat().st_size > 50_000

@@ -1,0 +1,65 @@
+"""The bundled models, their cards and scene maps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import dgan
+from dgan import exceptions as exc
+
+SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
+
+
+def test_five_leave_one_out_models_are_bundled() -> None:
+    assert dgan.models.list() == SCENES
+    for name in SCENES:
+        p = dgan.Predictor(name)
+        assert p.spec.t_obs == 8
+        assert p.spec.t_f == 12
+        assert p.classes == ("pedestrian",)
+        assert p.anchors["pedestrian"].shape == (20, 12, 2)
+        assert p.spec.map is not None
+        card = dgan.models.card(name)
+        assert f"test scene {name}" in card
+        assert "non-commercial" in card
+        assert dgan.models.path(name).stat().st_size < 5_000_000
+
+
+def test_unknown_names_list_the_bundled_ones() -> None:
+    with pytest.raises(exc.ModelNotFoundError, match="zara1"):
+        dgan.Predictor("zara9")
+    with pytest.raises(exc.ModelNotFoundError):
+        dgan.models.card("nope")
+
+
+def test_scene_maps_match_their_models(zara1_frame: dgan.Frame) -> None:
+    m = dgan.scene_map("zara1")
+    assert m.image.shape == (576, 720, 3)
+    # Colourised mask: only palette colours.
+    colours = np.unique(m.image.reshape(-1, 3), axis=0)
+    assert all(any((c == p).all() for p in dgan.scenes.MASK_PALETTE) for c in colours)
+    with pytest.raises(exc.InvalidMapError, match="bundled scenes"):
+        dgan.scene_map("times_square")
+    frame = dgan.Frame(zara1_frame.positions, mask=zara1_frame.mask, ids=zara1_frame.ids, map=m)
+    pred = dgan.Predictor("zara1", modes=5).predict(frame)
+    assert pred.trajectories.shape == (len(frame), 5, 12, 2)
+    # Pedestrians walk: the most likely mode ends within 15 m of where each one is now.
+    dist = np.linalg.norm(pred.most_likely[:, -1] - frame.positions[:, -1], axis=1)
+    assert np.all(dist < 15.0)
+
+
+def test_a_bundled_model_beats_standing_still(zara1_frame: dgan.Frame) -> None:
+    """On the bundled zara1 excerpt, the zara1 model's top mode is far closer to what happened than standing still."""
+    rows = np.loadtxt(dgan.demo.SCENE_FILE)
+    frame, futures = dgan.demo.load_scene(8, 5500.0)
+    pred = dgan.Predictor("zara1").predict(frame)
+    errs, still = [], []
+    for i, pid in enumerate(frame.ids):
+        fut = futures[int(pid)]
+        if len(fut) == 12:
+            errs.append(np.linalg.norm(pred.most_likely[i] - fut, axis=1).mean())
+            still.append(np.linalg.norm(frame.positions[i, -1] - fut, axis=1).mean())
+    assert len(errs) >= 10
+    assert len(rows) == 346
+    assert np.mean(errs) < 0.5 * np.mean(still)
