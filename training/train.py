@@ -66,26 +66,28 @@ def fit_anchors(cfg: Config, train: Windows) -> np.ndarray:
     return kmeans_anchors(fut, cfg.train.anchors_per_class, cfg.train.seed).astype(np.float32)
 
 
+def forward_loss(
+    net: torch.nn.Module, b: dict[str, torch.Tensor], anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config
+) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+    """The network on a batch and the loss over its target agents; also the targets' outputs."""
+    cl, al, off = net(*model_inputs(b))
+    t = b["target"]
+    outs = (cl[t], al[t], off[t])
+    loss, parts = dgan_loss(
+        *outs, b["future"][t], b["class_index"][t], anchors, class_of, cfg.train.alpha, cfg.train.beta
+    )
+    return loss, parts, outs
+
+
 @torch.no_grad()
 def validate(model: DGAN, w: Windows, anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config) -> dict[str, float]:
     model.eval()
     losses, ade1, fde1, ade20, fde20, n = [], [], [], [], [], 0
     for start in range(0, w.num_windows, 64):
         b = to_tensors(w.batch(range(start, min(start + 64, w.num_windows))))
-        cl, al, off = model(*model_inputs(b))
         t = b["target"]
-        loss, _ = dgan_loss(
-            cl[t],
-            al[t],
-            off[t],
-            b["future"][t],
-            b["class_index"][t],
-            anchors,
-            class_of,
-            cfg.train.alpha,
-            cfg.train.beta,
-        )
-        traj, _ = decode_torch(cl[t], al[t], off[t], anchors, class_of)
+        loss, _, (cl, al, off) = forward_loss(model, b, anchors, class_of, cfg)
+        traj, _ = decode_torch(cl, al, off, anchors, class_of)
         d = torch.linalg.norm(traj - b["future"][t].unsqueeze(1), dim=-1)  # (n, K, T)
         losses.append(float(loss) * int(t.sum()))
         ade1.append(d[:, 0].mean(-1).sum())
@@ -194,19 +196,7 @@ def main(argv: list[str] | None = None) -> Path:
         for idx in bar:
             flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
             b = to_tensors(train.batch(idx, flip))
-            cl, al, off = net(*model_inputs(b))
-            t = b["target"]
-            loss, parts = dgan_loss(
-                cl[t],
-                al[t],
-                off[t],
-                b["future"][t],
-                b["class_index"][t],
-                anchors,
-                class_of,
-                cfg.train.alpha,
-                cfg.train.beta,
-            )
+            loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg)
             opt.zero_grad()
             loss.backward()  # type: ignore[no-untyped-call]
             torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)

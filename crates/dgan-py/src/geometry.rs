@@ -20,7 +20,7 @@ fn poses(origins: &PyReadonlyArrayDyn<'_, f64>, headings: &PyReadonlyArrayDyn<'_
     Ok((0..h.len()).map(|i| AgentPose::new([o[[i, 0]], o[[i, 1]]], h[i])).collect())
 }
 
-fn points(p: &PyReadonlyArrayDyn<'_, f64>, n: usize) -> PyResult<Array3<f64>> {
+fn points_of(p: &PyReadonlyArrayDyn<'_, f64>, n: usize) -> PyResult<Array3<f64>> {
     let shape = p.as_array().shape().to_vec();
     let a =
         p.as_array().to_owned().into_dimensionality::<ndarray::Ix3>().ok().filter(|a| a.dim().0 == n && a.dim().2 == 2);
@@ -39,6 +39,18 @@ fn map_points(p: Array3<f64>, poses: &[AgentPose], f: impl Fn(&AgentPose, [f64; 
     out
 }
 
+fn transform<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArrayDyn<'py, f64>,
+    origins: PyReadonlyArrayDyn<'py, f64>,
+    headings: PyReadonlyArrayDyn<'py, f64>,
+    f: impl Fn(&AgentPose, [f64; 2]) -> [f64; 2],
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let poses = poses(&origins, &headings)?;
+    let p = points_of(&points, poses.len())?;
+    Ok(map_points(p, &poses, f).into_pyarray(py))
+}
+
 /// World points `(N, T, 2)` → each agent's frame (origin `(N, 2)`, heading `(N,)` radians).
 #[pyfunction]
 pub fn to_agent_frame<'py>(
@@ -47,9 +59,7 @@ pub fn to_agent_frame<'py>(
     origins: PyReadonlyArrayDyn<'py, f64>,
     headings: PyReadonlyArrayDyn<'py, f64>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let poses = poses(&origins, &headings)?;
-    let p = points(&points_world, poses.len())?;
-    Ok(map_points(p, &poses, |pose, q| pose.to_local(q)).into_pyarray(py))
+    transform(py, points_world, origins, headings, |pose, q| pose.to_local(q))
 }
 
 /// Agent-frame points `(N, T, 2)` → the world frame.
@@ -60,9 +70,7 @@ pub fn to_world_frame<'py>(
     origins: PyReadonlyArrayDyn<'py, f64>,
     headings: PyReadonlyArrayDyn<'py, f64>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-    let poses = poses(&origins, &headings)?;
-    let p = points(&points_local, poses.len())?;
-    Ok(map_points(p, &poses, |pose, q| pose.to_world(q)).into_pyarray(py))
+    transform(py, points_local, origins, headings, |pose, q| pose.to_world(q))
 }
 
 /// Undirected attention-zone edges `(E, 2)`, `i < j`, of circles `centres (N, 2)`, `radii (N,)`.
