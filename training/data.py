@@ -89,15 +89,13 @@ class Windows:
 
     def batch(self, windows: Sequence[int], flip: Arr | None = None) -> dict[str, Arr]:
         """Concatenates windows into one graph; ``flip`` (per window, bool) mirrors left and right."""
-        a_idx = np.concatenate([np.arange(self.agent_ptr[w], self.agent_ptr[w + 1]) for w in windows])
-        e_idx = np.concatenate([np.arange(self.edge_ptr[w], self.edge_ptr[w + 1]) for w in windows])
-        shift = np.concatenate([np.full(self.edge_ptr[w + 1] - self.edge_ptr[w], 0, np.int64) for w in windows])
-        base, start = 0, 0
-        for w in windows:
-            ne = self.edge_ptr[w + 1] - self.edge_ptr[w]
-            shift[start : start + ne] = base
-            base += self.agent_ptr[w + 1] - self.agent_ptr[w]
-            start += ne
+        w = np.asarray(windows)
+        n_agents = self.agent_ptr[w + 1] - self.agent_ptr[w]
+        n_edges = self.edge_ptr[w + 1] - self.edge_ptr[w]
+        a_idx = np.concatenate([np.arange(self.agent_ptr[i], self.agent_ptr[i + 1]) for i in w])
+        e_idx = np.concatenate([np.arange(self.edge_ptr[i], self.edge_ptr[i + 1]) for i in w])
+        # Each window's edge indices shift by the agents of the windows before it in the batch.
+        shift = np.repeat(np.cumsum(n_agents) - n_agents, n_edges)
         out = {
             "trajectory": self.trajectory[a_idx].copy(),
             "trajectory_mask": self.trajectory_mask[a_idx],
@@ -111,13 +109,7 @@ class Windows:
         if self.map is not None:
             out["map"] = self.map[a_idx].astype(np.float32) / 255.0
         if flip is not None and flip.any():
-            agent_flip = np.concatenate(
-                [np.full(self.agent_ptr[w + 1] - self.agent_ptr[w], f) for w, f in zip(windows, flip, strict=True)]
-            )
-            edge_flip = np.concatenate(
-                [np.full(self.edge_ptr[w + 1] - self.edge_ptr[w], f) for w, f in zip(windows, flip, strict=True)]
-            )
-            mirror(out, agent_flip, edge_flip)
+            mirror(out, np.repeat(flip, n_agents), np.repeat(flip, n_edges))
         return out
 
 

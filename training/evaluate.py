@@ -22,32 +22,35 @@ from training import metrics
 from training.data import iter_windows, read_file, scene_of, split_files
 
 
-def evaluate(predictor: dgan.Predictor, data_root: Path, scene: str, progress: bool = False) -> dict[str, Any]:
+def evaluate(predictor: dgan.Predictor, data_root: Path, scene: str) -> dict[str, Any]:
     """Per-agent metrics of the model and of constant velocity, averaged, with window and agent counts."""
     spec = predictor.spec
     maps_root = data_root / "eth_ucy_scene_maps" / "semantic_masks"
     per: dict[str, list[np.ndarray]] = {}
     windows = 0
+    maps: dict[str, dgan.RasterMap] = {}
     for path in split_files(data_root, scene, "test"):
-        smap = scene_raster_map(scene_of(path), maps_root / scene_of(path)) if spec.map is not None else None
+        smap = None
+        if spec.map is not None:
+            s = scene_of(path)
+            if s not in maps:
+                maps[s] = scene_raster_map(s, maps_root / s)
+            smap = maps[s]
         for _now, ids, pos, mask, target in iter_windows(read_file(path), spec.t_obs, spec.t_f):
             windows += 1
             frame = dgan.Frame(pos[:, : spec.t_obs], mask=mask[:, : spec.t_obs], ids=ids.astype(np.int64), map=smap)
-            pred = predictor.predict(frame, modes=min(20, predictor._predictor.num_modes))
+            pred = predictor.predict(frame, modes=min(20, predictor.num_modes))
             gt = pos[target, spec.t_obs :]
             traj, prob = pred.trajectories[target], pred.probabilities[target]
             cv = metrics.constant_velocity(pos[target, : spec.t_obs], mask[target, : spec.t_obs], spec.t_f)
-            add = {
-                "ade": metrics.ade_fde_top1(traj, gt)[0],
-                "fde": metrics.ade_fde_top1(traj, gt)[1],
-                "min_ade5": metrics.min_ade_fde(traj, gt, 5)[0],
-                "min_fde5": metrics.min_ade_fde(traj, gt, 5)[1],
-                "min_ade20": metrics.min_ade_fde(traj, gt, 20)[0],
-                "min_fde20": metrics.min_ade_fde(traj, gt, 20)[1],
-                "brier_min_fde20": metrics.brier_min_fde(traj, gt, prob, 20),
-                "cv_ade": metrics.ade_fde_top1(cv, gt)[0],
-                "cv_fde": metrics.ade_fde_top1(cv, gt)[1],
+            pairs = {
+                ("ade", "fde"): metrics.ade_fde_top1(traj, gt),
+                ("min_ade5", "min_fde5"): metrics.min_ade_fde(traj, gt, 5),
+                ("min_ade20", "min_fde20"): metrics.min_ade_fde(traj, gt, 20),
+                ("cv_ade", "cv_fde"): metrics.ade_fde_top1(cv, gt),
             }
+            add = {name: value for names, values in pairs.items() for name, value in zip(names, values, strict=True)}
+            add["brier_min_fde20"] = metrics.brier_min_fde(traj, gt, prob, 20)
             for k, v in add.items():
                 per.setdefault(k, []).append(v)
     out: dict[str, Any] = {k: float(np.concatenate(v).mean()) for k, v in per.items()}

@@ -42,29 +42,28 @@ def dgan_loss(
     parts = {"cls": float(cls.mean().detach()), "reg": float(reg.mean().detach())}
     if beta > 0:
         with torch.no_grad():
-            pc = torch.softmax(class_logits, dim=1)[:, class_of_anchor]
-            pk = torch.zeros_like(anchor_logits)
-            for c in range(class_logits.shape[1]):
-                sel = class_of_anchor == c
-                pk[:, sel] = torch.softmax(anchor_logits[:, sel], dim=1)
-            top = (pc * pk).argmax(dim=1)
+            top = mode_probabilities(class_logits, anchor_logits, class_of_anchor).argmax(dim=1)
         top_err = torch.linalg.norm(anchors[top] + offsets[rows, top] - future, dim=-1).mean(dim=-1)
         loss = loss + beta * top_err.mean()
         parts["top1"] = float(top_err.mean().detach())
     return loss, parts
 
 
+def mode_probabilities(class_logits: Tensor, anchor_logits: Tensor, class_of_anchor: Tensor) -> Tensor:
+    """``(N, K)`` p(c(k)) · p(k | c(k)) of every anchor."""
+    pc = torch.softmax(class_logits, dim=1)[:, class_of_anchor]
+    pk = torch.zeros_like(anchor_logits)
+    for c in range(class_logits.shape[1]):
+        sel = class_of_anchor == c
+        pk[:, sel] = torch.softmax(anchor_logits[:, sel], dim=1)
+    return pc * pk
+
+
 def decode_torch(
     class_logits: Tensor, anchor_logits: Tensor, offsets: Tensor, anchors: Tensor, class_of_anchor: Tensor
 ) -> tuple[Tensor, Tensor]:
     """Agent-frame modes ``(N, K, T, 2)`` sorted by p(c) · p(k | c), and those probabilities ``(N, K)``."""
-    pc = torch.softmax(class_logits, dim=1)[:, class_of_anchor]
-    num_classes = class_logits.shape[1]
-    pk = torch.zeros_like(anchor_logits)
-    for c in range(num_classes):
-        sel = class_of_anchor == c
-        pk[:, sel] = torch.softmax(anchor_logits[:, sel], dim=1)
-    p = pc * pk
+    p = mode_probabilities(class_logits, anchor_logits, class_of_anchor)
     order = torch.argsort(-p, dim=1, stable=True)
     traj = (anchors.unsqueeze(0) + offsets).gather(1, order[..., None, None].expand(-1, -1, *offsets.shape[2:]))
     return traj, p.gather(1, order)

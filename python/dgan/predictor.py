@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._runtime import onnxruntime_library
+from dgan._runtime import onnxruntime_library as onnxruntime_library_path
 from dgan.exceptions import InvalidSpecError
 from dgan.frame import Frame
 from dgan.spec import InputSpec
@@ -70,7 +70,7 @@ class Predictor:
         threads: int = 1,
         onnxruntime_library: str | os.PathLike[str] | None = None,
     ) -> None:
-        lib = Path(onnxruntime_library) if onnxruntime_library is not None else _default_library()
+        lib = Path(onnxruntime_library) if onnxruntime_library is not None else onnxruntime_library_path()
         if threads < 1:
             raise InvalidSpecError(f"threads must be at least 1, got {threads}")
         self._predictor = _dgan.Predictor(os.fspath(_resolve(model)), os.fspath(lib), threads)
@@ -79,12 +79,18 @@ class Predictor:
         self._modes = self._check_modes(modes)
 
     def _check_modes(self, modes: int | None) -> int:
-        k: int = self._predictor.num_modes
+        k = self.num_modes
         if modes is None:
             return k
         if not 1 <= modes <= k:
             raise InvalidSpecError(f"modes must be in 1..={k} (the model's anchors), got {modes}")
         return modes
+
+    @property
+    def num_modes(self) -> int:
+        """K = Σ K_c, the most modes :meth:`predict` can return."""
+        k: int = self._predictor.num_modes
+        return k
 
     @property
     def spec(self) -> InputSpec:
@@ -136,7 +142,3 @@ def _resolve(model: str | os.PathLike[str]) -> Path:
 
         return models.path(model)  # a bundled name, or ModelNotFoundError listing them
     return p
-
-
-def _default_library() -> Path:
-    return onnxruntime_library()

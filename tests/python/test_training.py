@@ -140,25 +140,21 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
     ]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     torchrun = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2"]
-    first = subprocess.run(
-        [*torchrun, *common, "--set", "train.epochs=2", "--stop-after", "1"],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert first.returncode == 0, first.stdout[-3000:] + first.stderr[-3000:]
-    assert "2 process(es)" in first.stdout
-    second = subprocess.run(
-        [*torchrun, *common, "--set", "train.epochs=2", "--resume"],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert second.returncode == 0, second.stdout[-3000:] + second.stderr[-3000:]
+
+    def run(*extra: str) -> str:
+        done = subprocess.run(
+            [*torchrun, *common, "--set", "train.epochs=2", *extra],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        return done.stdout
+
+    assert "2 process(es)" in run("--stop-after", "1")  # interrupted after epoch 1
+    run("--resume")
     rows = list(csv.DictReader((out / "log.csv").open()))
     assert [r["epoch"] for r in rows] == ["1", "2"]
     assert np.isfinite(float(rows[-1]["val_min_ade20"]))
