@@ -158,3 +158,13 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
     rows = list(csv.DictReader((out / "log.csv").open()))
     assert [r["epoch"] for r in rows] == ["1", "2"]
     assert np.isfinite(float(rows[-1]["val_min_ade20"]))
+
+
+def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
+    from training.anchors import kmeans_anchors
+    from training.data import split_files
+
+    with pytest.raises(FileNotFoundError, match=r"set data\.root"):
+        split_files(tmp_path, "zara1", "train")
+    with pytest.raises(ValueError, match="3 futures cannot make 20 anchors"):
+        kmeans_anchors(np.zeros((3, 12, 2)), 20)
