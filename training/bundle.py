@@ -1,7 +1,8 @@
-"""Ship a trained fold: export its best checkpoint into ``python/dgan/models/<name>.onnx``, keep a slim checkpoint
+"""Ship a trained run: export its best checkpoint into ``python/dgan/models/<name>.onnx``, keep a slim checkpoint
 for the parity test in ``training/checkpoints/<name>.pt``, evaluate it with the engine and write its model card.
 
     python -m training.bundle runs/ethucy_zara1 --name zara1 --data-root ../shared/data
+    python -m training.bundle runs/sdd --name sdd
 """
 
 from __future__ import annotations
@@ -65,21 +66,103 @@ training.
 """
 
 
+MULTICLASS = {
+    "sdd": {
+        "title": "Stanford Drone (multi-class)",
+        "data": "Stanford Drone Dataset in Multiclass-SGCN's `multiclass_step10` release: all 60 videos split 30/13/17 "
+        "by video (train/val/test), box centres in pixels, one step = 10 video frames (1/3 s). Positions are "
+        "converted to metres with each video's scale (`estimated_scales.yaml`); errors are reported in **pixels**. "
+        "Labels → classes as in the paper: Pedestrian → pedestrian; Biker, Skater → cyclist; Cart, Car, Bus → "
+        "vehicle. Lengths and widths are the class defaults (the release has no boxes). The map is each video's "
+        "`reference.jpg`, box-filtered to about 0.25 m/px, cropped heading-aligned.",
+        "protocol": "8 observed steps (2.7 s), 12 predicted (4 s); windows of 20 consecutive steps, targets present "
+        "at all of them, windows with at least two targets (Multiclass-SGCN's windows).",
+        "licence": "Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016.",
+        "scene": "`dgan demo --model sdd` (hyang video0 of the test split)",
+    },
+    "apolloscape": {
+        "title": "ApolloScape trajectory (multi-class)",
+        "data": "ApolloScape trajectory (urban traffic recorded from a vehicle, 2 Hz) with each agent's measured "
+        "class, length, width and heading. Split by recording: test 9048, 9056, 9058, 9061; val 9049, 9060; "
+        "train the other eight. Small and big vehicles → vehicle; bicyclists and motorcyclists → cyclist; "
+        'pedestrians; "others" are neighbours only. No map: the model has no map branch.',
+        "protocol": "6 observed steps (3 s), 6 predicted (3 s); targets present at all 12 steps.",
+        "licence": "ApolloScape: **non-commercial academic research** only. Cite Ma et al. 2019 (TrafficPredict).",
+        "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split)",
+    },
+}
+
+
+def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
+    rows = list(csv.DictReader((run / "log.csv").open()))
+    seconds = sum(float(r["seconds"]) for r in rows)
+    best = min(rows, key=lambda r: float(r["val_loss"]))
+    d = MULTICLASS[cfg["data"]["dataset"]]
+    m = cfg["model"]
+    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20", "cv_ade", "cv_fde")
+    groups = [("all", metrics)] + [(c, r) for c, r in metrics["by_class"].items()]
+    groups += [(f"label {k}", r) for k, r in metrics["by_label"].items() if k not in metrics["by_class"]]
+    table = "\n".join(f"| {g} | {r['agents']} | " + " | ".join(f"{r[k]:.2f}" for k in keys) + " |" for g, r in groups)
+    map_line = (
+        f"map CNN (width {m['map_channels']}) over {cfg['data']['map_height_px']}×{cfg['data']['map_width_px']} px "
+        f"crops at {cfg['data']['map_resolution_m']} m/px, "
+        if m["use_map"] and cfg["data"]["use_map"] and cfg["data"]["dataset"] != "apolloscape"
+        else ""
+    )
+    return f"""# Model card: `{name}`
+
+DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on {d["title"]}, with
+{cfg["train"]["anchors_per_class"]} k-means anchors per class and the hierarchical class × anchor probability.
+
+- **Data**: {d["data"]}
+- **Protocol**: {d["protocol"]}
+- **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP (speed, acceleration, yaw rate,
+  direction of motion, length, width, one-hot class), {map_line}{m["gat_layers"]} GAT layers × {m["gat_heads"]} heads
+  over the attention-zone graph (λ = 0.5) with neighbour geometry on the edges. Loss: hierarchical classification and
+  closest-anchor regression (α = {cfg["train"]["alpha"]}) plus β = {cfg["train"]["beta"]} times the error of the most
+  probable mode.
+- **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, best at epoch {best["epoch"]},
+  {seconds / 60:.1f} min on 2 CPU cores; seed {cfg["train"]["seed"]}; left-right mirroring.
+- **Test metrics** (engine, {metrics["unit"]}, {metrics["windows"]} windows; most probable class correct for
+  {100 * metrics["class_accuracy"]:.1f}% of agents, since the class is an input as in the paper; mode-probability
+  calibration error {metrics["calibration"]["ece"]:.3f}, see `docs/results.md`):
+
+| agents | n | top-1 ADE | top-1 FDE | minADE5 | minFDE5 | minADE20 | minFDE20 | Brier-minFDE20 | CV ADE | CV FDE |
+|---|---|---|---|---|---|---|---|---|---|---|
+{table}
+
+- **Try it**: {d["scene"]}.
+- **Licence**: {d["licence"]} The weights are derived from this data: non-commercial research use only.
+- **Reproduce**: `python -m training.results --train` (every model of `docs/results.md`), or
+  `python -m training.train --config training/configs/{cfg["data"]["dataset"]}.toml --out runs/{name}`.
+"""
+
+
 def bundle(run: Path, name: str, data_root: Path) -> dict[str, Any]:
     cfg = json.loads((run / "config.json").read_text())["config"]
+    dataset = cfg["data"].get("dataset", "ethucy")
     MODELS.mkdir(parents=True, exist_ok=True)
     CHECKPOINTS.mkdir(parents=True, exist_ok=True)
     ckpt = torch.load(run / "best.pt", weights_only=False)
-    torch.save({k: ckpt[k] for k in ("model", "anchors", "config", "epoch")}, CHECKPOINTS / f"{name}.pt")
-    onnx_path = export_checkpoint(
-        CHECKPOINTS / f"{name}.pt",
-        MODELS / f"{name}.onnx",
-        name=f"dgan-ethucy-{name}",
-        description=f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "
-        "non-commercial research use only (ETH/UCY licence).",
+    keep = [k for k in ("model", "anchors", "class_of", "config", "epoch") if k in ckpt]
+    torch.save({k: ckpt[k] for k in keep}, CHECKPOINTS / f"{name}.pt")
+    if dataset == "ethucy":
+        description = (
+            f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "
+            "non-commercial research use only (ETH/UCY licence)."
+        )
+    else:
+        description = (
+            f"DGAN for vehicles, cyclists and pedestrians trained on {MULTICLASS[dataset]['title']}; "
+            "non-commercial research use only (dataset licence)."
+        )
+    model_name = f"dgan-ethucy-{name}" if dataset == "ethucy" else f"dgan-{name}"
+    onnx_path = export_checkpoint(CHECKPOINTS / f"{name}.pt", MODELS / f"{name}.onnx", model_name, description)
+    metrics = evaluate(
+        dgan.Predictor(onnx_path), dataset, data_root, cfg["data"]["scene"] if dataset == "ethucy" else ""
     )
-    metrics = evaluate(dgan.Predictor(onnx_path), data_root, cfg["data"]["scene"])
-    (MODELS / f"{name}.md").write_text(card(name, run, metrics, cfg))
+    text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
+    (MODELS / f"{name}.md").write_text(text)
     (run / "metrics.json").write_text(json.dumps(metrics, indent=2))
     return metrics
 

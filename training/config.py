@@ -13,8 +13,11 @@ from training.model import ModelConfig
 
 @dataclass(frozen=True)
 class DataConfig:
-    root: str = "../shared/data"  # the folder holding eth_ucy/ and eth_ucy_scene_maps/
-    scene: str = "zara1"  # the held-out ETH/UCY scene
+    root: str = "../shared/data"  # the folder holding eth_ucy/, sdd/, apolloscape_trajectory/ ...
+    dataset: str = "ethucy"  # ethucy, sdd or apolloscape (training.datasets.DATASETS)
+    scene: str = "zara1"  # the held-out ETH/UCY scene (ethucy only)
+    target_class: str = ""  # train on this class's targets only (a per-class baseline); "" = every class
+    window_stride: int = 1  # train and validate on windows ending at every n-th step (the test always uses all)
     cache_dir: str = "~/.cache/dgan/windows"
     use_map: bool = True
     map_height_px: int = 32

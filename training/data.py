@@ -1,9 +1,10 @@
-"""ETH/UCY in the Social-GAN layout → windows of 8 observed and 12 future steps → the engine's network inputs.
+"""Recordings (:mod:`training.datasets`) → windows of T_obs observed and T_f future steps → the engine's network
+inputs.
 
-Every start frame gives a window; every agent seen at t_obs is in the frame (neighbours with partial histories
-included) and the agents present at all 20 steps are the targets. As in Social-GAN, a window is kept when it has at
-least two targets. Inputs come from :func:`dgan.preprocess` (the Rust engine), with each scene's colourised semantic
-mask as the raster map, and futures in each agent's frame from :func:`dgan.to_agent_frame`.
+Every step gives a window ending there; every agent seen at t_obs is in the frame (neighbours with partial histories
+included) and the agents of a scored label present at all T_obs + T_f consecutive steps are the targets. As in
+Social-GAN and Multiclass-SGCN, a window is kept when it has at least ``min_targets`` targets (two). Inputs come from
+:func:`dgan.preprocess` (the Rust engine) and futures in each agent's frame from :func:`dgan.to_agent_frame`.
 """
 
 from __future__ import annotations
@@ -19,30 +20,9 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
-from dgan.scenes import scene_raster_map
-
-#: Frame ids step by 10 between 0.4 s steps in the Social-GAN files.
-FRAME_STEP = 10
-#: Which scene map each Social-GAN file is recorded on.
-FILE_SCENES = {
-    "biwi_eth": "eth",
-    "biwi_hotel": "hotel",
-    "students001": "univ",
-    "students003": "univ",
-    "uni_examples": "univ",
-    "crowds_zara01": "zara1",
-    "crowds_zara02": "zara2",
-    "crowds_zara03": "zara2",
-}
+from training.datasets import DATASETS, DatasetInfo, Recording, recordings, source_files
 
 Arr = npt.NDArray[Any]
-
-
-def scene_of(path: Path) -> str:
-    for prefix, scene in FILE_SCENES.items():
-        if path.name.startswith(prefix):
-            return scene
-    raise ValueError(f"unknown ETH/UCY file {path.name}")
 
 
 @dataclass
@@ -58,7 +38,9 @@ class Windows:
     map: Arr | None  # (A, 3, H, W) u8
     future: Arr  # (A, T_f, 2) f32, agent frame (valid for targets)
     target: Arr  # (A,) bool
-    class_index: Arr  # (A,) i64
+    class_index: Arr  # (A,) i64 into the spec's classes
+    label: Arr  # (A,) i64 into the dataset's labels
+    unit: Arr  # (A,) f64 metres per reporting unit
     origin: Arr  # (A, 2) f64 world
     heading: Arr  # (A,) f64 world
     agent_ptr: Arr  # (W + 1,)
@@ -87,7 +69,7 @@ class Windows:
         d.setdefault("map", None)
         return cls(**d)
 
-    def batch(self, windows: Sequence[int], flip: Arr | None = None) -> dict[str, Arr]:
+    def batch(self, windows: Sequence[int] | Arr, flip: Arr | None = None) -> dict[str, Arr]:
         """Concatenates windows into one graph; ``flip`` (per window, bool) mirrors left and right."""
         w = np.asarray(windows)
         n_agents = self.agent_ptr[w + 1] - self.agent_ptr[w]
@@ -130,69 +112,105 @@ def mirror(batch: dict[str, Arr], agents: Arr, edges: Arr) -> None:
         batch["map"][agents] = batch["map"][agents][..., ::-1]
 
 
-def read_file(path: Path) -> Arr:
-    rows = np.loadtxt(path, ndmin=2)
-    return rows[np.lexsort((rows[:, 1], rows[:, 0]))]
+@dataclass
+class Window:
+    """One window of a recording: the agents seen at t_obs, their positions over all T_obs + T_f steps (NaN where
+    absent) and which of them are targets."""
+
+    recording: Recording
+    now: int  # the step of t_obs
+    ids: Arr  # (N,) i64
+    positions: Arr  # (N, T_obs + T_f, 2) world metres
+    mask: Arr  # (N, T_obs + T_f) bool
+    target: Arr  # (N,) bool
+    label: Arr  # (N,) i64, at t_obs
+    heading: Arr | None  # (N,) at t_obs
+    length: Arr | None
+    width: Arr | None
+
+    def frame(self, info: DatasetInfo, t_obs: int, with_map: bool = True) -> dgan.Frame:
+        return dgan.Frame(
+            self.positions[:, :t_obs],
+            mask=self.mask[:, :t_obs],
+            classes=[info.label_class[k] for k in self.label],
+            ids=self.ids,
+            headings=self.heading,
+            lengths=self.length,
+            widths=self.width,
+            map=self.recording.map if with_map else None,
+        )
 
 
-def iter_windows(rows: Arr, t_obs: int, t_f: int, min_targets: int = 2) -> Iterator[tuple[float, Arr, Arr, Arr, Arr]]:
-    """Each kept window as ``(t_obs frame, ids (N,), positions (N, T_obs + T_f, 2), mask (N, T), target (N,))``."""
-    frames = np.unique(rows[:, 0])
-    by_frame = {f: rows[rows[:, 0] == f] for f in frames}
+def iter_windows(
+    rec: Recording, info: DatasetInfo, t_obs: int, t_f: int, stride: int = 1, min_targets: int | None = None
+) -> Iterator[Window]:
+    """Every window of ``rec`` ending at a step divisible by ``stride`` with at least ``min_targets`` targets: agents
+    of a scored label present at all ``t_obs + t_f`` consecutive steps."""
+    need = info.min_targets if min_targets is None else min_targets
+    steps, first = np.unique(rec.step, return_index=True)
+    bounds = dict(
+        zip(steps.tolist(), zip(first.tolist(), [*first[1:].tolist(), len(rec.step)], strict=True), strict=True)
+    )
+    scored = np.array(info.scored)
     total = t_obs + t_f
-    for f0 in frames:
-        steps = [f0 + k * FRAME_STEP for k in range(total)]
-        now = steps[t_obs - 1]
-        if now not in by_frame:
+    for now in steps.tolist():
+        if now % stride:
             continue
-        ids = np.unique(by_frame[now][:, 1])
-        pos = np.full((len(ids), total, 2), np.nan)
-        mask = np.zeros((len(ids), total), dtype=bool)
-        for k, f in enumerate(steps):
-            r = by_frame.get(f)
-            if r is None:
+        lo, hi = bounds[now]
+        ids, at = np.unique(rec.agent[lo:hi], return_index=True)
+        n = len(ids)
+        pos = np.full((n, total, 2), np.nan)
+        mask = np.zeros((n, total), dtype=bool)
+        for k in range(total):
+            b = bounds.get(now - (t_obs - 1) + k)
+            if b is None:
                 continue
-            hit = np.isin(r[:, 1], ids)
-            idx = np.searchsorted(ids, r[hit, 1])
-            pos[idx, k] = r[hit, 2:4]
-            mask[idx, k] = True
-        target = mask.all(axis=1)
-        if target.sum() >= min_targets:
-            yield float(now), ids, pos, mask, np.asarray(target)
+            agents = rec.agent[b[0] : b[1]]
+            idx = np.minimum(np.searchsorted(ids, agents), n - 1)
+            hit = ids[idx] == agents
+            pos[idx[hit], k] = rec.xy[b[0] : b[1]][hit]
+            mask[idx[hit], k] = True
+        rows = lo + at
+        label = rec.label[rows]
+        target = mask.all(axis=1) & scored[label]
+        if target.sum() < need:
+            continue
+
+        def at_now(col: Arr | None, rows: Arr = rows) -> Arr | None:
+            return None if col is None else col[rows]
+
+        yield Window(
+            rec, now, ids, pos, mask, target, label, at_now(rec.heading), at_now(rec.length), at_now(rec.width)
+        )
 
 
 def build_windows(
-    files: Sequence[Path], maps_root: Path | None, spec: dgan.InputSpec, progress: bool = True
+    recs: Sequence[Recording], info: DatasetInfo, spec: dgan.InputSpec, stride: int = 1, progress: bool = True
 ) -> Windows:
-    """Preprocesses every window of ``files`` through the engine."""
+    """Preprocesses every window of ``recs`` through the engine."""
     from tqdm import tqdm
 
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
     agent_ptr, edge_ptr = [0], [0]
-    cls_index = list(spec.classes).index("pedestrian")
-    maps = {}
-    for fi, path in enumerate(files):
-        scene = scene_of(path)
-        if spec.map is not None and maps_root is not None and scene not in maps:
-            maps[scene] = scene_raster_map(scene, maps_root / scene)
-        rows = read_file(path)
-        windows = list(iter_windows(rows, spec.t_obs, spec.t_f))
-        for now, ids, pos, mask, target in tqdm(windows, desc=path.name, disable=not progress, leave=False):
-            obs_mask = mask[:, : spec.t_obs]
-            frame = dgan.Frame(pos[:, : spec.t_obs], mask=obs_mask, ids=ids.astype(np.int64), map=maps.get(scene))
-            x = dgan.preprocess(frame, spec)
-            fut = np.where(mask[:, spec.t_obs :, None], pos[:, spec.t_obs :], 0.0)
+    class_of_label = np.array([list(spec.classes).index(c) if c in spec.classes else -1 for c in info.label_class])
+    for fi, rec in enumerate(recs):
+        windows = list(iter_windows(rec, info, spec.t_obs, spec.t_f, stride))
+        for w in tqdm(windows, desc=rec.name, disable=not progress, leave=False):
+            x = dgan.preprocess(w.frame(info, spec.t_obs, with_map=spec.map is not None), spec)
+            fut = np.where(w.mask[:, spec.t_obs :, None], w.positions[:, spec.t_obs :], 0.0)
             future = dgan.to_agent_frame(fut, x["origin"], x["heading"])
-            n = len(ids)
+            n = len(w.ids)
             for key in ("trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "origin", "heading"):
                 parts[key].append(x[key])
             if "map" in x:
                 parts["map"].append(np.round(x["map"] * 255).astype(np.uint8))
             parts["future"].append(future.astype(np.float32))
-            parts["target"].append(target)
-            parts["class_index"].append(np.full(n, cls_index, np.int64))
+            parts["target"].append(w.target)
+            parts["class_index"].append(class_of_label[w.label])
+            parts["label"].append(w.label)
+            parts["unit"].append(np.full(n, rec.unit_m))
             parts["window_file"].append(np.array([fi]))
-            parts["window_frame"].append(np.array([now]))
+            parts["window_frame"].append(np.array([w.now]))
             agent_ptr.append(agent_ptr[-1] + n)
             edge_ptr.append(edge_ptr[-1] + len(x["edge_index"]))
     cat = {k: np.concatenate(v) for k, v in parts.items() if v and k not in ("agent_ptr", "edge_ptr")}
@@ -200,34 +218,33 @@ def build_windows(
         map=cat.pop("map", None),
         agent_ptr=np.array(agent_ptr),
         edge_ptr=np.array(edge_ptr),
-        files=[str(f) for f in files],
+        files=[r.name for r in recs],
         **cat,
     )
 
 
-def split_files(data_root: Path, scene: str, split: str) -> list[Path]:
-    """The Social-GAN files of a leave-one-scene-out fold: ``train``/``val`` hold the other scenes, ``test`` the
-    held-out one."""
-    folder = data_root / "eth_ucy" / "datasets" / scene / split
-    files = sorted(folder.glob("*.txt"))
-    if not files:
-        raise FileNotFoundError(f"no ETH/UCY files in {folder}; set data.root to the folder holding eth_ucy/")
-    return files
-
-
 def cached_windows(
-    data_root: Path, scene: str, split: str, spec: dgan.InputSpec, cache_dir: Path, progress: bool = True
+    dataset: str,
+    data_root: Path,
+    split: str,
+    spec: dgan.InputSpec,
+    cache_dir: Path,
+    fold: str = "",
+    stride: int = 1,
+    progress: bool = True,
 ) -> Windows:
-    """``build_windows`` for one split of one fold, cached under ``cache_dir`` by content."""
-    files = split_files(data_root, scene, split)
+    """``build_windows`` for one split of a dataset (``fold``: the held-out ETH/UCY scene), cached under
+    ``cache_dir`` by content."""
+    files = source_files(dataset, data_root, split, fold)
     key = hashlib.sha256(
-        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], "v1"]).encode()
+        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v2"]).encode()
     ).hexdigest()[:16]
-    path = cache_dir / f"ethucy_{scene}_{split}_{key}.npz"
+    path = cache_dir / f"{dataset}{'_' + fold if fold else ''}_{split}_{key}.npz"
     if path.is_file():
         return Windows.load(path)
-    maps_root = data_root / "eth_ucy_scene_maps" / "semantic_masks"
-    w = build_windows(files, maps_root if spec.map is not None else None, spec, progress)
+    info = DATASETS[dataset]
+    recs = recordings(dataset, data_root, split, fold, with_map=spec.map is not None)
+    w = build_windows(recs, info, spec, stride, progress)
     cache_dir.mkdir(parents=True, exist_ok=True)
     w.save(path)
     return w

@@ -1,10 +1,13 @@
-"""Evaluate an exported model with the engine (``dgan.Predictor``) on a held-out ETH/UCY scene, beside the
+"""Evaluate an exported model with the engine (``dgan.Predictor``) on a dataset's test split, beside the
 constant-velocity baseline on the very same windows and agents.
 
-    python -m training.evaluate MODEL.onnx --scene zara1 [--data-root ../shared/data]
+    python -m training.evaluate MODEL.onnx --dataset ethucy --scene zara1 [--data-root ../shared/data]
+    python -m training.evaluate MODEL.onnx --dataset sdd
 
-Windows are built exactly as for training (``training.data.iter_windows``); the targets are the agents present at
-all 20 steps; errors are in world metres.
+Windows are built exactly as for training (``training.data.iter_windows``); the targets are the agents of a scored
+label present at all T_obs + T_f steps. Errors are in the dataset's unit (metres; pixels for Stanford Drone), overall,
+per class and per label. Also: the accuracy of the most probable class, and the calibration of the mode probabilities
+(how often a mode given probability p is the best of all K modes).
 """
 
 from __future__ import annotations
@@ -17,60 +20,121 @@ from typing import Any
 import numpy as np
 
 import dgan
-from dgan.scenes import scene_raster_map
 from training import metrics
-from training.data import iter_windows, read_file, scene_of, split_files
+from training.data import iter_windows
+from training.datasets import DATASETS, recordings
+
+#: Edges of the probability bins of the reliability diagram.
+CALIBRATION_BINS = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
 
 
-def evaluate(predictor: dgan.Predictor, data_root: Path, scene: str) -> dict[str, Any]:
-    """Per-agent metrics of the model and of constant velocity, averaged, with window and agent counts."""
+def agent_metrics(pred: dgan.Prediction, gt: np.ndarray, cv: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-agent metrics of one window's targets, in the units of ``gt``."""
+    traj, prob = pred.trajectories, pred.probabilities
+    top20 = traj[:, :20]
+    pairs = {
+        ("ade", "fde"): metrics.ade_fde_top1(traj, gt),
+        ("min_ade5", "min_fde5"): metrics.min_ade_fde(traj, gt, 5),
+        ("min_ade20", "min_fde20"): metrics.min_ade_fde(top20, gt, 20),
+        ("cv_ade", "cv_fde"): metrics.ade_fde_top1(cv, gt),
+    }
+    out = {name: value for names, values in pairs.items() for name, value in zip(names, values, strict=True)}
+    out["brier_min_fde20"] = metrics.brier_min_fde(top20, gt, prob[:, :20], 20)
+    return out
+
+
+def calibration(prob: np.ndarray, hit: np.ndarray) -> dict[str, Any]:
+    """Reliability of mode probabilities: per bin, the mean probability and how often such a mode was the best."""
+    idx = np.clip(np.digitize(prob, CALIBRATION_BINS[1:-1]), 0, len(CALIBRATION_BINS) - 2)
+    count = np.bincount(idx, minlength=len(CALIBRATION_BINS) - 1)
+    mean_p = np.bincount(idx, prob, minlength=len(count)) / np.maximum(count, 1)
+    freq = np.bincount(idx, hit.astype(float), minlength=len(count)) / np.maximum(count, 1)
+    ece = float(np.sum(count * np.abs(mean_p - freq)) / max(1, count.sum()))
+    return {
+        "edges": CALIBRATION_BINS.tolist(),
+        "count": count.tolist(),
+        "mean_probability": mean_p.tolist(),
+        "frequency": freq.tolist(),
+        "ece": ece,
+    }
+
+
+def summarise(per: dict[str, np.ndarray], sel: np.ndarray) -> dict[str, Any]:
+    out: dict[str, Any] = {k: float(v[sel].mean()) if sel.any() else float("nan") for k, v in per.items()}
+    out["agents"] = int(sel.sum())
+    return out
+
+
+def evaluate(predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str = "") -> dict[str, Any]:
+    """Per-agent metrics of the model and of constant velocity on a test split, averaged overall (flat keys), per
+    class (``by_class``) and per label (``by_label``), with window and agent counts."""
+    info = DATASETS[dataset]
     spec = predictor.spec
-    maps_root = data_root / "eth_ucy_scene_maps" / "semantic_masks"
+    if (spec.t_obs, spec.t_f) != (info.t_obs, info.t_f) or abs(spec.dt_s - info.dt_s) > 1e-9:
+        raise ValueError(
+            f"the model's time base (dt {spec.dt_s} s, {spec.t_obs} + {spec.t_f} steps) is not {dataset}'s "
+            f"(dt {info.dt_s} s, {info.t_obs} + {info.t_f} steps)"
+        )
     per: dict[str, list[np.ndarray]] = {}
+    labels, classes, pred_class, mode_p, mode_hit = [], [], [], [], []
     windows = 0
-    maps: dict[str, dgan.RasterMap] = {}
-    for path in split_files(data_root, scene, "test"):
-        smap = None
-        if spec.map is not None:
-            s = scene_of(path)
-            if s not in maps:
-                maps[s] = scene_raster_map(s, maps_root / s)
-            smap = maps[s]
-        for _now, ids, pos, mask, target in iter_windows(read_file(path), spec.t_obs, spec.t_f):
+    model_classes = list(predictor.classes)
+    for rec in recordings(dataset, data_root, "test", fold, with_map=spec.map is not None):
+        for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
             windows += 1
-            frame = dgan.Frame(pos[:, : spec.t_obs], mask=mask[:, : spec.t_obs], ids=ids.astype(np.int64), map=smap)
-            pred = predictor.predict(frame, modes=min(20, predictor.num_modes))
-            gt = pos[target, spec.t_obs :]
-            traj, prob = pred.trajectories[target], pred.probabilities[target]
-            cv = metrics.constant_velocity(pos[target, : spec.t_obs], mask[target, : spec.t_obs], spec.t_f)
-            pairs = {
-                ("ade", "fde"): metrics.ade_fde_top1(traj, gt),
-                ("min_ade5", "min_fde5"): metrics.min_ade_fde(traj, gt, 5),
-                ("min_ade20", "min_fde20"): metrics.min_ade_fde(traj, gt, 20),
-                ("cv_ade", "cv_fde"): metrics.ade_fde_top1(cv, gt),
-            }
-            add = {name: value for names, values in pairs.items() for name, value in zip(names, values, strict=True)}
-            add["brier_min_fde20"] = metrics.brier_min_fde(traj, gt, prob, 20)
-            for k, v in add.items():
+            pred = predictor.predict(w.frame(info, spec.t_obs, with_map=spec.map is not None))
+            t = w.target
+            unit = rec.unit_m
+            gt = w.positions[t, spec.t_obs :] / unit
+            cv = metrics.constant_velocity(w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs], spec.t_f) / unit
+            sub = dgan.Prediction(
+                pred.agent_ids[t],
+                pred.trajectories[t] / unit,
+                pred.probabilities[t],
+                pred.class_probabilities[t],
+                pred.mode_classes[t],
+                pred.edges,
+                pred.classes,
+            )
+            for k, v in agent_metrics(sub, gt, cv).items():
                 per.setdefault(k, []).append(v)
-    out: dict[str, Any] = {k: float(np.concatenate(v).mean()) for k, v in per.items()}
+            labels.append(w.label[t])
+            classes.append(np.array([model_classes.index(info.label_class[k]) for k in w.label[t]]))
+            pred_class.append(sub.class_probabilities.argmax(axis=1))
+            ade_all = metrics.displacement(sub.trajectories, gt).mean(axis=2)  # (n, K)
+            mode_p.append(sub.probabilities.ravel())
+            mode_hit.append((ade_all == ade_all.min(axis=1, keepdims=True)).ravel())
+    flat = {k: np.concatenate(v) for k, v in per.items()}
+    label = np.concatenate(labels)
+    klass = np.concatenate(classes)
+    everyone = np.ones(len(label), dtype=bool)
+    out: dict[str, Any] = summarise(flat, everyone)
     out["windows"] = windows
-    out["agents"] = int(sum(len(v) for v in per["ade"]))
-    out["scene"] = scene
+    out["dataset"] = dataset
+    out["unit"] = info.unit
+    if fold:
+        out["scene"] = fold
+    out["by_class"] = {c: summarise(flat, klass == i) for i, c in enumerate(model_classes) if (klass == i).any()}
+    out["by_label"] = {n: summarise(flat, label == i) for i, n in enumerate(info.labels) if (label == i).any()}
+    out["class_accuracy"] = float((np.concatenate(pred_class) == klass).mean())
+    out["calibration"] = calibration(np.concatenate(mode_p), np.concatenate(mode_hit))
     return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("model")
-    ap.add_argument("--scene", required=True)
+    ap.add_argument("--dataset", default="ethucy", choices=sorted(DATASETS))
+    ap.add_argument("--scene", default="", help="the held-out ETH/UCY scene (ethucy only)")
     ap.add_argument("--data-root", default="../shared/data")
     ap.add_argument("--json", type=Path, help="also write the metrics here")
     a = ap.parse_args()
-    res = evaluate(dgan.Predictor(a.model), Path(a.data_root).expanduser(), a.scene)
+    if a.dataset == "ethucy" and not a.scene:
+        ap.error("--scene is required for ethucy")
+    res = evaluate(dgan.Predictor(a.model), a.dataset, Path(a.data_root).expanduser(), a.scene)
     if a.json:
         a.json.write_text(json.dumps(res, indent=2))
-    print(json.dumps(res, indent=2))
+    print(json.dumps({k: v for k, v in res.items() if k != "calibration"}, indent=2))
 
 
 if __name__ == "__main__":

@@ -19,7 +19,8 @@ INPUTS = ["trajectory", "trajectory_mask", "state", "edge_index", "edge_features
 OUTPUTS = ["class_logits", "anchor_logits", "offsets"]
 
 
-def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, Config]:
+def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
+    """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor and the config."""
     from training.train import build_model, input_spec
 
     ckpt = torch.load(path, weights_only=False)
@@ -30,15 +31,21 @@ def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, Confi
     model = build_model(cfg, spec, len(ckpt["anchors"]))
     model.load_state_dict(ckpt["model"])
     model.eval()
-    return model, spec, np.asarray(ckpt["anchors"]), cfg
+    anchors = np.asarray(ckpt["anchors"])
+    # Checkpoints from before multi-class training have one class and no class_of.
+    class_of = np.asarray(ckpt.get("class_of", np.zeros(len(anchors), np.int64)))
+    return model, spec, anchors, class_of, cfg
 
 
-def contract(spec: dgan.InputSpec, anchors: np.ndarray, name: str, description: str) -> dict[str, Any]:
+def contract(
+    spec: dgan.InputSpec, anchors: np.ndarray, class_of: np.ndarray, name: str, description: str
+) -> dict[str, Any]:
     d: dict[str, Any] = json.loads(spec.to_json())
+    rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
         contract_version=1,
         units="m",
-        anchors={spec.classes[0]: np.round(anchors.astype(np.float64), 6).tolist()},
+        anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
         name=name,
         description=description,
     )
@@ -61,8 +68,17 @@ def example_inputs(spec: dgan.InputSpec, n: int = 3) -> tuple[torch.Tensor, ...]
 
 
 def export_model(
-    model: DGAN, spec: dgan.InputSpec, anchors: np.ndarray, path: Path, name: str, description: str = ""
+    model: DGAN,
+    spec: dgan.InputSpec,
+    anchors: np.ndarray,
+    class_of: np.ndarray,
+    path: Path,
+    name: str,
+    description: str = "",
 ) -> Path:
+    """Exports under the contract; anchors must be grouped by class in the spec's class order."""
+    if not np.all(np.diff(class_of) >= 0) or (len(class_of) and class_of[-1] >= len(spec.classes)):
+        raise ValueError("anchors must be grouped by class, in the order of spec.classes")
     args = example_inputs(spec)
     names = INPUTS[: len(args)]
     dyn = {
@@ -85,15 +101,15 @@ def export_model(
         dynamo=False,
     )
     m = onnx.load(str(path))
-    onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(contract(spec, anchors, name, description))})
+    onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(contract(spec, anchors, class_of, name, description))})
     onnx.save(m, str(path))
     dgan.Predictor(path)  # the engine checks the contract
     return path
 
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
-    model, spec, anchors, _ = load_checkpoint(ckpt)
-    return export_model(model, spec, anchors, path, name, description)
+    model, spec, anchors, class_of, _ = load_checkpoint(ckpt)
+    return export_model(model, spec, anchors, class_of, path, name, description)
 
 
 def main() -> None:

@@ -1,6 +1,7 @@
-"""Train DGAN on one ETH/UCY leave-one-scene-out fold.
+"""Train DGAN on a dataset: an ETH/UCY leave-one-scene-out fold, Stanford Drone or ApolloScape.
 
     python -m training.train --config training/configs/ethucy_zara1.toml --out runs/zara1
+    python -m training.train --config training/configs/sdd.toml --out runs/sdd
     torchrun --nproc_per_node 2 -m training.train --config ... --out ...   # DDP on CPU (gloo)
 
 Writes ``<out>/config.json``, ``log.csv`` (one row per epoch), ``last.pt`` and ``best.pt`` (by validation loss).
@@ -29,18 +30,52 @@ import dgan
 from training.anchors import kmeans_anchors
 from training.config import Config
 from training.data import Windows, cached_windows
+from training.datasets import DATASETS
 from training.loss import decode_torch, dgan_loss
 from training.model import DGAN
 
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
     d = cfg.data
+    if d.dataset not in DATASETS:
+        raise ValueError(f"unknown data.dataset {d.dataset!r}; known: {', '.join(DATASETS)}")
+    info = DATASETS[d.dataset]
     map_spec = None
-    if d.use_map and cfg.model.use_map:
+    if d.use_map and cfg.model.use_map and info.has_map:
         map_spec = dgan.MapSpec(
             d.map_height_px, d.map_width_px, d.map_resolution_m, d.map_agent_row, d.map_width_px // 2
         )
-    return dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("pedestrian",), attention_lambda=0.5, map=map_spec)
+    return dgan.InputSpec(
+        dt_s=info.dt_s, t_obs=info.t_obs, t_f=info.t_f, classes=info.classes, attention_lambda=0.5, map=map_spec
+    )
+
+
+def run_name(cfg: Config) -> str:
+    """``ethucy-zara1``, ``sdd``, ``sdd-pedestrian`` ..."""
+    parts = [cfg.data.dataset] + ([cfg.data.scene] if cfg.data.dataset == "ethucy" else [])
+    return "-".join(parts + ([cfg.data.target_class] if cfg.data.target_class else []))
+
+
+def load_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> Windows:
+    """A split's cached windows."""
+    d = cfg.data
+    fold = d.scene if d.dataset == "ethucy" else ""
+    cache = Path(d.cache_dir).expanduser()
+    return cached_windows(d.dataset, Path(d.root).expanduser(), split, spec, cache, fold, d.window_stride, progress)
+
+
+def restrict_targets(w: Windows, spec: dgan.InputSpec, target_class: str) -> None:
+    """For a per-class run: only that class's agents stay targets (the others remain neighbours)."""
+    if target_class not in spec.classes:
+        raise ValueError(f"data.target_class {target_class!r} is not among the classes {spec.classes}")
+    w.target &= w.class_index == list(spec.classes).index(target_class)
+
+
+def windows_with_targets(w: Windows) -> np.ndarray:
+    """Indices of the windows that hold at least one target."""
+    counts = np.add.reduceat(w.target.astype(np.int64), w.agent_ptr[:-1]) if len(w.target) else np.zeros(0)
+    empty = w.agent_ptr[1:] == w.agent_ptr[:-1]  # reduceat repeats the next value for empty slices
+    return np.flatnonzero((counts > 0) & ~empty)
 
 
 def to_tensors(batch: dict[str, Any]) -> dict[str, torch.Tensor]:
@@ -57,13 +92,19 @@ def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
     return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw)
 
 
-def fit_anchors(cfg: Config, train: Windows) -> np.ndarray:
-    fut = train.future[train.target]
-    if cfg.train.mirror:
-        flipped = fut.copy()
-        flipped[..., 1] *= -1
-        fut = np.concatenate([fut, flipped])
-    return kmeans_anchors(fut, cfg.train.anchors_per_class, cfg.train.seed).astype(np.float32)
+def fit_anchors(cfg: Config, train: Windows, num_classes: int) -> tuple[np.ndarray, np.ndarray]:
+    """K_c k-means anchors for every class (from all of its targets, also in a per-class run, so that the model
+    contract holds) and the class of each anchor."""
+    out = []
+    for c in range(num_classes):
+        fut = train.future[train.target & (train.class_index == c)]
+        if cfg.train.mirror:
+            flipped = fut.copy()
+            flipped[..., 1] *= -1
+            fut = np.concatenate([fut, flipped])
+        out.append(kmeans_anchors(fut, cfg.train.anchors_per_class, cfg.train.seed).astype(np.float32))
+    class_of = np.repeat(np.arange(num_classes), cfg.train.anchors_per_class)
+    return np.concatenate(out), class_of
 
 
 def forward_loss(
@@ -83,8 +124,9 @@ def forward_loss(
 def validate(model: DGAN, w: Windows, anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config) -> dict[str, float]:
     model.eval()
     losses, ade1, fde1, ade20, fde20, n = [], [], [], [], [], 0
-    for start in range(0, w.num_windows, 64):
-        b = to_tensors(w.batch(range(start, min(start + 64, w.num_windows))))
+    keep = windows_with_targets(w)
+    for start in range(0, len(keep), 64):
+        b = to_tensors(w.batch(keep[start : start + 64]))
         t = b["target"]
         loss, _, (cl, al, off) = forward_loss(model, b, anchors, class_of, cfg)
         traj, _ = decode_torch(cl, al, off, anchors, class_of)
@@ -136,21 +178,22 @@ def main(argv: list[str] | None = None) -> Path:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     spec = input_spec(cfg)
-    root = Path(cfg.data.root).expanduser()
-    cache = Path(cfg.data.cache_dir).expanduser()
     show = rank == 0
     bars = show and sys.stderr.isatty()
-    train = cached_windows(root, cfg.data.scene, "train", spec, cache, progress=bars)
-    val = cached_windows(root, cfg.data.scene, "val", spec, cache, progress=bars)
+    train = load_windows(cfg, spec, "train", bars)
+    val = load_windows(cfg, spec, "val", bars)
 
     if args.resume and (out / "last.pt").is_file():
         ckpt = torch.load(out / "last.pt", weights_only=False)
-        anchors_np = ckpt["anchors"]
+        anchors_np, class_of_np = ckpt["anchors"], ckpt["class_of"]
     else:
         ckpt = None
-        anchors_np = fit_anchors(cfg, train)
+        anchors_np, class_of_np = fit_anchors(cfg, train, len(spec.classes))
+    if cfg.data.target_class:
+        restrict_targets(train, spec, cfg.data.target_class)
+        restrict_targets(val, spec, cfg.data.target_class)
     anchors = torch.from_numpy(anchors_np)
-    class_of = torch.zeros(len(anchors), dtype=torch.long)
+    class_of = torch.from_numpy(class_of_np).long()
     model = build_model(cfg, spec, len(anchors))
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
     # OneCycleLR divides by pct_start * total - 1, which is 0 at exactly 10 epochs: nudge only that case.
@@ -170,7 +213,7 @@ def main(argv: list[str] | None = None) -> Path:
             json.dumps({"config": asdict(cfg), "spec": json.loads(spec.to_json())}, indent=2)
         )
         print(
-            f"fold {cfg.data.scene}: {train.num_windows} train windows ({train.num_targets} targets), "
+            f"{run_name(cfg)}: {train.num_windows} train windows ({train.num_targets} targets), "
             f"{val.num_windows} val windows ({val.num_targets} targets); {len(anchors)} anchors; "
             f"{sum(p.numel() for p in model.parameters()):,} parameters; {world} process(es)"
         )
@@ -178,7 +221,7 @@ def main(argv: list[str] | None = None) -> Path:
 
     log_path = out / "log.csv"
     rng = np.random.default_rng(cfg.train.seed)
-    windows = np.arange(train.num_windows)
+    windows = windows_with_targets(train)
     if cfg.train.max_train_windows:
         windows = rng.choice(windows, min(cfg.train.max_train_windows, len(windows)), replace=False)
     last_epoch = min(cfg.train.epochs, args.stop_after) if args.stop_after else cfg.train.epochs
@@ -226,6 +269,7 @@ def main(argv: list[str] | None = None) -> Path:
             "epoch": epoch,
             "best": min(best, row["val_loss"]),
             "anchors": anchors_np,
+            "class_of": class_of_np,
             "config": asdict(cfg),
             "rng": torch.get_rng_state(),
         }
@@ -239,7 +283,7 @@ def main(argv: list[str] | None = None) -> Path:
     if show and not args.no_export and last_epoch == cfg.train.epochs:
         from training.export import export_checkpoint
 
-        path = export_checkpoint(out / "best.pt", out / "model.onnx", name=f"dgan-ethucy-{cfg.data.scene}")
+        path = export_checkpoint(out / "best.pt", out / "model.onnx", name=f"dgan-{run_name(cfg)}")
         print(f"exported {path}")
     return out
 

@@ -1,7 +1,8 @@
 """The ``dgan`` command line (also ``python -m dgan``).
 
 - ``dgan info MODEL``: the model's contract: classes, time base, anchors, map crop.
-- ``dgan demo``: the bundled zara1 scene and model, printed and drawn (``dgan_demo.png``).
+- ``dgan demo [--model zara1|sdd|apolloscape]``: a bundled real scene and model, printed and drawn
+  (``dgan_demo.png``).
 - ``dgan predict MODEL SCENE --time T``: predict every agent seen at time T of a scene file, either the
   Social-GAN layout (``frame agent_id x y``, whitespace-separated) or a CSV with a header
   (``agent_id,time,x,y[,class,heading,length,width,vx,vy]``).
@@ -122,9 +123,16 @@ def build_parser() -> argparse.ArgumentParser:
     pred.add_argument("--modes", type=int, default=3, help="modes per agent (default 3)")
     pred.add_argument("--json", action="store_true", help="print JSON instead of a table")
     pred.set_defaults(func=_predict)
-    demo = sub.add_parser("demo", help="predict the bundled zara1 scene with a bundled model and draw it")
-    demo.add_argument("--model", default="zara1", help="a bundled model name or an .onnx path (default zara1)")
-    demo.add_argument("--time", type=float, default=5500.0, help="t_obs frame of the bundled excerpt (5500..5510)")
+    demo = sub.add_parser("demo", help="predict a bundled real scene with a bundled model and draw it")
+    demo.add_argument(
+        "--model", default="zara1", help="a bundled model name (zara1, sdd, apolloscape ...) or an .onnx path"
+    )
+    demo.add_argument(
+        "--time",
+        type=float,
+        default=None,
+        help="t_obs step of the bundled excerpt: zara1 5500..5510, sdd 831..841, apolloscape 15..19",
+    )
     demo.add_argument("--modes", type=int, default=3)
     demo.add_argument("--out", default="dgan_demo.png", help="where to write the picture")
     demo.set_defaults(func=_demo)

@@ -1,77 +1,209 @@
-"""``dgan demo``: predict a bundled real scene with a bundled model, print each agent's top modes, and draw them over
-the scene image like the paper's Figure 3 (observed path, ground truth, predicted modes coloured by probability)."""
+"""``dgan demo``: predict a bundled real scene with a bundled model, print each agent's top modes, and draw them like
+the paper's Figure 3 (observed path, ground truth, predicted modes coloured by probability).
+
+The scene follows the model's time base: ETH/UCY models (0.4 s) get zara1, ``sdd`` (1/3 s) a Stanford Drone excerpt
+over its reference image, ``apolloscape`` (0.5 s) an ApolloScape excerpt drawn in world metres with each agent's
+measured box. Classes are told apart by colour.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from dgan.exceptions import DganError
-from dgan.frame import Frame
+from dgan.frame import Frame, RasterMap
 from dgan.predictor import Prediction, Predictor
-from dgan.scenes import scene_image, scene_map
+from dgan.scenes import APOLLO_TYPES, SDD_LABEL_CLASS, scene_image, scene_map, sdd_raster_map
+from dgan.spec import InputSpec
 
-SCENE_FILE = Path(__file__).parent / "data" / "zara1" / "frames_5430_5620.txt"
+DATA = Path(__file__).parent / "data"
+SCENE_FILE = DATA / "zara1" / "frames_5430_5620.txt"
+SDD_FILE = DATA / "sdd" / "hyang_0" / "frames_824_853.txt"
+SDD_IMAGE = DATA / "sdd" / "hyang_0" / "reference.jpg"
+#: Metres per pixel of SDD hyang video0 (``estimated_scales.yaml``).
+SDD_SCALE = 0.034749693
+APOLLO_FILE = DATA / "apolloscape" / "result_9048_1_frames_10_25.txt"
+#: Colour of each class in the pictures.
+CLASS_COLOURS = {"vehicle": "deepskyblue", "cyclist": "lime", "pedestrian": "yellow"}
+
+Arr = npt.NDArray[Any]
 
 
-def load_scene(t_obs: int, now: float) -> tuple[Frame, dict[int, np.ndarray]]:
-    """The bundled zara1 excerpt at frame ``now``, with the future (frame ids step by 10) of every agent."""
-    rows = np.loadtxt(SCENE_FILE)
-    cols = {"time": rows[:, 0], "agent_id": rows[:, 1].astype(np.int64), "x": rows[:, 2], "y": rows[:, 3]}
-    frame = Frame.from_records(cols, t_obs=t_obs, dt=10.0, current_time=now, map=scene_map("zara1"))
-    futures = {}
+@dataclass
+class DemoScene:
+    """A bundled excerpt at one time: the frame, every agent's future (world metres), what to draw on."""
+
+    name: str
+    frame: Frame
+    futures: dict[int, Arr]
+    labels: dict[int, str]
+    image: Arr | None  # (H, W, 3) background, or None to draw in world metres
+    world_to_pixel: Arr | None
+    default_now: float
+    headings: dict[int, float] | None = None  # measured headings at t_obs, for the boxes
+    time_step: float = 1.0  # time between steps in the file's unit
+
+
+def _futures(times: Arr, ids: Arr, xy: Arr, frame: Frame, now: float) -> dict[int, Arr]:
+    out = {}
     for pid in frame.ids:
-        r = rows[(rows[:, 1] == pid) & (rows[:, 0] > now)]
-        futures[int(pid)] = r[np.argsort(r[:, 0]), 2:4]
-    return frame, futures
+        sel = (ids == pid) & (times > now)
+        out[int(pid)] = xy[sel][np.argsort(times[sel])]
+    return out
 
 
-def draw(frame: Frame, pred: Prediction, futures: dict[int, np.ndarray], out: Path, title: str) -> Path:
+def zara1_scene(t_obs: int, now: float | None) -> DemoScene:
+    """The bundled zara1 excerpt (frame ids step by 10; ``now`` in 5500..5510)."""
+    now = 5500.0 if now is None else now
+    rows = np.loadtxt(SCENE_FILE)
+    ids = rows[:, 1].astype(np.int64)
+    cols = {"time": rows[:, 0], "agent_id": ids, "x": rows[:, 2], "y": rows[:, 3]}
+    frame = Frame.from_records(cols, t_obs=t_obs, dt=10.0, current_time=now, map=scene_map("zara1"))
+    img = scene_image("zara1")
+    if img is None:
+        raise DganError("the zara1 scene image is not bundled")
+    labels = {int(i): "pedestrian" for i in frame.ids}
+    futures = _futures(rows[:, 0], ids, rows[:, 2:4], frame, now)
+    return DemoScene("zara1", frame, futures, labels, *img, 5500.0, time_step=10.0)
+
+
+def sdd_scene(t_obs: int, now: float | None) -> DemoScene:
+    """The bundled Stanford Drone excerpt (hyang video0, test split, steps 824..853; ``now`` in 831..841)."""
+    now = 841.0 if now is None else now
+    raw = np.loadtxt(SDD_FILE, dtype=str)
+    times, ids = raw[:, 0].astype(float), raw[:, 1].astype(float).astype(np.int64)
+    xy = raw[:, 2:4].astype(float) * SDD_SCALE
+    cols = {
+        "time": times,
+        "agent_id": ids,
+        "x": xy[:, 0],
+        "y": xy[:, 1],
+        "class": np.array([SDD_LABEL_CLASS[s] for s in raw[:, 4]], dtype=object),
+    }
+    smap = sdd_raster_map(SDD_IMAGE, SDD_SCALE)
+    frame = Frame.from_records(cols, t_obs=t_obs, dt=1.0, current_time=now, map=smap)
+    labels = {int(i): str(raw[ids == i, 4][-1]) for i in frame.ids}
+    image = RasterMap.from_file(SDD_IMAGE, np.eye(3)).image
+    w2p = np.diag([1 / SDD_SCALE, 1 / SDD_SCALE, 1.0])
+    futures = _futures(times, ids, xy, frame, now)
+    return DemoScene("Stanford Drone hyang video0", frame, futures, labels, image, w2p, 841.0)
+
+
+def apollo_scene(t_obs: int, now: float | None) -> DemoScene:
+    """The bundled ApolloScape excerpt (recording 9048 file 1, frames 10..25; ``now`` in 15..19)."""
+    now = 17.0 if now is None else now
+    rows = np.loadtxt(APOLLO_FILE)
+    ids = rows[:, 1].astype(np.int64)
+    types = rows[:, 2].astype(int)
+    cols = {
+        "time": rows[:, 0],
+        "agent_id": ids,
+        "x": rows[:, 3],
+        "y": rows[:, 4],
+        "class": np.array([APOLLO_TYPES[t][1] for t in types], dtype=object),
+        "length": rows[:, 6],
+        "width": rows[:, 7],
+        "heading": rows[:, 9],
+    }
+    frame = Frame.from_records(cols, t_obs=t_obs, dt=1.0, current_time=now)
+    labels = {int(i): APOLLO_TYPES[int(types[ids == i][-1])][0] for i in frame.ids}
+    futures = _futures(rows[:, 0], ids, rows[:, 3:5], frame, now)
+    at_now = rows[:, 0] == now
+    headings = {int(i): float(hd) for i, hd in zip(ids[at_now], rows[at_now, 9], strict=True)}
+    return DemoScene("ApolloScape recording 9048", frame, futures, labels, None, None, 17.0, headings)
+
+
+def scene_for(spec: InputSpec, now: float | None = None) -> DemoScene:
+    """The bundled scene that matches a model's time base, at step ``now`` (the scene's default if None)."""
+    if abs(spec.dt_s - 0.4) < 1e-6:
+        return zara1_scene(spec.t_obs, now)
+    if abs(spec.dt_s - 1 / 3) < 1e-6:
+        return sdd_scene(spec.t_obs, now)
+    if abs(spec.dt_s - 0.5) < 1e-6:
+        return apollo_scene(spec.t_obs, now)
+    raise DganError(f"no bundled demo scene has steps of {spec.dt_s} s (ETH/UCY 0.4 s, SDD 1/3 s, ApolloScape 0.5 s)")
+
+
+def draw(scene: DemoScene, pred: Prediction, out: Path, title: str) -> Path:
     try:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+        from matplotlib.patches import Polygon
     except ImportError as e:
         raise DganError("the demo's picture needs matplotlib: pip install matplotlib") from e
-    img = scene_image("zara1")
-    if img is None:
-        raise DganError("the zara1 scene image is not bundled")
-    image, h = img
+    frame = scene.frame
+    h = scene.world_to_pixel
 
-    def px(p: np.ndarray) -> Any:
+    def px(p: Arr) -> Any:
+        if h is None:
+            return p
         q = np.c_[p, np.ones(len(p))] @ h.T
         return q[:, :2] / q[:, 2:]
 
-    hgt, wid = image.shape[:2]
-    fig, ax = plt.subplots(figsize=(wid / 60 + 1.5, hgt / 60), dpi=100)
-    ax.imshow(image)
-    ax.set_xlim(0, wid)
-    ax.set_ylim(hgt, 0)
+    if scene.image is not None:
+        hgt, wid = scene.image.shape[:2]
+        size = (wid / max(hgt, wid) * 11 + 1.5, hgt / max(hgt, wid) * 11)
+        fig, ax = plt.subplots(figsize=size, dpi=100)
+        ax.imshow(scene.image)
+    else:
+        fig, ax = plt.subplots(figsize=(11, 9), dpi=100)
+        ax.set_facecolor("0.15")
+        ax.set_aspect("equal")
     cmap = plt.get_cmap("cool")
     modes = pred.trajectories.shape[1]
+    box_xy: list[Arr] = []
     for i, pid in enumerate(frame.ids):
-        obs = px(frame.positions[i][frame.mask[i]])
-        ax.plot(obs[:, 0], obs[:, 1], "--", color="yellow", lw=1.6)
+        cls = frame.classes[i]
+        colour = CLASS_COLOURS[cls]
+        hist = frame.positions[i][frame.mask[i]]
+        obs = px(hist)
+        box_xy.append(hist)
+        ax.plot(obs[:, 0], obs[:, 1], "--", color=colour, lw=1.6)
         for m in reversed(range(modes)):
             pr = pred.probabilities[i, m]
-            tr = px(np.vstack([frame.positions[i][frame.mask[i]][-1:], pred.trajectories[i, m]]))
+            tr = px(np.vstack([hist[-1:], pred.trajectories[i, m]]))
             ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / 0.5)), lw=1.0 + 3 * pr, alpha=0.9)
-        fut = futures.get(int(pid))
+            box_xy.append(pred.trajectories[i, m])
+        fut = scene.futures.get(int(pid))
         if fut is not None and len(fut):
-            gt = px(np.vstack([frame.positions[i][frame.mask[i]][-1:], fut]))
+            gt = px(np.vstack([hist[-1:], fut]))
             ax.plot(gt[:, 0], gt[:, 1], "-", color="red", lw=1.8)
-        ax.plot(*obs[-1], "o", color="white", ms=4, mec="black")
+            box_xy.append(fut)
+        if scene.headings is not None:  # the agent's measured box at t_obs
+            yaw = scene.headings.get(int(pid), 0.0)
+            c, s = np.cos(yaw), np.sin(yaw)
+            half = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [frame.lengths[i] / 2, frame.widths[i] / 2]
+            corners = hist[-1] + half @ np.array([[c, s], [-s, c]])
+            ax.add_patch(Polygon(corners, closed=True, fc=colour, ec="white", lw=0.6, alpha=0.8))
+        else:
+            ax.plot(*obs[-1], "o", color=colour, ms=5, mec="black")
+    if h is None:
+        pts = np.vstack(box_xy)
+        lo, hi = pts.min(axis=0) - 5, pts.max(axis=0) + 5
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+    else:
+        assert scene.image is not None
+        ax.set_xlim(0, scene.image.shape[1])
+        ax.set_ylim(scene.image.shape[0], 0)
+        ax.set_axis_off()
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0, 0.5))
     fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.01, label="mode probability (≥ 0.5 saturates)")
-    ax.plot([], [], "--", color="yellow", label="observed (3.2 s)")
+    for cls in sorted(set(frame.classes)):
+        ax.plot([], [], "--", color=CLASS_COLOURS[cls], label=f"observed {cls}")
     ax.plot([], [], "-", color="red", label="ground truth")
     ax.plot([], [], "-", color=cmap(0.9), label="predicted modes")
     ax.legend(loc="lower left")
     ax.set_title(title)
-    ax.set_axis_off()
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)
@@ -79,23 +211,25 @@ def draw(frame: Frame, pred: Prediction, futures: dict[int, np.ndarray], out: Pa
     return out
 
 
-def run(model: str = "zara1", now: float = 5500.0, modes: int = 3, out: Path = Path("dgan_demo.png")) -> int:
+def run(model: str = "zara1", now: float | None = None, modes: int = 3, out: Path = Path("dgan_demo.png")) -> int:
     predictor = Predictor(model, modes=modes)
-    frame, futures = load_scene(predictor.spec.t_obs, now)
+    scene = scene_for(predictor.spec, now)
+    frame = scene.frame
+    t = scene.default_now if now is None else now
     pred = predictor.predict(frame)
     card = predictor.contract.get("name", model)
-    print(f"model {card}: {len(frame)} pedestrians of zara1 at frame {int(now)}, {len(pred.edges)} attention edges")
-    print("agent   top modes: probability -> position in 4.8 s (world metres)        actual")
+    horizon = predictor.spec.t_f * predictor.spec.dt_s
+    print(f"model {card}: {len(frame)} agents of {scene.name} at step {t:g}, {len(pred.edges)} attention edges")
+    print(f"agent  label          top modes: probability -> position in {horizon:.1f} s (world metres)      actual")
     for i, pid in enumerate(pred.agent_ids):
         end = pred.trajectories[i, :, -1]
         ends = "  ".join(
-            f"{pred.probabilities[i, m]:.2f} -> ({end[m, 0]:5.2f}, {end[m, 1]:5.2f})" for m in range(len(end))
+            f"{pred.probabilities[i, m]:.2f} -> ({end[m, 0]:6.2f}, {end[m, 1]:6.2f})" for m in range(len(end))
         )
-        fut = futures.get(int(pid))
-        actual = (
-            f"({fut[-1, 0]:5.2f}, {fut[-1, 1]:5.2f})" if fut is not None and len(fut) == 12 else "   (left the scene)"
-        )
-        print(f"{pid:>5}   {ends}   {actual}")
-    path = draw(frame, pred, futures, out, f"DGAN ({card}) on zara1, frame {int(now)}: top {modes} modes")
+        fut = scene.futures.get(int(pid))
+        full = fut is not None and len(fut) == predictor.spec.t_f
+        actual = f"({fut[-1, 0]:6.2f}, {fut[-1, 1]:6.2f})" if full and fut is not None else "   (left the scene)"
+        print(f"{pid:>5}  {scene.labels[int(pid)]:<13}  {ends}   {actual}")
+    path = draw(scene, pred, out, f"DGAN ({card}) on {scene.name}, step {t:g}: top {modes} modes")
     print(f"wrote {path}")
     return 0

@@ -1,4 +1,6 @@
-"""ETH/UCY scene maps: each scene's semantic mask, colourised, with its world→pixel homography.
+"""Scene maps and label mappings of the datasets the bundled models were trained on.
+
+ETH/UCY: each scene's semantic mask, colourised, with its world→pixel homography.
 
 The masks (``eth_ucy_scene_maps/semantic_masks`` of the shared data; MG-GAN layout) label each pixel 0..5; class 1 is
 the walkable ground (97-98% of the pedestrians' points on eth, hotel and zara; 71% on univ, which has another 24% on
@@ -72,3 +74,38 @@ def scene_raster_map(scene: str, folder: str | os.PathLike[str]) -> RasterMap:
         raise InvalidMapError(f"no mask for scene {scene!r} in {folder}")
     labels = RasterMap.from_file(mask_path, np.eye(3)).image
     return RasterMap(colourise_mask(labels), world_to_pixel(scene, np.loadtxt(folder / "H.txt")))
+
+
+#: Stanford Drone labels → dgan classes, as in the paper (cyclists and skateboarders together; carts, cars, buses).
+SDD_LABEL_CLASS: Final = {
+    "Pedestrian": "pedestrian",
+    "Biker": "cyclist",
+    "Skater": "cyclist",
+    "Cart": "vehicle",
+    "Car": "vehicle",
+    "Bus": "vehicle",
+}
+#: ApolloScape object types → (label, dgan class). "others" (mean size 2.1 × 1.1 m) enter as small neighbours.
+APOLLO_TYPES: Final = {
+    1: ("small vehicle", "vehicle"),
+    2: ("big vehicle", "vehicle"),
+    3: ("pedestrian", "pedestrian"),
+    4: ("cyclist", "cyclist"),
+    5: ("others", "cyclist"),
+}
+
+
+def sdd_raster_map(image_path: str | os.PathLike[str], metres_per_px: float, resolution_m: float = 0.25) -> RasterMap:
+    """A Stanford Drone video's ``reference.jpg`` as a raster map in the world frame ``(x, y) = (u, v) ·
+    metres_per_px``, box-filtered by an integer factor to about ``resolution_m`` per pixel, so that coarse crops do
+    not alias."""
+    if not metres_per_px > 0:
+        raise InvalidMapError(f"metres_per_px must be positive, got {metres_per_px}")
+    image = RasterMap.from_file(image_path, np.eye(3)).image
+    f = max(1, round(resolution_m / metres_per_px))
+    h, w = (image.shape[0] // f) * f, (image.shape[1] // f) * f
+    small = image[:h, :w].reshape(h // f, f, w // f, f, 3).mean(axis=(1, 3)).round().astype(np.uint8)
+    # Output pixel j averages input pixels j·f … j·f + f − 1, whose centre is at j·f + (f − 1) / 2.
+    s = 1.0 / (metres_per_px * f)
+    off = -(f - 1) / 2 / f
+    return RasterMap(small, np.array([[s, 0.0, off], [0.0, s, off], [0.0, 0.0, 1.0]]))

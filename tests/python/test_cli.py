@@ -49,10 +49,14 @@ def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys:
     assert "expected 4 columns" in capsys.readouterr().err
 
 
-def test_demo_prints_and_draws(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(
+    ("model", "expected"),
+    [("zara1", "18 agents of zara1 at step 5500")],
+)
+def test_demo_prints_and_draws(model: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo.png"
-    assert main(["demo", "--out", str(out)]) == 0
+    assert main(["demo", "--model", model, "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "18 pedestrians of zara1 at frame 5500" in text
+    assert expected in text
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert out.stat().st_size > 50_000

@@ -65,21 +65,22 @@ def test_loss_picks_the_closest_anchor_of_the_class() -> None:
 
 
 def real_frames(spec: dgan.InputSpec) -> list[dgan.Frame]:
-    rows = np.loadtxt(ROOT / "python" / "dgan" / "data" / "zara1" / "frames_5430_5620.txt")
-    cols = {"time": rows[:, 0], "agent_id": rows[:, 1].astype(np.int64), "x": rows[:, 2], "y": rows[:, 3]}
-    smap = dgan.scene_map("zara1") if spec.map is not None else None
-    return [dgan.Frame.from_records(cols, t_obs=8, dt=10.0, current_time=t, map=smap) for t in (5500.0, 5510.0)]
+    """Two real frames of the bundled demo scene that matches the spec's time base (ETH/UCY, SDD, ApolloScape)."""
+    from dgan.demo import scene_for
+
+    first = scene_for(spec)
+    return [first.frame, scene_for(spec, first.default_now + first.time_step).frame]
 
 
-def assert_parity(model: torch.nn.Module, spec: dgan.InputSpec, anchors: np.ndarray, onnx_path: Path) -> None:
+def assert_parity(
+    model: torch.nn.Module, spec: dgan.InputSpec, anchors: np.ndarray, class_of: np.ndarray, onnx_path: Path
+) -> None:
     predictor = dgan.Predictor(onnx_path)
     for frame in real_frames(spec):
         x = dgan.preprocess(frame, spec)
         with torch.no_grad():
             cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
-            traj, prob = decode_torch(
-                cl, al, off, torch.from_numpy(anchors), torch.zeros(len(anchors), dtype=torch.long)
-            )
+            traj, prob = decode_torch(cl, al, off, torch.from_numpy(anchors), torch.from_numpy(class_of).long())
         n, k = traj.shape[:2]
         flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
         world = dgan.to_world_frame(flat, x["origin"], x["heading"]).reshape(n, k, -1, 2)
@@ -90,28 +91,42 @@ def assert_parity(model: torch.nn.Module, spec: dgan.InputSpec, anchors: np.ndar
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in CHECKPOINTS.glob("*.pt")))
 def test_bundled_models_match_pytorch(name: str) -> None:
-    model, spec, anchors, _ = load_checkpoint(CHECKPOINTS / f"{name}.pt")
-    assert_parity(model, spec, anchors, dgan.models.path(name))
+    model, spec, anchors, class_of, _ = load_checkpoint(CHECKPOINTS / f"{name}.pt")
+    assert_parity(model, spec, anchors, class_of, dgan.models.path(name))
 
 
 def test_every_bundled_model_has_a_checkpoint() -> None:
     assert set(dgan.models.list()) <= {p.stem for p in CHECKPOINTS.glob("*.pt")}
 
 
-@pytest.mark.parametrize("variant", [{}, {"model.use_map": False}, {"model.use_gat": False}])
-def test_fresh_exports_match_pytorch(variant: dict[str, bool], tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("config", "variant"),
+    [
+        ("ethucy_zara1", {}),
+        ("ethucy_zara1", {"model.use_map": False}),
+        ("ethucy_zara1", {"model.use_gat": False}),
+        ("sdd", {}),
+        ("apolloscape", {}),
+    ],
+)
+def test_fresh_exports_match_pytorch(config: str, variant: dict[str, bool], tmp_path: Path) -> None:
     torch.manual_seed(1)
-    cfg = Config.load(CONFIG, variant)
+    cfg = Config.load(ROOT / "training" / "configs" / f"{config}.toml", variant)
     spec = input_spec(cfg)
-    anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (20, 12, 2)), axis=1).astype(np.float32)
-    model = build_model(cfg, spec, 20).eval()
+    k_c = 4
+    k = k_c * len(spec.classes)
+    class_of = np.repeat(np.arange(len(spec.classes)), k_c)
+    anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (k, spec.t_f, 2)), axis=1).astype(np.float32)
+    model = build_model(cfg, spec, k).eval()
     for m in model.modules():
         if isinstance(m, torch.nn.BatchNorm2d):
             assert m.running_mean is not None
             assert m.running_var is not None
             m.running_mean.uniform_(-0.5, 0.5)
             m.running_var.uniform_(0.5, 2.0)
-    assert_parity(model, spec, anchors, export_model(model, spec, anchors, tmp_path / "m.onnx", "fresh"))
+    path = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "fresh")
+    assert dgan.Predictor(path).classes == spec.classes
+    assert_parity(model, spec, anchors, class_of, path)
 
 
 def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
@@ -121,7 +136,7 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
     cfg = Config.load(CONFIG)
     cache = Path(cfg.data.cache_dir).expanduser()
     for split in ("train", "val"):  # build the cache once, before two processes read it
-        cached_windows(root, "zara1", split, input_spec(cfg), cache, progress=False)
+        cached_windows("ethucy", root, split, input_spec(cfg), cache, fold="zara1", progress=False)
     out = tmp_path / "run"
     common = [
         "-m",
@@ -162,9 +177,16 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
 
 def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
     from training.anchors import kmeans_anchors
-    from training.data import split_files
+    from training.datasets import recordings, split_files
 
     with pytest.raises(FileNotFoundError, match=r"set data\.root"):
         split_files(tmp_path, "zara1", "train")
+    for dataset in ("sdd", "apolloscape"):
+        with pytest.raises(FileNotFoundError, match=r"set data\.root"):
+            recordings(dataset, tmp_path, "test")
+    with pytest.raises(ValueError, match="unknown dataset"):
+        recordings("kitti", tmp_path, "test")
+    with pytest.raises(ValueError, match=r"unknown data\.dataset"):
+        input_spec(Config.load(CONFIG, {"data.dataset": "kitti"}))
     with pytest.raises(ValueError, match="3 futures cannot make 20 anchors"):
         kmeans_anchors(np.zeros((3, 12, 2)), 20)

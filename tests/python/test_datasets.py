@@ -1,0 +1,137 @@
+"""The dataset readers and the window rule (``training.datasets``, ``training.data``) on small hand-made recordings
+and on the real shared data."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import dgan
+from training.data import iter_windows
+from training.datasets import (
+    APOLLO_TEST,
+    APOLLO_VAL,
+    DATASETS,
+    Recording,
+    apollo_files,
+    apollo_recording_id,
+    recordings,
+    sdd_scales,
+    sdd_video,
+)
+from training.evaluate import calibration
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def data_root() -> Path:
+    root = Path(os.environ.get("DGAN_DATA_ROOT", ROOT.parent / "shared" / "data"))
+    if not (root / "sdd").is_dir():
+        pytest.fail(f"shared data not found under {root}; set DGAN_DATA_ROOT to the folder holding sdd/")
+    return root
+
+
+def toy(rows: list[tuple[int, int, int]]) -> Recording:
+    """(step, agent, label) rows; agent a walks along x at 1 m per step."""
+    r = np.array(rows)
+    return Recording.sorted(
+        name="toy", step=r[:, 0], agent=r[:, 1], xy=np.c_[r[:, 0] * 1.0 + r[:, 1] * 10.0, r[:, 1] * 1.0], label=r[:, 2]
+    )
+
+
+def test_windows_need_two_agents_present_at_every_step() -> None:
+    info = DATASETS["sdd"]
+    # Agents 1 and 2 cover steps 0..19; agent 3 misses step 15; agent 4 appears at step 5 only (a neighbour).
+    rows = [(s, a, 0) for s in range(20) for a in (1, 2)] + [(s, 3, 1) for s in range(20) if s != 15] + [(5, 4, 2)]
+    windows = list(iter_windows(toy(rows), info, 8, 12))
+    assert [w.now for w in windows] == [7]
+    w = windows[0]
+    assert w.ids.tolist() == [1, 2, 3]
+    assert w.target.tolist() == [True, True, False]
+    assert not w.mask[2, 15]
+    assert w.mask[2, :15].all()
+    np.testing.assert_allclose(w.positions[0, :, 0], np.arange(20) + 10.0)
+    # One target is not enough.
+    assert not list(iter_windows(toy([r for r in rows if r[1] != 2]), info, 8, 12))
+
+
+def test_unscored_labels_are_neighbours_only() -> None:
+    info = DATASETS["apolloscape"]
+    others = info.labels.index("others")
+    rows = [(s, 1, 0) for s in range(12)] + [(s, 2, others) for s in range(12)]
+    (w,) = iter_windows(toy(rows), info, 6, 6)
+    assert w.target.tolist() == [True, False]
+    frame = w.frame(info, 6)
+    assert frame.classes == ["vehicle", "cyclist"]
+
+
+def test_labels_map_to_the_papers_classes() -> None:
+    assert DATASETS["sdd"].classes == ("vehicle", "cyclist", "pedestrian")
+    sdd = dict(zip(DATASETS["sdd"].labels, DATASETS["sdd"].label_class, strict=True))
+    assert sdd == {
+        "Pedestrian": "pedestrian",
+        "Biker": "cyclist",
+        "Skater": "cyclist",
+        "Cart": "vehicle",
+        "Car": "vehicle",
+        "Bus": "vehicle",
+    }
+    assert DATASETS["ethucy"].classes == ("pedestrian",)
+    assert DATASETS["apolloscape"].classes == ("vehicle", "cyclist", "pedestrian")
+
+
+def test_sdd_reads_metres_and_its_map_lines_up() -> None:
+    root = data_root()
+    scales = sdd_scales(root)
+    assert len(scales) == 60
+    assert scales[("hyang", 0)] == pytest.approx(0.034749693)
+    assert sdd_video(Path("stan_deathCircle_3.txt")) == ("deathCircle", 3)
+    (rec,) = [r for r in recordings("sdd", root, "test") if r.name == "stan_hyang_0"]
+    raw = np.loadtxt(root / "sdd/multiclass_step10/test/stan_hyang_0.txt", dtype=str)
+    assert len(rec.step) == len(raw)
+    assert rec.unit_m == pytest.approx(0.034749693)
+    first = raw[(raw[:, 0].astype(float) == rec.step[0]) & (raw[:, 1].astype(float) == rec.agent[0])][0]
+    np.testing.assert_allclose(rec.xy[0], first[2:4].astype(float) * rec.unit_m)
+    # The world → pixel map of the box-filtered image puts a world point on the same image content.
+    assert rec.map is not None
+    small, h = rec.map.image, rec.map.world_to_pixel
+    full = dgan.RasterMap.from_file(root / "sdd/raw_annotations/hyang/video0/reference.jpg", np.eye(3)).image
+    f = full.shape[1] // small.shape[1]
+    u, v = (h @ np.r_[rec.xy[0], 1.0])[:2]
+    px = (rec.xy[0] / rec.unit_m).round().astype(int)
+    block = full[int(v) * f : int(v) * f + f, int(u) * f : int(u) * f + f].reshape(-1, 3).mean(axis=0)
+    np.testing.assert_allclose(small[int(v), int(u)], block, atol=1.0)
+    assert abs(px[0] // f - int(u)) <= 1
+    assert abs(px[1] // f - int(v)) <= 1
+
+
+def test_apolloscape_splits_by_recording() -> None:
+    root = data_root()
+    splits = {s: {apollo_recording_id(p) for p in apollo_files(root, s)} for s in ("train", "val", "test")}
+    assert splits["test"] == set(APOLLO_TEST)
+    assert splits["val"] == set(APOLLO_VAL)
+    assert not splits["train"] & (splits["val"] | splits["test"])
+    rec = recordings("apolloscape", root, "test")[0]
+    assert rec.heading is not None
+    assert rec.length is not None
+    assert rec.width is not None
+    assert rec.label.min() >= 0
+    assert rec.label.max() <= 4
+
+
+def test_calibration_bins_probabilities_and_hits() -> None:
+    prob = np.array([0.01, 0.01, 0.95, 0.95, 0.5])
+    hit = np.array([False, False, True, False, True])
+    cal = calibration(prob, hit)
+    count = np.array(cal["count"])
+    assert count.sum() == 5
+    first, last = 0, len(count) - 1
+    assert count[first] == 2
+    assert cal["frequency"][first] == 0.0
+    assert count[last] == 2
+    assert cal["frequency"][last] == 0.5
+    expected = (2 * 0.01 + 2 * abs(0.95 - 0.5) + 1 * 0.5) / 5
+    assert cal["ece"] == pytest.approx(expected)

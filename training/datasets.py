@@ -1,0 +1,289 @@
+"""The real datasets training reads, each as :class:`Recording` tables in world metres with per-row labels.
+
+- ``ethucy``: ETH/UCY in the Social-GAN layout (metres, 0.4 s), leave-one-scene-out (``fold`` is the held-out
+  scene), each scene's colourised semantic mask as the raster map. One class: pedestrian.
+- ``sdd``: Stanford Drone, multi-class, in Multiclass-SGCN's ``multiclass_step10`` release (all 60 videos, split
+  30/13/17 by video, box centres in pixels, one step = 10 video frames ≈ 0.33 s). Positions become metres with each
+  video's scale from ``estimated_scales.yaml``; errors are reported back in pixels (``Recording.unit_m``). Each
+  video's ``reference.jpg``, box-filtered to about 0.25 m per pixel, is its raster map.
+- ``apolloscape``: ApolloScape trajectory (2 Hz, measured class, length, width and heading), split by recording;
+  no map. Its "others" take part as neighbours only, never as targets.
+
+Each dataset's labels map onto the engine's three classes as in the paper: pedestrian; cyclist (Biker, Skater;
+bicyclist/motorcyclist); vehicle (Cart, Car, Bus; small and big vehicles).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+import dgan
+from dgan.scenes import APOLLO_TYPES, SDD_LABEL_CLASS, scene_raster_map, sdd_raster_map
+
+Arr = npt.NDArray[Any]
+
+
+@dataclass(frozen=True)
+class DatasetInfo:
+    """A dataset's time base, protocol and labels."""
+
+    name: str
+    dt_s: float
+    t_obs: int
+    t_f: int
+    labels: tuple[str, ...]  # the dataset's own labels, in code order
+    label_class: tuple[str, ...]  # the engine class of each label
+    scored: tuple[bool, ...]  # whether agents with the label can be targets
+    unit: str  # the unit errors are reported in: "m" or "px"
+    min_targets: int  # a window needs at least this many targets
+    has_map: bool
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """The model's classes, in the engine's canonical order, among those of the scored labels."""
+        used = {c for c, s in zip(self.label_class, self.scored, strict=True) if s}
+        return tuple(c for c in dgan.CLASSES if c in used)
+
+
+DATASETS: dict[str, DatasetInfo] = {
+    "ethucy": DatasetInfo(
+        "ethucy", 0.4, 8, 12, ("Pedestrian",), ("pedestrian",), (True,), "m", min_targets=2, has_map=True
+    ),
+    "sdd": DatasetInfo(
+        "sdd",
+        1 / 3,  # 10 frames of 30 fps video
+        8,
+        12,
+        tuple(SDD_LABEL_CLASS),
+        tuple(SDD_LABEL_CLASS.values()),
+        (True,) * 6,
+        "px",
+        min_targets=2,
+        has_map=True,
+    ),
+    "apolloscape": DatasetInfo(
+        "apolloscape",
+        0.5,
+        6,
+        6,
+        tuple(label for label, _ in APOLLO_TYPES.values()),
+        tuple(cls for _, cls in APOLLO_TYPES.values()),
+        (True, True, True, True, False),  # "others" are neighbours only
+        "m",
+        min_targets=1,
+        has_map=False,
+    ),
+}
+
+#: ApolloScape recordings held out for testing and validation; the other recordings train.
+APOLLO_TEST = (9048, 9056, 9058, 9061)
+APOLLO_VAL = (9049, 9060)
+#: Target resolution of the box-filtered SDD reference images, metres per pixel.
+SDD_MAP_RESOLUTION_M = 0.25
+
+
+@dataclass
+class Recording:
+    """One recording's rows, sorted by (step, agent). Steps are integer time indices ``dt_s`` apart."""
+
+    name: str
+    step: Arr  # (R,) int64
+    agent: Arr  # (R,) int64
+    xy: Arr  # (R, 2) f64, world metres
+    label: Arr  # (R,) int64 into DatasetInfo.labels
+    heading: Arr | None = None  # (R,) radians
+    length: Arr | None = None  # (R,) metres
+    width: Arr | None = None  # (R,) metres
+    unit_m: float = 1.0  # metres per reporting unit
+    map: dgan.RasterMap | None = None
+
+    @classmethod
+    def sorted(cls, **kw: Any) -> Recording:
+        rec = cls(**kw)
+        order = np.lexsort((rec.agent, rec.step))
+        for k in ("step", "agent", "xy", "label", "heading", "length", "width"):
+            v = getattr(rec, k)
+            if v is not None:
+                setattr(rec, k, v[order])
+        return rec
+
+
+def recordings(dataset: str, root: Path, split: str, fold: str = "", with_map: bool = True) -> list[Recording]:
+    """Every recording of a split (``train``, ``val`` or ``test``); ``fold`` is the held-out ETH/UCY scene."""
+    if dataset not in DATASETS:
+        raise ValueError(f"unknown dataset {dataset!r}; known: {', '.join(DATASETS)}")
+    if split not in ("train", "val", "test"):
+        raise ValueError(f"unknown split {split!r}; known: train, val, test")
+    if dataset == "ethucy":
+        return [ethucy_recording(p, root, with_map) for p in split_files(root, fold, split)]
+    if dataset == "sdd":
+        return [sdd_recording(p, root, with_map) for p in sdd_files(root, split)]
+    return [apollo_recording(p) for p in apollo_files(root, split)]
+
+
+def source_files(dataset: str, root: Path, split: str, fold: str = "") -> list[Path]:
+    """The files behind a split (for cache keys)."""
+    if dataset == "ethucy":
+        return split_files(root, fold, split)
+    if dataset == "sdd":
+        return sdd_files(root, split)
+    return apollo_files(root, split)
+
+
+# ---- ETH/UCY -------------------------------------------------------------------------------------------------------
+
+#: Frame ids step by 10 between 0.4 s steps in the Social-GAN files.
+ETHUCY_FRAME_STEP = 10
+#: Which scene map each Social-GAN file is recorded on.
+FILE_SCENES = {
+    "biwi_eth": "eth",
+    "biwi_hotel": "hotel",
+    "students001": "univ",
+    "students003": "univ",
+    "uni_examples": "univ",
+    "crowds_zara01": "zara1",
+    "crowds_zara02": "zara2",
+    "crowds_zara03": "zara2",
+}
+
+
+def scene_of(path: Path) -> str:
+    for prefix, scene in FILE_SCENES.items():
+        if path.name.startswith(prefix):
+            return scene
+    raise ValueError(f"unknown ETH/UCY file {path.name}")
+
+
+def split_files(data_root: Path, scene: str, split: str) -> list[Path]:
+    """The Social-GAN files of a leave-one-scene-out fold: ``train``/``val`` hold the other scenes, ``test`` the
+    held-out one."""
+    folder = data_root / "eth_ucy" / "datasets" / scene / split
+    files = sorted(folder.glob("*.txt"))
+    if not files:
+        raise FileNotFoundError(f"no ETH/UCY files in {folder}; set data.root to the folder holding eth_ucy/")
+    return files
+
+
+@cache
+def _ethucy_map(root: Path, scene: str) -> dgan.RasterMap:
+    return scene_raster_map(scene, root / "eth_ucy_scene_maps" / "semantic_masks" / scene)
+
+
+def ethucy_recording(path: Path, root: Path, with_map: bool = True) -> Recording:
+    rows = np.loadtxt(path, ndmin=2)
+    scene = scene_of(path)
+    return Recording.sorted(
+        name=path.stem,
+        step=np.rint(rows[:, 0] / ETHUCY_FRAME_STEP).astype(np.int64),
+        agent=rows[:, 1].astype(np.int64),
+        xy=rows[:, 2:4].astype(np.float64),
+        label=np.zeros(len(rows), np.int64),
+        map=_ethucy_map(root, scene) if with_map else None,
+    )
+
+
+# ---- Stanford Drone ------------------------------------------------------------------------------------------------
+
+
+def sdd_files(root: Path, split: str) -> list[Path]:
+    folder = root / "sdd" / "multiclass_step10" / split
+    files = sorted(folder.glob("stan_*.txt"))
+    if not files:
+        raise FileNotFoundError(f"no SDD files in {folder}; set data.root to the folder holding sdd/")
+    return files
+
+
+def sdd_video(path: Path) -> tuple[str, int]:
+    """``stan_deathCircle_3.txt`` → ``("deathCircle", 3)``."""
+    m = re.fullmatch(r"stan_(\w+?)_(\d+)", path.stem)
+    if m is None:
+        raise ValueError(f"not an SDD multiclass file name: {path.name}")
+    return m.group(1), int(m.group(2))
+
+
+@cache
+def sdd_scales(root: Path) -> dict[tuple[str, int], float]:
+    """Metres per pixel of every video, from ``estimated_scales.yaml`` (a two-level mapping; read without PyYAML)."""
+    path = root / "sdd" / "raw_annotations" / "estimated_scales.yaml"
+    scales: dict[tuple[str, int], float] = {}
+    scene, video = "", -1
+    for line in path.read_text().splitlines():
+        if m := re.fullmatch(r"(\w+):\s*", line):
+            scene = m.group(1)
+        elif m := re.fullmatch(r"\s+video(\d+):\s*", line):
+            video = int(m.group(1))
+        elif m := re.fullmatch(r"\s+scale:\s*([0-9.eE+-]+)\s*", line):
+            scales[(scene, video)] = float(m.group(1))
+    if not scales:
+        raise ValueError(f"no scales found in {path}")
+    return scales
+
+
+def sdd_recording(path: Path, root: Path, with_map: bool = True) -> Recording:
+    scene, video = sdd_video(path)
+    scale = sdd_scales(root).get((scene, video))
+    if scale is None:
+        raise ValueError(f"no scale for SDD {scene} video {video} in estimated_scales.yaml")
+    raw = np.loadtxt(path, dtype=str, ndmin=2)
+    labels = DATASETS["sdd"].labels
+    unknown = set(raw[:, 4]) - set(labels)
+    if unknown:
+        raise ValueError(f"{path.name}: unknown SDD labels {sorted(unknown)}; known: {labels}")
+    smap = None
+    if with_map:
+        image = root / "sdd" / "raw_annotations" / scene / f"video{video}" / "reference.jpg"
+        smap = sdd_raster_map(image, scale, SDD_MAP_RESOLUTION_M)
+    return Recording.sorted(
+        name=path.stem,
+        step=raw[:, 0].astype(float).astype(np.int64),
+        agent=raw[:, 1].astype(float).astype(np.int64),
+        xy=raw[:, 2:4].astype(np.float64) * scale,
+        label=np.array([labels.index(s) for s in raw[:, 4]], np.int64),
+        unit_m=scale,
+        map=smap,
+    )
+
+
+# ---- ApolloScape ---------------------------------------------------------------------------------------------------
+
+
+def apollo_recording_id(path: Path) -> int:
+    m = re.fullmatch(r"result_(\d+)_\d+_frame", path.stem)
+    if m is None:
+        raise ValueError(f"not an ApolloScape trajectory file name: {path.name}")
+    return int(m.group(1))
+
+
+def apollo_files(root: Path, split: str) -> list[Path]:
+    folder = root / "apolloscape_trajectory" / "prediction_train"
+    files = sorted(folder.glob("result_*_frame.txt"))
+    if not files:
+        raise FileNotFoundError(f"no ApolloScape files in {folder}; set data.root to the folder holding it")
+    held = {"test": APOLLO_TEST, "val": APOLLO_VAL}
+    if split == "train":
+        return [p for p in files if apollo_recording_id(p) not in APOLLO_TEST + APOLLO_VAL]
+    return [p for p in files if apollo_recording_id(p) in held[split]]
+
+
+def apollo_recording(path: Path) -> Recording:
+    rows = np.loadtxt(path, ndmin=2)
+    types = rows[:, 2].astype(np.int64)
+    if not np.isin(types, [1, 2, 3, 4, 5]).all():
+        raise ValueError(f"{path.name}: object types must be 1..5, found {sorted(set(types.tolist()))}")
+    return Recording.sorted(
+        name=path.stem,
+        step=rows[:, 0].astype(np.int64),
+        agent=rows[:, 1].astype(np.int64),
+        xy=rows[:, 3:5].astype(np.float64),
+        label=types - 1,
+        heading=rows[:, 9].astype(np.float64),
+        length=rows[:, 6].astype(np.float64),
+        width=rows[:, 7].astype(np.float64),
+    )
