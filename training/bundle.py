@@ -78,7 +78,8 @@ MULTICLASS = {
         "protocol": "8 observed steps (2.7 s), 12 predicted (4 s); windows of 20 consecutive steps, targets present "
         "at all of them, windows with at least two targets (Multiclass-SGCN's windows).",
         "licence": "Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016.",
-        "scene": "`dgan demo --model sdd` (hyang video0 of the test split)",
+        "scene": "`dgan demo --model sdd` (hyang video0 of the test split). On a new frame of an SDD video, pass "
+        "metres (pixels × the video's scale) and the map `dgan.scenes.sdd_raster_map(reference_jpg, scale)`",
     },
     "apolloscape": {
         "title": "ApolloScape trajectory (multi-class)",
@@ -88,7 +89,8 @@ MULTICLASS = {
         'pedestrians; "others" are neighbours only. No map: the model has no map branch.',
         "protocol": "6 observed steps (3 s), 6 predicted (3 s); targets present at all 12 steps.",
         "licence": "ApolloScape: **non-commercial academic research** only. Cite Ma et al. 2019 (TrafficPredict).",
-        "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split)",
+        "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split). Pass measured headings, "
+        "lengths and widths in the frame, as in training",
     },
 }
 
@@ -101,7 +103,7 @@ def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str
     m = cfg["model"]
     keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20", "cv_ade", "cv_fde")
     groups = [("all", metrics)] + [(c, r) for c, r in metrics["by_class"].items()]
-    groups += [(f"label {k}", r) for k, r in metrics["by_label"].items() if k not in metrics["by_class"]]
+    groups += [(f"label {k}", r) for k, r in metrics["by_label"].items() if k.lower() not in metrics["by_class"]]
     table = "\n".join(f"| {g} | {r['agents']} | " + " | ".join(f"{r[k]:.2f}" for k in keys) + " |" for g, r in groups)
     map_line = (
         f"map CNN (width {m['map_channels']}) over {cfg['data']['map_height_px']}×{cfg['data']['map_width_px']} px "
@@ -133,7 +135,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 
 - **Try it**: {d["scene"]}.
 - **Licence**: {d["licence"]} The weights are derived from this data: non-commercial research use only.
-- **Reproduce**: `python -m training.results --train` (every model of `docs/results.md`), or
+- **Reproduce**: `python -m training.results --train-multiclass` (this model and its per-class baselines), or
   `python -m training.train --config training/configs/{cfg["data"]["dataset"]}.toml --out runs/{name}`.
 """
 

@@ -104,25 +104,19 @@ def class_table(dataset: str, res: dict[str, Any]) -> str:
 
 
 def verdict(dataset: str, res: dict[str, Any]) -> str:
-    """Where the single model is at least as good as the per-class models, and where not (by minADE20 and top-1)."""
+    """Per class, how the single model's top-1 ADE and minADE20 compare with the per-class model's (relative)."""
     multi, per = res["multi"]["by_class"], res["per_class"]
-    better: list[str] = []
-    worse: list[str] = []
+    parts = []
     for cls, m in multi.items():
         if cls not in per:
             continue
         p = per[cls]
-        lost = [
-            f"{name} {m[a]:.2f}/{m[b]:.2f} vs {p[a]:.2f}/{p[b]:.2f}"
-            for name, (a, b) in (("top-1", ("ade", "fde")), ("min20", ("min_ade20", "min_fde20")))
-            if m[a] > p[a] or m[b] > p[b]
-        ]
-        (worse if lost else better).append(f"{cls} ({'; '.join(lost)})" if lost else cls)
-    text = "The single model is at least as good as the per-class models (top-1 and min20) on: "
-    text += f"{', '.join(better) or 'none'}."
-    if worse:
-        text += f" It is behind on: {', '.join(worse)}."
-    return text
+        cells = []
+        for name, key in (("top-1 ADE", "ade"), ("minADE20", "min_ade20")):
+            rel = 100 * (m[key] - p[key]) / p[key]
+            cells.append(f"{name} {'behind' if rel > 0 else 'ahead'} by {abs(rel):.1f}%")
+        parts.append(f"{cls}: {', '.join(cells)}")
+    return "Single model against the per-class models: " + "; ".join(parts) + "."
 
 
 def sdd_published_table(res: dict[str, Any]) -> str:

@@ -51,7 +51,11 @@ def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys:
 
 @pytest.mark.parametrize(
     ("model", "expected"),
-    [("zara1", "18 agents of zara1 at step 5500")],
+    [
+        ("zara1", "18 agents of zara1 at step 5500"),
+        ("sdd", "22 agents of Stanford Drone hyang video0 at step 841"),
+        ("apolloscape", "agents of ApolloScape recording 9048 at step 17"),
+    ],
 )
 def test_demo_prints_and_draws(model: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo.png"

@@ -12,7 +12,7 @@ SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
 
 
 def test_five_leave_one_out_models_are_bundled() -> None:
-    assert dgan.models.list() == SCENES
+    assert set(SCENES) <= set(dgan.models.list())
     for name in SCENES:
         p = dgan.Predictor(name)
         assert p.spec.t_obs == 8
@@ -24,6 +24,25 @@ def test_five_leave_one_out_models_are_bundled() -> None:
         assert f"test scene {name}" in card
         assert "non-commercial" in card
         assert dgan.models.path(name).stat().st_size < 5_000_000
+
+
+@pytest.mark.parametrize(
+    ("name", "dt", "t_obs", "t_f", "has_map"),
+    [("sdd", 1 / 3, 8, 12, True), ("apolloscape", 0.5, 6, 6, False)],
+)
+def test_multiclass_models_are_bundled(name: str, dt: float, t_obs: int, t_f: int, has_map: bool) -> None:
+    p = dgan.Predictor(name)
+    assert p.classes == ("vehicle", "cyclist", "pedestrian")
+    assert p.spec.dt_s == pytest.approx(dt)
+    assert (p.spec.t_obs, p.spec.t_f) == (t_obs, t_f)
+    assert (p.spec.map is not None) == has_map
+    for cls in p.classes:
+        assert p.anchors[cls].shape == (20, t_f, 2)
+    assert p.num_modes == 60
+    card = dgan.models.card(name)
+    assert "one model for vehicles, cyclists and pedestrians" in card
+    assert "non-commercial" in card
+    assert dgan.models.path(name).stat().st_size < 5_000_000
 
 
 def test_unknown_names_list_the_bundled_ones() -> None:
@@ -49,7 +68,7 @@ def test_scene_maps_match_their_models(zara1_frame: dgan.Frame) -> None:
     assert np.all(dist < 15.0)
 
 
-@pytest.mark.parametrize("name", ["zara1"])
+@pytest.mark.parametrize("name", ["zara1", "sdd", "apolloscape"])
 def test_a_bundled_model_beats_standing_still(name: str) -> None:
     """On its bundled real excerpt, a bundled model's top mode is far closer to what happened than standing still."""
     predictor = dgan.Predictor(name)
@@ -61,5 +80,5 @@ def test_a_bundled_model_beats_standing_still(name: str) -> None:
         if len(fut) == predictor.spec.t_f:
             errs.append(np.linalg.norm(pred.most_likely[i] - fut, axis=1).mean())
             still.append(np.linalg.norm(scene.frame.positions[i, -1] - fut, axis=1).mean())
-    assert len(errs) >= 5
+    assert len(errs) >= 2  # ApolloScape tracks are short: 2 of its excerpt's agents stay for all 3 s
     assert np.mean(errs) < 0.5 * np.mean(still)
