@@ -24,10 +24,22 @@ MODELS = ROOT / "python" / "dgan" / "models"
 CHECKPOINTS = ROOT / "training" / "checkpoints"
 
 
-def card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
+def training_log(run: Path) -> tuple[list[dict[str, str]], float, dict[str, str]]:
+    """A run's epoch rows, its total training seconds and its best row (by validation loss)."""
     rows = list(csv.DictReader((run / "log.csv").open()))
-    seconds = sum(float(r["seconds"]) for r in rows)
-    best = min(rows, key=lambda r: float(r["val_loss"]))
+    return rows, sum(float(r["seconds"]) for r in rows), min(rows, key=lambda r: float(r["val_loss"]))
+
+
+def slim_checkpoint(run: Path, out: Path) -> Path:
+    """Keeps what export and the parity test need of a run's best checkpoint (no optimizer state)."""
+    ckpt = torch.load(run / "best.pt", weights_only=False)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({k: ckpt[k] for k in ("model", "anchors", "class_of", "config", "epoch") if k in ckpt}, out)
+    return out
+
+
+def card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
+    rows, seconds, best = training_log(run)
     scene = cfg["data"]["scene"]
     others = ", ".join(s for s in ("eth", "hotel", "univ", "zara1", "zara2") if s != scene)
     m = cfg["model"]
@@ -96,9 +108,7 @@ MULTICLASS = {
 
 
 def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
-    rows = list(csv.DictReader((run / "log.csv").open()))
-    seconds = sum(float(r["seconds"]) for r in rows)
-    best = min(rows, key=lambda r: float(r["val_loss"]))
+    rows, seconds, best = training_log(run)
     d = MULTICLASS[cfg["data"]["dataset"]]
     m = cfg["model"]
     keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20", "cv_ade", "cv_fde")
@@ -144,10 +154,7 @@ def bundle(run: Path, name: str, data_root: Path) -> dict[str, Any]:
     cfg = json.loads((run / "config.json").read_text())["config"]
     dataset = cfg["data"].get("dataset", "ethucy")
     MODELS.mkdir(parents=True, exist_ok=True)
-    CHECKPOINTS.mkdir(parents=True, exist_ok=True)
-    ckpt = torch.load(run / "best.pt", weights_only=False)
-    keep = [k for k in ("model", "anchors", "class_of", "config", "epoch") if k in ckpt]
-    torch.save({k: ckpt[k] for k in keep}, CHECKPOINTS / f"{name}.pt")
+    slim_checkpoint(run, CHECKPOINTS / f"{name}.pt")
     if dataset == "ethucy":
         description = (
             f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "

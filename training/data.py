@@ -39,8 +39,6 @@ class Windows:
     future: Arr  # (A, T_f, 2) f32, agent frame (valid for targets)
     target: Arr  # (A,) bool
     class_index: Arr  # (A,) i64 into the spec's classes
-    label: Arr  # (A,) i64 into the dataset's labels
-    unit: Arr  # (A,) f64 metres per reporting unit
     origin: Arr  # (A, 2) f64 world
     heading: Arr  # (A,) f64 world
     agent_ptr: Arr  # (W + 1,)
@@ -192,7 +190,7 @@ def build_windows(
 
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
     agent_ptr, edge_ptr = [0], [0]
-    class_of_label = np.array([list(spec.classes).index(c) if c in spec.classes else -1 for c in info.label_class])
+    class_of_label = np.array([list(spec.classes).index(c) for c in info.label_class])
     for fi, rec in enumerate(recs):
         windows = list(iter_windows(rec, info, spec.t_obs, spec.t_f, stride))
         for w in tqdm(windows, desc=rec.name, disable=not progress, leave=False):
@@ -207,8 +205,6 @@ def build_windows(
             parts["future"].append(future.astype(np.float32))
             parts["target"].append(w.target)
             parts["class_index"].append(class_of_label[w.label])
-            parts["label"].append(w.label)
-            parts["unit"].append(np.full(n, rec.unit_m))
             parts["window_file"].append(np.array([fi]))
             parts["window_frame"].append(np.array([w.now]))
             agent_ptr.append(agent_ptr[-1] + n)
@@ -237,7 +233,7 @@ def cached_windows(
     ``cache_dir`` by content."""
     files = source_files(dataset, data_root, split, fold)
     key = hashlib.sha256(
-        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v2"]).encode()
+        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v3"]).encode()
     ).hexdigest()[:16]
     path = cache_dir / f"{dataset}{'_' + fold if fold else ''}_{split}_{key}.npz"
     if path.is_file():

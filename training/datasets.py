@@ -117,19 +117,20 @@ class Recording:
 
 def recordings(dataset: str, root: Path, split: str, fold: str = "", with_map: bool = True) -> list[Recording]:
     """Every recording of a split (``train``, ``val`` or ``test``); ``fold`` is the held-out ETH/UCY scene."""
+    files = source_files(dataset, root, split, fold)
+    if dataset == "ethucy":
+        return [ethucy_recording(p, root, with_map) for p in files]
+    if dataset == "sdd":
+        return [sdd_recording(p, root, with_map) for p in files]
+    return [apollo_recording(p) for p in files]
+
+
+def source_files(dataset: str, root: Path, split: str, fold: str = "") -> list[Path]:
+    """The files behind a split (also the cache key of its windows)."""
     if dataset not in DATASETS:
         raise ValueError(f"unknown dataset {dataset!r}; known: {', '.join(DATASETS)}")
     if split not in ("train", "val", "test"):
         raise ValueError(f"unknown split {split!r}; known: train, val, test")
-    if dataset == "ethucy":
-        return [ethucy_recording(p, root, with_map) for p in split_files(root, fold, split)]
-    if dataset == "sdd":
-        return [sdd_recording(p, root, with_map) for p in sdd_files(root, split)]
-    return [apollo_recording(p) for p in apollo_files(root, split)]
-
-
-def source_files(dataset: str, root: Path, split: str, fold: str = "") -> list[Path]:
-    """The files behind a split (for cache keys)."""
     if dataset == "ethucy":
         return split_files(root, fold, split)
     if dataset == "sdd":

@@ -156,9 +156,7 @@ def main() -> None:
 def train_multiclass(root: Path) -> None:
     """Trains each multi-class model and its per-class baselines, bundles the multi-class models and keeps the
     baselines' slim checkpoints (``training/checkpoints/baselines``)."""
-    import torch
-
-    from training.bundle import bundle
+    from training.bundle import bundle, slim_checkpoint
     from training.train import main as train
 
     for ds in multiclass.MULTICLASS_DATASETS:
@@ -171,10 +169,7 @@ def train_multiclass(root: Path) -> None:
             )
             train(args)
             if cls:
-                multiclass.BASELINES.mkdir(parents=True, exist_ok=True)
-                ckpt = torch.load(run / "best.pt", weights_only=False)
-                keep = ("model", "anchors", "class_of", "config", "epoch")
-                torch.save({k: ckpt[k] for k in keep}, multiclass.BASELINES / f"{name}.pt")
+                slim_checkpoint(run, multiclass.BASELINES / f"{name}.pt")
             else:
                 bundle(run, ds, root)
 

@@ -135,3 +135,43 @@ def test_calibration_bins_probabilities_and_hits() -> None:
     assert cal["frequency"][last] == 0.5
     expected = (2 * 0.01 + 2 * abs(0.95 - 0.5) + 1 * 0.5) / 5
     assert cal["ece"] == pytest.approx(expected)
+
+
+def test_bad_dataset_files_are_clear_errors(tmp_path: Path) -> None:
+    from dgan.exceptions import InvalidMapError
+    from dgan.scenes import sdd_raster_map
+    from training.datasets import apollo_recording, sdd_recording
+
+    (tmp_path / "sdd" / "raw_annotations").mkdir(parents=True)
+    (tmp_path / "sdd" / "raw_annotations" / "estimated_scales.yaml").write_text(
+        "hyang:\n   video0:\n      scale: 0.03\n      certainty: 1.0\n"
+    )
+    bad_label = tmp_path / "stan_hyang_0.txt"
+    bad_label.write_text("1 0.0 10.0 20.0 Pedestrian\n2 0.0 11.0 20.0 Horse\n")
+    with pytest.raises(ValueError, match="unknown SDD labels"):
+        sdd_recording(bad_label, tmp_path, with_map=False)
+    no_scale = tmp_path / "stan_quad_7.txt"
+    no_scale.write_text("1 0.0 10.0 20.0 Pedestrian\n")
+    with pytest.raises(ValueError, match="no scale for SDD quad video 7"):
+        sdd_recording(no_scale, tmp_path, with_map=False)
+    bad_type = tmp_path / "result_9048_1_frame.txt"
+    bad_type.write_text("0 1 7 1.0 2.0 0.0 4.0 2.0 1.5 0.0\n")
+    with pytest.raises(ValueError, match=r"object types must be 1\.\.5"):
+        apollo_recording(bad_type)
+    with pytest.raises(InvalidMapError, match="metres_per_px must be positive"):
+        sdd_raster_map(ROOT / "python/dgan/data/sdd/hyang_0/reference.jpg", 0.0)
+
+
+def test_a_per_class_run_needs_a_known_class() -> None:
+    import torch  # noqa: F401  (training.train needs torch)
+
+    from training.config import Config
+    from training.train import input_spec, restrict_targets
+
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml")
+    spec = input_spec(cfg)
+    w = type("W", (), {"target": np.ones(3, bool), "class_index": np.array([0, 1, 2])})()
+    restrict_targets(w, spec, "cyclist")
+    assert w.target.tolist() == [False, True, False]
+    with pytest.raises(ValueError, match="'bus' is not among the classes"):
+        restrict_targets(w, spec, "bus")
