@@ -104,6 +104,23 @@ MULTICLASS = {
         "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split). Pass measured headings, "
         "lengths and widths in the frame, as in training",
     },
+    "hdmap": {
+        "title": "driving scenes with a vector HD map (nuScenes mini and Waymo Open Motion)",
+        "data": "nuScenes v1.0-mini (all 10 scenes, ScenarioNet conversion) and 35 Waymo Open Motion scenarios "
+        "(GPUDrive JSON and ScenarioNet), read by `dgan.hdmaps`, split by scene (`training.datasets.HDMAP_TEST`: "
+        "nuScenes scene-0103 and scene-1094 and six Waymo scenarios; val: scene-0553 and two Waymo scenarios; the "
+        "other 34 scenes train). Measured headings and boxes. The map branch sees each agent's heading-aligned crop of "
+        "the vector map (lane centre lines, dashed and solid lane lines, road edges, crosswalks, bike lanes, medians "
+        "and static obstacles) rasterised by the engine in the paper's colours, other agents as blue boxes.",
+        "protocol": "5 Hz: 10 observed steps (2 s), 15 predicted (3 s). The 10 Hz sources are sampled every second "
+        "step; nuScenes annotates at 2 Hz only and its test windows end at a keyframe. Targets: agents seen at all "
+        "25 steps that move more than 1 m over them.",
+        "licence": "nuScenes: **CC BY-NC-SA 4.0**; Waymo Open Dataset: its own licence, **non-commercial use "
+        "only**, which also limits redistribution. Cite Caesar et al. 2020 and Ettinger et al. 2021",
+        "scene": "`dgan demo --model hdmap` (Waymo scenario 2bd577a009790706 of the test split, over its map as the "
+        "engine rasterises it, and one agent's crop). Build frames with `dgan.hdmaps.read_scenario(path).frame(step, "
+        "10, every=2)` for 10 Hz sources, with a `dgan.VectorMap`",
+    },
 }
 
 

@@ -151,8 +151,9 @@ def iter_windows(
     )
     scored = np.array(info.scored)
     total = t_obs + t_f
+    allowed = None if rec.now_steps is None else set(rec.now_steps.tolist())
     for now in steps.tolist():
-        if now % stride:
+        if now % stride or (allowed is not None and now not in allowed):
             continue
         lo, hi = bounds[now]
         ids, at = np.unique(rec.agent[lo:hi], return_index=True)
@@ -171,6 +172,8 @@ def iter_windows(
         rows = lo + at
         label = rec.label[rows]
         target = mask.all(axis=1) & scored[label]
+        if info.min_move_m > 0:
+            target &= np.linalg.norm(pos[:, -1] - pos[:, 0], axis=1) > info.min_move_m
         if target.sum() < need:
             continue
 
@@ -233,7 +236,7 @@ def cached_windows(
     ``cache_dir`` by content."""
     files = source_files(dataset, data_root, split, fold)
     key = hashlib.sha256(
-        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v3"]).encode()
+        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v4"]).encode()
     ).hexdigest()[:16]
     path = cache_dir / f"{dataset}{'_' + fold if fold else ''}_{split}_{key}.npz"
     if path.is_file():

@@ -8,6 +8,15 @@
   video's ``reference.jpg``, box-filtered to about 0.25 m per pixel, is its raster map.
 - ``apolloscape``: ApolloScape trajectory (2 Hz, measured class, length, width and heading), split by recording;
   no map. Its "others" take part as neighbours only, never as targets.
+- ``hdmap``: driving scenes with vector HD maps, nuScenes mini (ScenarioNet) and Waymo Open Motion (GPUDrive JSON
+  and ScenarioNet), read by :mod:`dgan.hdmaps`, at 5 Hz: 2 s observed (10 steps), 3 s predicted (15 steps), split
+  by scene (:data:`HDMAP_TEST`, :data:`HDMAP_VAL`). Targets are agents seen at all 25 steps that move more than 1 m
+  over them. The 10 Hz sources are sampled every second step, in both phases (each scenario gives two recordings,
+  steps 0, 2, 4 … and 1, 3, 5 …). nuScenes annotates agents only at 2 Hz keyframes, every fifth 10 Hz step, and
+  the conversion interpolated linearly between them: its test windows end at a keyframe, so t_obs and the 3 s
+  endpoint (FDE) are real annotations and the points between are linear interpolations of real ones.
+- ``argoverse2``: the three Argoverse 2 scenes (one motion-forecasting scenario, two sensor logs), never trained on:
+  a test of the ``hdmap`` protocol on a source the model has not seen.
 
 Each dataset's labels map onto the engine's three classes as in the paper: pedestrian; cyclist (Biker, Skater;
 bicyclist/motorcyclist); vehicle (Cart, Car, Bus; small and big vehicles).
@@ -16,7 +25,7 @@ bicyclist/motorcyclist); vehicle (Cart, Car, Bus; small and big vehicles).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -25,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
+from dgan.hdmaps import read_scenario
 from dgan.scenes import APOLLO_TYPES, SDD_LABEL_CLASS, scene_raster_map, sdd_raster_map
 
 Arr = npt.NDArray[Any]
@@ -44,6 +54,7 @@ class DatasetInfo:
     unit: str  # the unit errors are reported in: "m" or "px"
     min_targets: int  # a window needs at least this many targets
     has_map: bool
+    min_move_m: float = 0.0  # a target must move more than this over the window (first to last point)
 
     @property
     def classes(self) -> tuple[str, ...]:
@@ -80,13 +91,36 @@ DATASETS: dict[str, DatasetInfo] = {
         min_targets=1,
         has_map=False,
     ),
+    "hdmap": DatasetInfo(
+        "hdmap", 0.2, 10, 15, dgan.CLASSES, dgan.CLASSES, (True,) * 3, "m", min_targets=1, has_map=True, min_move_m=1.0
+    ),
 }
+DATASETS["argoverse2"] = replace(DATASETS["hdmap"], name="argoverse2")
 
 #: ApolloScape recordings held out for testing and validation; the other recordings train.
 APOLLO_TEST = (9048, 9056, 9058, 9061)
 APOLLO_VAL = (9049, 9060)
 #: Target resolution of the box-filtered SDD reference images, metres per pixel.
 SDD_MAP_RESOLUTION_M = 0.25
+#: Driving scenes held out for testing and validation (file names without their extensions); the rest train. The
+#: test scenes hold two nuScenes scenes (Boston, Singapore) and six Waymo scenarios, chosen to include cyclists.
+HDMAP_TEST = (
+    "sd_nuscenes_v1.0-mini_scene-0103",
+    "sd_nuscenes_v1.0-mini_scene-1094",
+    "tfrecord-00000-of-01000_4",
+    "tfrecord-00000-of-01000_402",
+    "tfrecord-00004-of-00150_a5c442237e79e506",
+    "tfrecord-00005-of-00150_2bd577a009790706",
+    "tfrecord-00051-of-00150_641ead285b0c7516",
+    "sd_training.tfrecord-00000-of-01000_c403d5992cab9e0",
+)
+HDMAP_VAL = (
+    "sd_nuscenes_v1.0-mini_scene-0553",
+    "tfrecord-00000-of-01000_325",
+    "tfrecord-00015-of-00150_a898cbc905050656",
+)
+#: The hdmap protocol samples 10 Hz sources every second step.
+HDMAP_EVERY = 2
 
 
 @dataclass
@@ -102,7 +136,8 @@ class Recording:
     length: Arr | None = None  # (R,) metres
     width: Arr | None = None  # (R,) metres
     unit_m: float = 1.0  # metres per reporting unit
-    map: dgan.RasterMap | None = None
+    map: dgan.RasterMap | dgan.VectorMap | None = None
+    now_steps: Arr | None = None  # the steps a window may end at (all if None)
 
     @classmethod
     def sorted(cls, **kw: Any) -> Recording:
@@ -122,6 +157,8 @@ def recordings(dataset: str, root: Path, split: str, fold: str = "", with_map: b
         return [ethucy_recording(p, root, with_map) for p in files]
     if dataset == "sdd":
         return [sdd_recording(p, root, with_map) for p in files]
+    if dataset in ("hdmap", "argoverse2"):
+        return [r for p in files for r in hdmap_recordings(p, keyframes_only=split == "test")]
     return [apollo_recording(p) for p in files]
 
 
@@ -135,6 +172,10 @@ def source_files(dataset: str, root: Path, split: str, fold: str = "") -> list[P
         return split_files(root, fold, split)
     if dataset == "sdd":
         return sdd_files(root, split)
+    if dataset == "hdmap":
+        return hdmap_files(root, split)
+    if dataset == "argoverse2":
+        return argoverse2_files(root, split)
     return apollo_files(root, split)
 
 
@@ -288,3 +329,68 @@ def apollo_recording(path: Path) -> Recording:
         length=rows[:, 6].astype(np.float64),
         width=rows[:, 7].astype(np.float64),
     )
+
+
+# ---- Driving scenes with vector HD maps (nuScenes, Waymo, Argoverse 2) -----------------------------------------------
+
+
+def _stem(path: Path) -> str:
+    return path.name.split(".")[0] if path.name.endswith(".json.gz") else path.stem
+
+
+def hdmap_files(root: Path, split: str) -> list[Path]:
+    files = sorted((root / "nuscenes_mini_scenarionet").glob("*.pkl"))
+    waymo = root / "waymo_motion_samples"
+    files += sorted((waymo / "gpudrive_json").glob("*.json.gz")) + sorted((waymo / "scenarionet_pkl").glob("*.pkl"))
+    if not files:
+        raise FileNotFoundError(
+            f"no nuScenes or Waymo scenarios under {root}; set data.root to the folder holding "
+            "nuscenes_mini_scenarionet/ and waymo_motion_samples/"
+        )
+    held = {"test": HDMAP_TEST, "val": HDMAP_VAL}
+    if split == "train":
+        return [p for p in files if _stem(p) not in HDMAP_TEST + HDMAP_VAL]
+    return [p for p in files if _stem(p) in held[split]]
+
+
+def argoverse2_files(root: Path, split: str) -> list[Path]:
+    """The Argoverse 2 scenes are a test set only."""
+    if split != "test":
+        return []
+    folder = root / "argoverse2"
+    files = sorted((folder / "motion_forecasting").iterdir()) + sorted((folder / "sensor_logs").iterdir())
+    if not files:
+        raise FileNotFoundError(f"no Argoverse 2 scenes in {folder}; set data.root to the folder holding argoverse2/")
+    return files
+
+
+def hdmap_recordings(path: Path, keyframes_only: bool = False) -> list[Recording]:
+    """One scenario as two 5 Hz recordings (the two phases of its 10 Hz steps). With ``keyframes_only``, windows of
+    sources with sparse annotations (nuScenes) may end only at a real annotation."""
+    sc = read_scenario(path)
+    if abs(sc.dt_s - 0.1) > 0.005:
+        raise ValueError(f"{path.name}: expected 10 Hz states, got a step of {sc.dt_s} s")
+    labels = DATASETS["hdmap"].labels
+    out = []
+    for phase in range(HDMAP_EVERY):
+        cols = np.arange(phase, sc.num_steps, HDMAP_EVERY)
+        agent, step = np.nonzero(sc.valid[:, cols])
+        src = cols[step]
+        now_steps = None
+        if keyframes_only and sc.keyframe_every > 1:
+            now_steps = np.flatnonzero(cols % sc.keyframe_every == 0)
+        out.append(
+            Recording.sorted(
+                name=f"{_stem(path)}@{phase}",
+                step=step.astype(np.int64),
+                agent=sc.ids[agent],
+                xy=sc.positions[agent, src],
+                label=np.array([labels.index(sc.labels[a]) for a in agent], np.int64),
+                heading=sc.heading[agent, src],
+                length=sc.length[agent, src],
+                width=sc.width[agent, src],
+                map=sc.map,
+                now_steps=now_steps,
+            )
+        )
+    return out

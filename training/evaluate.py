@@ -39,6 +39,7 @@ def agent_metrics(pred: dgan.Prediction, gt: np.ndarray, cv: np.ndarray) -> dict
         ("cv_ade", "cv_fde"): metrics.ade_fde_top1(cv, gt),
     }
     out = {name: value for names, values in pairs.items() for name, value in zip(names, values, strict=True)}
+    out["brier_min_fde5"] = metrics.brier_min_fde(traj[:, :5], gt, prob[:, :5], 5)
     out["brier_min_fde20"] = metrics.brier_min_fde(top20, gt, prob[:, :20], 20)
     return out
 

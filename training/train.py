@@ -51,8 +51,10 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
 
 
 def run_name(cfg: Config) -> str:
-    """``ethucy-zara1``, ``sdd``, ``sdd-pedestrian`` ..."""
+    """``ethucy-zara1``, ``sdd``, ``sdd-pedestrian``, ``hdmap-nomap`` ..."""
     parts = [cfg.data.dataset] + ([cfg.data.scene] if cfg.data.dataset == "ethucy" else [])
+    if input_spec(cfg).map is None and DATASETS[cfg.data.dataset].has_map:
+        parts.append("nomap")
     return "-".join(parts + ([cfg.data.target_class] if cfg.data.target_class else []))
 
 

@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-from dgan import demo, exceptions, models, scenes
+from dgan import demo, exceptions, hdmaps, models, scenes
 from dgan._dgan import __version__
 from dgan.exceptions import DganError
 from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
@@ -30,6 +30,7 @@ __all__ = [
     "attention_graph",
     "demo",
     "exceptions",
+    "hdmaps",
     "models",
     "preprocess",
     "scene_map",

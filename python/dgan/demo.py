@@ -3,7 +3,8 @@ the paper's Figure 3 (observed path, ground truth, predicted modes coloured by p
 
 The scene follows the model's time base: ETH/UCY models (0.4 s) get zara1, ``sdd`` (1/3 s) a Stanford Drone excerpt
 over its reference image, ``apolloscape`` (0.5 s) an ApolloScape excerpt drawn in world metres with each agent's
-measured box. Classes are told apart by colour.
+measured box, ``hdmap`` (0.2 s) a Waymo Open Motion scenario over its vector map as the engine rasterises it, plus a
+second picture of one agent's map crop as the network sees it. Classes are told apart by colour.
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ SDD_IMAGE = DATA / "sdd" / "hyang_0" / "reference.jpg"
 #: Metres per pixel of SDD hyang video0 (``estimated_scales.yaml``).
 SDD_SCALE = 0.034749693
 APOLLO_FILE = DATA / "apolloscape" / "result_9048_1_frames_10_25.txt"
+WAYMO_FILE = DATA / "waymo" / "tfrecord-00005-of-00150_2bd577a009790706.json.gz"
+#: The Waymo scene's 10 Hz steps per model step (the hdmap model runs at 5 Hz).
+WAYMO_EVERY = 2
 #: Colour of each class in the pictures.
 CLASS_COLOURS = {"vehicle": "deepskyblue", "cyclist": "lime", "pedestrian": "yellow"}
 
@@ -118,6 +122,38 @@ def apollo_scene(t_obs: int, now: float | None) -> DemoScene:
     return DemoScene("ApolloScape recording 9048", frame, futures, labels, None, None, 17.0, headings)
 
 
+def waymo_scene(t_obs: int, now: float | None, extent_m: float = 110.0, resolution_m: float = 0.2) -> DemoScene:
+    """The bundled Waymo scenario (10 Hz steps 0..90, sampled every second step; ``now`` in 18..60), over the
+    engine's north-up rendering of its vector map."""
+    from dgan.hdmaps import bird_eye, read_waymo_json
+
+    step = 40 if now is None else int(now)
+    sc = read_waymo_json(WAYMO_FILE)
+    span = WAYMO_EVERY * (t_obs - 1)
+    if not span <= step <= sc.num_steps - 1 - WAYMO_EVERY:
+        raise DganError(f"the Waymo demo scene needs --time in {span}..{sc.num_steps - 1 - WAYMO_EVERY}, got {step}")
+    frame = sc.frame(step, t_obs, every=WAYMO_EVERY)
+    rows = np.flatnonzero(sc.valid[:, step])
+    moving = np.nanmax(np.linalg.norm(sc.positions[rows] - sc.positions[rows, step][:, None], axis=-1), axis=1) > 1
+    centre = np.nanmean(sc.positions[rows[moving], step], axis=0) if moving.any() else None
+    image = bird_eye(sc, step, centre, extent_m, resolution_m)
+    c = np.nanmean(sc.positions[rows, step], axis=0) if centre is None else centre
+    half = image.shape[0] // 2
+    # Pixel centres at integers: u = col + (x - cx) / res, v = row - (y - cy) / res (north up).
+    w2p = np.array(
+        [
+            [1 / resolution_m, 0, half - c[0] / resolution_m],
+            [0, -1 / resolution_m, half + c[1] / resolution_m],
+            [0, 0, 1],
+        ]
+    )
+    fut = np.arange(step + WAYMO_EVERY, sc.num_steps, WAYMO_EVERY)
+    futures = {int(sc.ids[r]): sc.positions[r, fut][sc.valid[r, fut]] for r in rows}
+    labels = {int(sc.ids[r]): sc.labels[r] for r in rows}
+    headings = {int(sc.ids[r]): float(sc.heading[r, step]) for r in rows}
+    return DemoScene(f"Waymo Open Motion {sc.name}", frame, futures, labels, image, w2p, 40.0, headings, WAYMO_EVERY)
+
+
 def scene_for(spec: InputSpec, now: float | None = None) -> DemoScene:
     """The bundled scene that matches a model's time base, at step ``now`` (the scene's default if None)."""
     if abs(spec.dt_s - 0.4) < 1e-6:
@@ -126,7 +162,11 @@ def scene_for(spec: InputSpec, now: float | None = None) -> DemoScene:
         return sdd_scene(spec.t_obs, now)
     if abs(spec.dt_s - 0.5) < 1e-6:
         return apollo_scene(spec.t_obs, now)
-    raise DganError(f"no bundled demo scene has steps of {spec.dt_s} s (ETH/UCY 0.4 s, SDD 1/3 s, ApolloScape 0.5 s)")
+    if abs(spec.dt_s - 0.2) < 1e-6:
+        return waymo_scene(spec.t_obs, now)
+    raise DganError(
+        f"no bundled demo scene has steps of {spec.dt_s} s (ETH/UCY 0.4 s, SDD 1/3 s, ApolloScape 0.5 s, Waymo 0.2 s)"
+    )
 
 
 def draw(scene: DemoScene, pred: Prediction, out: Path, title: str) -> Path:
@@ -181,7 +221,7 @@ def draw(scene: DemoScene, pred: Prediction, out: Path, title: str) -> Path:
             c, s = np.cos(yaw), np.sin(yaw)
             half = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [frame.lengths[i] / 2, frame.widths[i] / 2]
             corners = hist[-1] + half @ np.array([[c, s], [-s, c]])
-            ax.add_patch(Polygon(corners, closed=True, fc=colour, ec="white", lw=0.6, alpha=0.8))
+            ax.add_patch(Polygon(px(corners), closed=True, fc=colour, ec="white", lw=0.6, alpha=0.8))
         else:
             ax.plot(*obs[-1], "o", color=colour, ms=5, mec="black")
     if h is None:
@@ -211,6 +251,74 @@ def draw(scene: DemoScene, pred: Prediction, out: Path, title: str) -> Path:
     return out
 
 
+def crop_agent(scene: DemoScene) -> int:
+    """The row of the agent whose crop the demo shows: the one that travels farthest over its observed path and its
+    future."""
+    frame = scene.frame
+    best, row = -1.0, 0
+    for i, pid in enumerate(frame.ids):
+        fut = scene.futures.get(int(pid))
+        if fut is None or not len(fut):
+            continue
+        hist = frame.positions[i][frame.mask[i]]
+        score = float(np.linalg.norm(fut[-1] - hist[-1]) + np.linalg.norm(hist[-1] - hist[0]))
+        if score > best:
+            best, row = score, i
+    return row
+
+
+def draw_crop(scene: DemoScene, predictor: Predictor, pred: Prediction, out: Path) -> Path:
+    """One agent's map crop exactly as the network receives it (``dgan.preprocess``), with its observed path, its
+    ground truth and the predicted modes drawn over it in the crop's pixels."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dgan.spec import preprocess, to_agent_frame
+
+    spec = predictor.spec
+    assert spec.map is not None
+    x = preprocess(scene.frame, spec)
+    i = crop_agent(scene)
+    pid = int(scene.frame.ids[i])
+    m = spec.map
+    origin, heading = x["origin"][i : i + 1], x["heading"][i : i + 1]
+
+    def px(world: Arr) -> Arr:
+        local = to_agent_frame(world[None], origin, heading)[0]
+        out: Arr = np.c_[m.agent_col - local[:, 1] / m.resolution_m, m.agent_row - local[:, 0] / m.resolution_m]
+        return out
+
+    fig, ax = plt.subplots(figsize=(6.4, 6.4 * m.height_px / m.width_px + 0.6), dpi=100)
+    ax.imshow(np.moveaxis(x["map"][i], 0, -1), interpolation="nearest")
+    hist = scene.frame.positions[i][scene.frame.mask[i]]
+    h = px(hist)
+    ax.plot(h[:, 0], h[:, 1], "--", color="orange", lw=2, label="observed")
+    cmap = plt.get_cmap("cool")
+    for k in reversed(range(pred.trajectories.shape[1])):
+        tr = px(np.vstack([hist[-1:], pred.trajectories[i, k]]))
+        pr = pred.probabilities[i, k]
+        ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / 0.5)), lw=1 + 3 * pr)
+    fut = scene.futures.get(pid)
+    if fut is not None and len(fut):
+        g = px(np.vstack([hist[-1:], fut]))
+        ax.plot(g[:, 0], g[:, 1], "-", color="red", lw=1.8, label="ground truth")
+    ax.plot([], [], "-", color=cmap(0.9), label="predicted modes")
+    ax.set_xlim(-0.5, m.width_px - 0.5)
+    ax.set_ylim(m.height_px - 0.5, -0.5)
+    ax.legend(loc="lower left", fontsize=8)
+    ax.set_title(
+        f"{scene.labels.get(pid, scene.frame.classes[i])} {pid}: its {m.height_px}×{m.width_px} px crop at "
+        f"{m.resolution_m:g} m/px, heading up",
+        fontsize=10,
+    )
+    fig.tight_layout()
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
 def run(model: str = "zara1", now: float | None = None, modes: int = 3, out: Path = Path("dgan_demo.png")) -> int:
     predictor = Predictor(model, modes=modes)
     scene = scene_for(predictor.spec, now)
@@ -232,4 +340,7 @@ def run(model: str = "zara1", now: float | None = None, modes: int = 3, out: Pat
         print(f"{pid:>5}  {scene.labels[int(pid)]:<13}  {ends}   {actual}")
     path = draw(scene, pred, out, f"DGAN ({card}) on {scene.name}, step {t:g}: top {modes} modes")
     print(f"wrote {path}")
+    if predictor.spec.map is not None:
+        crop = draw_crop(scene, predictor, pred, out.with_name(f"{out.stem}_crop{out.suffix}"))
+        print(f"wrote {crop} (one agent's map crop as the network sees it)")
     return 0

@@ -15,12 +15,16 @@ from training.datasets import (
     APOLLO_TEST,
     APOLLO_VAL,
     DATASETS,
+    HDMAP_TEST,
+    HDMAP_VAL,
     Recording,
     apollo_files,
     apollo_recording_id,
+    hdmap_recordings,
     recordings,
     sdd_scales,
     sdd_video,
+    source_files,
 )
 from training.evaluate import calibration
 
@@ -96,7 +100,7 @@ def test_sdd_reads_metres_and_its_map_lines_up() -> None:
     first = raw[(raw[:, 0].astype(float) == rec.step[0]) & (raw[:, 1].astype(float) == rec.agent[0])][0]
     np.testing.assert_allclose(rec.xy[0], first[2:4].astype(float) * rec.unit_m)
     # The world → pixel map of the box-filtered image puts a world point on the same image content.
-    assert rec.map is not None
+    assert isinstance(rec.map, dgan.RasterMap)
     small, h = rec.map.image, rec.map.world_to_pixel
     full = dgan.RasterMap.from_file(root / "sdd/raw_annotations/hyang/video0/reference.jpg", np.eye(3)).image
     f = full.shape[1] // small.shape[1]
@@ -175,3 +179,33 @@ def test_a_per_class_run_needs_a_known_class() -> None:
     assert w.target.tolist() == [False, True, False]
     with pytest.raises(ValueError, match="'bus' is not among the classes"):
         restrict_targets(w, spec, "bus")
+
+
+def test_hdmap_splits_by_scene_and_samples_5_hz() -> None:
+    root = data_root()
+    files = {s: {p.name for p in source_files("hdmap", root, s)} for s in ("train", "val", "test")}
+    assert not files["train"] & files["val"]
+    assert not files["train"] & files["test"]
+    assert not files["val"] & files["test"]
+    assert sum(len(f) for f in files.values()) == 45  # 10 nuScenes scenes and 35 Waymo scenarios
+    assert len(files["test"]) == len(HDMAP_TEST)
+    assert len(files["val"]) == len(HDMAP_VAL)
+    assert source_files("argoverse2", root, "train") == []
+    assert len(source_files("argoverse2", root, "test")) == 3
+    nu = next(p for p in source_files("hdmap", root, "test") if "scene-0103" in p.name)
+    info = DATASETS["hdmap"]
+    both = hdmap_recordings(nu, keyframes_only=True)
+    assert [r.name for r in both] == ["sd_nuscenes_v1.0-mini_scene-0103@0", "sd_nuscenes_v1.0-mini_scene-0103@1"]
+    for phase, rec in enumerate(both):
+        windows = list(iter_windows(rec, info, info.t_obs, info.t_f))
+        assert windows
+        for w in windows:
+            # t_obs is a real 2 Hz annotation (10 Hz step divisible by 5), and so is the 3 s endpoint.
+            assert (2 * w.now + phase) % 5 == 0
+            assert (2 * (w.now + info.t_f) + phase) % 5 == 0
+            moved = np.linalg.norm(w.positions[w.target, -1] - w.positions[w.target, 0], axis=1)
+            assert (moved > info.min_move_m).all()
+    # Training windows may end at any step.
+    assert len(list(iter_windows(hdmap_recordings(nu)[0], info, 10, 15))) > len(
+        list(iter_windows(both[0], info, 10, 15))
+    )

@@ -1,0 +1,148 @@
+"""The HD-map readers (``dgan.hdmaps``): nuScenes and Waymo in ScenarioNet pickles, Waymo in GPUDrive JSON and
+Argoverse 2, their element kinds, frames cut from them, the engine's picture of their maps, and bad input."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import os
+import pickle
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import dgan
+from dgan.demo import WAYMO_FILE
+from dgan.exceptions import InvalidFrameError, InvalidMapError
+from dgan.hdmaps import bird_eye, read_scenario, read_waymo_json, widen
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def data_root() -> Path:
+    root = Path(os.environ.get("DGAN_DATA_ROOT", ROOT.parent / "shared" / "data"))
+    if not (root / "nuscenes_mini_scenarionet").is_dir():
+        pytest.fail(f"shared data not found under {root}; set DGAN_DATA_ROOT to the folder holding it")
+    return root
+
+
+def kinds(sc: dgan.hdmaps.Scenario) -> Counter[str]:
+    return Counter(k for k, _ in sc.map.elements())
+
+
+def test_bundled_waymo_scenario_has_every_element_kind() -> None:
+    sc = read_waymo_json(WAYMO_FILE)
+    assert (sc.source, sc.dt_s, sc.num_steps) == ("waymo", 0.1, 91)
+    assert set(sc.labels) == {"vehicle", "pedestrian", "cyclist"}
+    # The source's roads: 82 lanes (8 bike lanes), 39 road lines, 23 road edges (8 medians), 4 crosswalks.
+    assert kinds(sc) == Counter(
+        lane_centerline=74, bike_lane=8, lane_line_solid=25, lane_line_dashed=14, road_edge=15, obstacle=8, crosswalk=4
+    )
+    # Invalid steps hold the -10000 sentinel in the file; here they are masked out and NaN.
+    assert np.isnan(sc.positions[~sc.valid]).all()
+    assert np.isfinite(sc.positions[sc.valid]).all()
+
+
+def test_frame_samples_every_second_step_back_from_now() -> None:
+    sc = read_waymo_json(WAYMO_FILE)
+    f = sc.frame(40, 10, every=2)
+    row = int(np.flatnonzero(sc.valid[:, 40] & sc.valid[:, 22])[0])
+    i = list(f.ids).index(sc.ids[row])
+    np.testing.assert_allclose(f.positions[i], sc.positions[row, 22:41:2])
+    # Steps before the scenario starts are masked out.
+    early = sc.frame(4, 10, every=2)
+    assert not early.mask[:, :7].any()
+    with pytest.raises(InvalidFrameError, match="outside"):
+        sc.frame(91, 10)
+
+
+def test_each_source_reads_with_its_map() -> None:
+    root = data_root()
+    nu = read_scenario(root / "nuscenes_mini_scenarionet" / "sd_nuscenes_v1.0-mini_scene-0061.pkl")
+    assert (nu.source, nu.keyframe_every, nu.num_steps) == ("nuscenes", 5, 191)
+    # 24 vehicles, 60 pedestrians and 6 cyclists; the 136 cones and barriers become obstacles.
+    assert Counter(nu.labels) == Counter(vehicle=24, pedestrian=60, cyclist=6)
+    assert kinds(nu) == Counter(
+        lane_centerline=460, lane_line_dashed=72, lane_line_solid=25, road_edge=29, obstacle=136
+    )
+    wp = read_scenario(next((root / "waymo_motion_samples" / "scenarionet_pkl").glob("*8a346109094cd5aa.pkl")))
+    assert wp.source == "waymo"
+    assert wp.dt_s == pytest.approx(0.1)
+    assert {"crosswalk", "bike_lane", "obstacle", "road_edge"} <= set(kinds(wp))
+    av = read_scenario(root / "argoverse2" / "motion_forecasting" / "0a1e6f0a-1817-4a98-b02e-db8c9327d151")
+    # 71 lane segments: 37 bike lanes as regions and 34 centre lines; 6 crossings; 2 drivable areas.
+    k = kinds(av)
+    assert (k["bike_lane"], k["lane_centerline"], k["crosswalk"], k["road_edge"]) == (37, 34, 6, 2)
+    log = read_scenario(root / "argoverse2" / "sensor_logs" / "7fab2350-7eaf-3b7e-a39d-6937a4c1bede")
+    # Sensor-log maps have no centre lines: each lane's is the midline of its boundaries.
+    assert kinds(log)["lane_centerline"] > 0
+    assert log.num_steps == 156
+    # The cuboids, composed with the ego poses, land on the city map: vehicles within its drivable areas' extent.
+    pts = np.vstack([p for kind, p in log.map.elements() if kind == "road_edge"])
+    veh = log.positions[[c == "vehicle" for c in log.labels]]
+    v = veh[np.isfinite(veh[..., 0])]
+    assert ((v >= pts.min(axis=0) - 5) & (v <= pts.max(axis=0) + 5)).all(axis=1).mean() > 0.99
+
+
+def test_bird_eye_draws_crosswalks_where_they_are() -> None:
+    sc = read_waymo_json(WAYMO_FILE)
+    cw = next(p for k, p in sc.map.elements() if k == "crosswalk")
+    res = 0.2
+    img = bird_eye(sc, 40, cw.mean(axis=0), extent_m=40.0, resolution_m=res)
+    assert img.shape == (200, 200, 3)
+    assert img.dtype == np.uint8
+    # Pixels of the crosswalk polygon (north up: u = 100 + dx / res, v = 100 - dy / res) are mostly grey.
+    from matplotlib.path import Path as MplPath
+
+    u, v = np.meshgrid(np.arange(200), np.arange(200))
+    world = np.c_[(u.ravel() - 100) * res, (100 - v.ravel()) * res] + cw.mean(axis=0)
+    inside = MplPath(cw).contains_points(world).reshape(200, 200)
+    grey = (img == 128).all(axis=-1)
+    assert inside.sum() > 100
+    assert grey[inside].mean() > 0.6
+    assert grey[~inside].mean() < 0.05
+
+
+def test_widen_makes_a_polygon_of_the_width() -> None:
+    poly = widen(np.array([[0.0, 0.0], [10.0, 0.0]]), 1.5)
+    np.testing.assert_allclose(poly, [[0, 0.75], [10, 0.75], [10, -0.75], [0, -0.75]])
+
+
+def test_bad_files_are_clear_errors(tmp_path: Path) -> None:
+    bad_gz = tmp_path / "bad.json.gz"
+    bad_gz.write_bytes(b"not gzip")
+    with pytest.raises(InvalidFrameError, match="cannot read Waymo JSON"):
+        read_scenario(bad_gz)
+    wrong = tmp_path / "wrong.json.gz"
+    with gzip.open(wrong, "wt") as fh:
+        json.dump({"objects": []}, fh)
+    with pytest.raises(InvalidFrameError, match="not a GPUDrive scenario"):
+        read_scenario(wrong)
+    empty = tmp_path / "empty.json"
+    empty.write_text(json.dumps({"objects": [{"type": "unknown"}], "roads": []}))
+    with pytest.raises(InvalidFrameError, match="no vehicle, cyclist or pedestrian"):
+        read_scenario(empty)
+    pkl = tmp_path / "x.pkl"
+    pkl.write_bytes(pickle.dumps({"id": 1}))
+    with pytest.raises(InvalidFrameError, match="not a ScenarioNet scenario"):
+        read_scenario(pkl)
+    trunc = tmp_path / "t.pkl"
+    trunc.write_bytes(pickle.dumps({"tracks": {}})[:5])
+    with pytest.raises(InvalidFrameError, match="cannot read ScenarioNet pickle"):
+        read_scenario(trunc)
+    with pytest.raises(InvalidFrameError, match="unknown scenario format"):
+        read_scenario(tmp_path / "scene.csv")
+    folder = tmp_path / "av2"
+    folder.mkdir()
+    with pytest.raises(InvalidFrameError, match="needs scenario_"):
+        read_scenario(folder)
+    bad_map = folder / "log_map_archive_x.json"
+    bad_map.write_text("{}")
+    with pytest.raises(InvalidMapError, match="not an Argoverse 2 map"):
+        dgan.hdmaps.av2_map(bad_map)
+    bad_road = tmp_path / "road.json"
+    bad_road.write_text(json.dumps({"objects": [], "roads": [{"type": "lane", "geometry": [[1.0], [2.0]]}]}))
+    with pytest.raises(InvalidMapError, match="road 0"):
+        dgan.hdmaps.waymo_json_map(json.loads(bad_road.read_text())["roads"])
