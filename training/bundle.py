@@ -25,9 +25,11 @@ CHECKPOINTS = ROOT / "training" / "checkpoints"
 
 
 def training_log(run: Path) -> tuple[list[dict[str, str]], float, dict[str, str]]:
-    """A run's epoch rows, its total training seconds and its best row (by validation loss)."""
+    """A run's epoch rows, its total training seconds and the row of the kept weights (``train.select``)."""
     rows = list(csv.DictReader((run / "log.csv").open()))
-    return rows, sum(float(r["seconds"]) for r in rows), min(rows, key=lambda r: float(r["val_loss"]))
+    cfg = json.loads((run / "config.json").read_text())["config"]
+    kept = rows[-1] if cfg["train"].get("select") == "last" else min(rows, key=lambda r: float(r["val_loss"]))
+    return rows, sum(float(r["seconds"]) for r in rows), kept
 
 
 def slim_checkpoint(run: Path, out: Path) -> Path:
@@ -90,6 +92,7 @@ MULTICLASS = {
         "protocol": "8 observed steps (2.7 s), 12 predicted (4 s); windows of 20 consecutive steps, targets present "
         "at all of them, windows with at least two targets (Multiclass-SGCN's windows).",
         "licence": "Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016.",
+        "reproduce": "--train-multiclass` (this model and its per-class baselines)",
         "scene": "`dgan demo --model sdd` (hyang video0 of the test split). On a new frame of an SDD video, pass "
         "metres (pixels × the video's scale) and the map `dgan.scenes.sdd_raster_map(reference_jpg, scale)`",
     },
@@ -101,6 +104,7 @@ MULTICLASS = {
         'pedestrians; "others" are neighbours only. No map: the model has no map branch.',
         "protocol": "6 observed steps (3 s), 6 predicted (3 s); targets present at all 12 steps.",
         "licence": "ApolloScape: **non-commercial academic research** only. Cite Ma et al. 2019 (TrafficPredict).",
+        "reproduce": "--train-multiclass` (this model and its per-class baselines)",
         "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split). Pass measured headings, "
         "lengths and widths in the frame, as in training",
     },
@@ -116,7 +120,8 @@ MULTICLASS = {
         "step; nuScenes annotates at 2 Hz only and its test windows end at a keyframe. Targets: agents seen at all "
         "25 steps that move more than 1 m over them.",
         "licence": "nuScenes: **CC BY-NC-SA 4.0**; Waymo Open Dataset: its own licence, **non-commercial use "
-        "only**, which also limits redistribution. Cite Caesar et al. 2020 and Ettinger et al. 2021",
+        "only**, which also limits redistribution. Cite Caesar et al. 2020 and Ettinger et al. 2021.",
+        "reproduce": "--train-hdmap` (this model and its no-map variant)",
         "scene": "`dgan demo --model hdmap` (Waymo scenario 2bd577a009790706 of the test split, over its map as the "
         "engine rasterises it, and one agent's crop). Build frames with `dgan.hdmaps.read_scenario(path).frame(step, "
         "10, every=2)` for 10 Hz sources, with a `dgan.VectorMap`",
@@ -150,7 +155,8 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
   over the attention-zone graph (λ = 0.5) with neighbour geometry on the edges. Loss: hierarchical classification and
   closest-anchor regression (α = {cfg["train"]["alpha"]}) plus β = {cfg["train"]["beta"]} times the error of the most
   probable mode.
-- **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, best at epoch {best["epoch"]},
+- **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}
+  ({"the last" if cfg["train"].get("select") == "last" else "lowest validation loss"}),
   {seconds / 60:.1f} min on 2 CPU cores; seed {cfg["train"]["seed"]}; left-right mirroring.
 - **Test metrics** (engine, {metrics["unit"]}, {metrics["windows"]} windows; most probable class correct for
   {100 * metrics["class_accuracy"]:.1f}% of agents, since the class is an input as in the paper; mode-probability
@@ -162,7 +168,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 
 - **Try it**: {d["scene"]}.
 - **Licence**: {d["licence"]} The weights are derived from this data: non-commercial research use only.
-- **Reproduce**: `python -m training.results --train-multiclass` (this model and its per-class baselines), or
+- **Reproduce**: `python -m training.results {d["reproduce"]}, or
   `python -m training.train --config training/configs/{cfg["data"]["dataset"]}.toml --out runs/{name}`.
 """
 

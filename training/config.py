@@ -39,6 +39,10 @@ class TrainConfig:
     seed: int = 0
     threads: int = 2
     max_train_windows: int = 0  # 0 = all; a positive number subsamples (quick tests)
+    # Which epoch's weights are kept as best.pt: "val_loss" (the lowest validation loss) or "last" (the end of the
+    # one-cycle schedule; for small data where the validation loss rises with the classifier's confidence while the
+    # validation errors keep falling).
+    select: str = "val_loss"
 
 
 @dataclass(frozen=True)

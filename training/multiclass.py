@@ -108,15 +108,21 @@ def verdict(dataset: str, res: dict[str, Any]) -> str:
     multi, per = res["multi"]["by_class"], res["per_class"]
     parts = []
     for cls, m in multi.items():
-        if cls not in per:
-            continue
-        p = per[cls]
-        cells = []
-        for name, key in (("top-1 ADE", "ade"), ("minADE20", "min_ade20")):
-            rel = 100 * (m[key] - p[key]) / p[key]
-            cells.append(f"{name} {'behind' if rel > 0 else 'ahead'} by {abs(rel):.1f}%")
-        parts.append(f"{cls}: {', '.join(cells)}")
+        if cls in per:
+            parts.append(f"{cls}: {relative(m, per[cls], (('top-1 ADE', 'ade'), ('minADE20', 'min_ade20')))}")
     return "Single model against the per-class models: " + "; ".join(parts) + "."
+
+
+def relative(
+    mine: dict[str, Any], other: dict[str, Any], metrics: tuple[tuple[str, str], ...], words: str = "behind ahead"
+) -> str:
+    """``"top-1 ADE behind by 1.2%, ..."``: each metric of ``mine`` relative to ``other`` (lower is better)."""
+    worse, better = words.split()
+    cells = []
+    for name, key in metrics:
+        rel = 100 * (mine[key] - other[key]) / other[key]
+        cells.append(f"{name} {worse if rel > 0 else better} by {abs(rel):.1f}%")
+    return ", ".join(cells)
 
 
 def sdd_published_table(res: dict[str, Any]) -> str:

@@ -169,6 +169,8 @@ def main(argv: list[str] | None = None) -> Path:
         except json.JSONDecodeError:
             overrides[key] = value
     cfg = Config.load(args.config, overrides)
+    if cfg.train.select not in ("val_loss", "last"):
+        raise ValueError(f"train.select must be 'val_loss' or 'last', got {cfg.train.select!r}")
     world = int(os.environ.get("WORLD_SIZE", "1"))
     rank = int(os.environ.get("RANK", "0"))
     if world > 1:
@@ -276,7 +278,7 @@ def main(argv: list[str] | None = None) -> Path:
             "rng": torch.get_rng_state(),
         }
         torch.save(state, out / "last.pt")
-        if row["val_loss"] < best:
+        if cfg.train.select == "last" or row["val_loss"] < best:
             best = row["val_loss"]
             torch.save(state, out / "best.pt")
     if world > 1:

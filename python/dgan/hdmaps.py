@@ -191,6 +191,44 @@ def box(centre: Arr, heading: float, length: float, width: float) -> Arr:
     return out
 
 
+class _Tracks:
+    """Per-agent state arrays, gathered one agent at a time, and the :class:`Scenario` they make."""
+
+    def __init__(self) -> None:
+        self.ids: list[int] = []
+        self.labels: list[str] = []
+        self.cols: dict[str, list[Arr]] = {k: [] for k in ("positions", "valid", "heading", "length", "width")}
+
+    def add(self, agent: int, label: str, xy: Arr, valid: Arr, heading: Arr, length: Arr, width: Arr) -> None:
+        """One agent's ``(T, 2)`` positions (anything where invalid), ``(T,)`` validity, heading and size."""
+        self.ids.append(agent)
+        self.labels.append(label)
+        values = (np.where(valid[:, None], xy, np.nan), valid, heading, length, width)
+        for col, value in zip(self.cols.values(), values, strict=True):
+            col.append(value)
+
+    def scenario(
+        self, path: Path, name: str, source: str, dt_s: float, elements: list[Element], keyframe_every: int = 1
+    ) -> Scenario:
+        if not self.ids:
+            raise InvalidFrameError(f"{path}: no vehicle, cyclist or pedestrian tracks")
+        col = {k: np.stack(v) for k, v in self.cols.items()}
+        return Scenario(
+            name=name,
+            source=source,
+            dt_s=dt_s,
+            ids=np.array(self.ids, np.int64),
+            labels=self.labels,
+            positions=col["positions"],
+            valid=col["valid"],
+            heading=col["heading"],
+            length=col["length"],
+            width=col["width"],
+            map=VectorMap(_usable(elements)),
+            keyframe_every=keyframe_every,
+        )
+
+
 def _usable(elements: Iterable[Element]) -> list[Element]:
     """Drops degenerate elements (too few distinct points for their kind) rather than rejecting the whole map."""
     out = []
@@ -242,7 +280,7 @@ def read_scenarionet(path: str | os.PathLike[str], source: str | None = None) ->
     else:  # Waymo conversions give the timestamps only
         dt = round(float(np.median(np.diff(np.asarray(meta.get("ts", [0.0, 0.1]), dtype=np.float64)))), 3)
     elements = scenarionet_map(d["map_features"])
-    ids, labels, pos, valid, heading, length, width = [], [], [], [], [], [], []
+    tracks = _Tracks()
     for k, (_tid, tr) in enumerate(sorted(d["tracks"].items(), key=lambda kv: str(kv[0]))):
         st = tr["state"]
         ok = np.asarray(st["valid"]).astype(bool).ravel()
@@ -256,31 +294,10 @@ def read_scenarionet(path: str | os.PathLike[str], source: str | None = None) ->
                 elements.append(("obstacle", box(p[t], hd[t], max(ln[t], 0.3), max(wd[t], 0.3))))
             continue
         cls = SCENARIONET_CLASSES.get(str(tr["type"]))
-        if cls is None:
-            continue
-        ids.append(k)
-        labels.append(cls)
-        pos.append(np.where(ok[:, None], p, np.nan))
-        valid.append(ok)
-        heading.append(hd)
-        length.append(ln)
-        width.append(wd)
-    if not ids:
-        raise InvalidFrameError(f"{path}: no vehicle, cyclist or pedestrian tracks")
-    return Scenario(
-        name=str(d.get("id", path.stem)),
-        source=src,
-        dt_s=dt,
-        ids=np.array(ids, np.int64),
-        labels=labels,
-        positions=np.stack(pos),
-        valid=np.stack(valid),
-        heading=np.stack(heading),
-        length=np.stack(length),
-        width=np.stack(width),
-        map=VectorMap(_usable(elements)),
-        keyframe_every=5 if src == "nuscenes" else 1,
-    )
+        if cls is not None:
+            tracks.add(k, cls, p, ok, hd, ln, wd)
+    name = str(d.get("id", path.stem))
+    return tracks.scenario(path, name, src, dt, elements, keyframe_every=5 if src == "nuscenes" else 1)
 
 
 # ---- Waymo Open Motion in GPUDrive/Nocturne JSON ---------------------------------------------------------------------
@@ -327,38 +344,18 @@ def read_waymo_json(path: str | os.PathLike[str]) -> Scenario:
         raise InvalidFrameError(f"cannot read Waymo JSON {path}: {e}") from None
     if not isinstance(d, dict) or "objects" not in d or "roads" not in d:
         raise InvalidFrameError(f"{path}: not a GPUDrive scenario (needs objects and roads)")
-    ids, labels, pos, valid, heading, length, width = [], [], [], [], [], [], []
+    tracks = _Tracks()
     for k, o in enumerate(d["objects"]):
         cls = str(o.get("type", ""))
         if cls not in ("vehicle", "pedestrian", "cyclist"):
             continue
         p = np.array([[q["x"], q["y"]] for q in o["position"]], dtype=np.float64)
         ok = np.asarray(o["valid"], dtype=bool) & (p[:, 0] != WAYMO_INVALID)
-        hd = np.asarray(o["heading"], dtype=np.float64)
+        hd = np.where(ok, np.asarray(o["heading"], dtype=np.float64), 0.0)
         t = len(p)
-        ids.append(int(o.get("id", k)))
-        labels.append(cls)
-        pos.append(np.where(ok[:, None], p, np.nan))
-        valid.append(ok)
-        heading.append(np.where(ok, hd, 0.0))
-        length.append(np.full(t, float(o["length"])))
-        width.append(np.full(t, float(o["width"])))
-    if not ids:
-        raise InvalidFrameError(f"{path}: no vehicle, cyclist or pedestrian objects")
+        tracks.add(int(o.get("id", k)), cls, p, ok, hd, np.full(t, float(o["length"])), np.full(t, float(o["width"])))
     name = str(d.get("scenario_id") or d.get("name") or path.name.split(".")[0])
-    return Scenario(
-        name=name,
-        source="waymo",
-        dt_s=0.1,
-        ids=np.array(ids, np.int64),
-        labels=labels,
-        positions=np.stack(pos),
-        valid=np.stack(valid),
-        heading=np.stack(heading),
-        length=np.stack(length),
-        width=np.stack(width),
-        map=VectorMap(_usable(waymo_json_map(d["roads"]))),
-    )
+    return tracks.scenario(path, name, "waymo", 0.1, waymo_json_map(d["roads"]))
 
 
 # ---- Argoverse 2 -----------------------------------------------------------------------------------------------------
@@ -412,22 +409,20 @@ def _pyarrow() -> Any:
     return pyarrow
 
 
-def _grid(track: Arr, step: Arr, num_steps: int, *cols: Arr) -> tuple[list[Arr], list[Arr], list[list[Arr]]]:
-    """Scatters long rows (track index, step, columns) into per-track ``(T, …)`` arrays."""
-    pos, valid, other = [], [], []
+def _long_rows(tracks: _Tracks, track: Arr, step: Arr, num_steps: int, labels: Arr, xy: Arr, *cols: Arr) -> None:
+    """Adds long rows (track index, step, label, positions, heading, length, width; NaN length and width for the
+    class defaults) to ``tracks``, one agent per track index."""
     for t in np.unique(track):
         rows = track == t
         ok = np.zeros(num_steps, bool)
         ok[step[rows]] = True
         grid = []
-        for c in cols:
+        for c in (xy, *cols):
             g = np.full((num_steps, *c.shape[1:]), np.nan)
             g[step[rows]] = c[rows]
             grid.append(g)
-        pos.append(grid[0])
-        valid.append(ok)
-        other.append(grid[1:])
-    return pos, valid, other
+        heading, length, width = grid[1:]
+        tracks.add(int(t), str(labels[rows][0]), grid[0], ok, np.nan_to_num(heading), length, width)
 
 
 def read_av2_scenario(folder: str | os.PathLike[str]) -> Scenario:
@@ -453,23 +448,15 @@ def read_av2_scenario(folder: str | os.PathLike[str]) -> Scenario:
             ("obstacle", box(np.array([col["position_x"][r], col["position_y"][r]]), col["heading"][r], 4.5, 2.0))
         )
     keep = np.isin(types, list(AV2_SCENARIO_CLASSES))
-    names, track = np.unique(track_names[keep], return_inverse=True)
+    _, track = np.unique(track_names[keep], return_inverse=True)
+    labels = np.array([AV2_SCENARIO_CLASSES[t] for t in types[keep]])
     xy = np.c_[col["position_x"][keep], col["position_y"][keep]]
-    pos, valid, other = _grid(track, step[keep], num_steps, xy, col["heading"][keep].astype(np.float64))
-    labels = [AV2_SCENARIO_CLASSES[types[keep][track == k][0]] for k in range(len(names))]
-    return Scenario(
-        name=folder.name,
-        source="argoverse2",
-        dt_s=0.1,
-        ids=np.arange(len(names), dtype=np.int64),
-        labels=labels,
-        positions=np.stack(pos),
-        valid=np.stack(valid),
-        heading=np.nan_to_num(np.stack([o[0] for o in other])),
-        length=np.full((len(names), num_steps), np.nan),  # NaN: the engine's class default
-        width=np.full((len(names), num_steps), np.nan),
-        map=VectorMap(_usable(elements)),
+    no_size = np.full(len(xy), np.nan)  # the engine's class defaults
+    tracks = _Tracks()
+    _long_rows(
+        tracks, track, step[keep], num_steps, labels, xy, col["heading"][keep].astype(np.float64), no_size, no_size
     )
+    return tracks.scenario(folder, folder.name, "argoverse2", 0.1, elements)
 
 
 def _yaw(qw: Arr, qx: Arr, qy: Arr, qz: Arr) -> Arr:
@@ -510,24 +497,13 @@ def read_av2_sensor_log(folder: str | os.PathLike[str]) -> Scenario:
         r = np.flatnonzero(uuids == u)[0]
         elements.append(("obstacle", box(np.array([x[r], y[r]]), yaw[r], ann["length_m"][r], ann["width_m"][r])))
     keep = np.isin(cats, list(AV2_SENSOR_CLASSES))
-    names, track = np.unique(uuids[keep], return_inverse=True)
-    pos, valid, other = _grid(
-        track, step[keep], len(times), np.c_[x, y][keep], yaw[keep], ann["length_m"][keep], ann["width_m"][keep]
-    )
-    dt = float(np.median(np.diff(times))) * 1e-9
-    return Scenario(
-        name=folder.name,
-        source="argoverse2",
-        dt_s=round(dt, 3),
-        ids=np.arange(len(names), dtype=np.int64),
-        labels=[AV2_SENSOR_CLASSES[cats[keep][track == k][0]] for k in range(len(names))],
-        positions=np.stack(pos),
-        valid=np.stack(valid),
-        heading=np.nan_to_num(np.stack([o[0] for o in other])),
-        length=np.nan_to_num(np.stack([o[1] for o in other]), nan=1.0),
-        width=np.nan_to_num(np.stack([o[2] for o in other]), nan=1.0),
-        map=VectorMap(_usable(elements)),
-    )
+    _, track = np.unique(uuids[keep], return_inverse=True)
+    labels = np.array([AV2_SENSOR_CLASSES[c] for c in cats[keep]])
+    tracks = _Tracks()
+    sizes = (ann["length_m"][keep].astype(np.float64), ann["width_m"][keep].astype(np.float64))
+    _long_rows(tracks, track, step[keep], len(times), labels, np.c_[x, y][keep], yaw[keep], *sizes)
+    dt = round(float(np.median(np.diff(times))) * 1e-9, 3)
+    return tracks.scenario(folder, folder.name, "argoverse2", dt, elements)
 
 
 def read_scenario(path: str | os.PathLike[str]) -> Scenario:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -15,6 +16,15 @@ FIXTURES = ROOT / "tests" / "fixtures"
 DATA = ROOT / "python" / "dgan" / "data" / "zara1"
 SCENES = ROOT / "python" / "dgan" / "data" / "scenes"
 sys.path.insert(0, str(FIXTURES))
+
+
+def shared_data(needs: str) -> Path:
+    """The shared data root (``DGAN_DATA_ROOT``, default ``../shared/data`` beside the clone), which must hold
+    ``needs``."""
+    root = Path(os.environ.get("DGAN_DATA_ROOT", ROOT.parent / "shared" / "data"))
+    if not (root / needs).is_dir():
+        pytest.fail(f"shared data not found under {root}; set DGAN_DATA_ROOT to the folder holding {needs}/")
+    return root
 
 
 @pytest.fixture(scope="session")

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 from conftest import DATA
 
+import dgan
 from dgan.cli import main
 
 SCENE = DATA / "frames_5430_5620.txt"
@@ -55,6 +56,7 @@ def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys:
         ("zara1", "18 agents of zara1 at step 5500"),
         ("sdd", "22 agents of Stanford Drone hyang video0 at step 841"),
         ("apolloscape", "agents of ApolloScape recording 9048 at step 17"),
+        ("hdmap", "45 agents of Waymo Open Motion 2bd577a009790706 at step 40"),
     ],
 )
 def test_demo_prints_and_draws(model: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -64,3 +66,8 @@ def test_demo_prints_and_draws(model: str, expected: str, tmp_path: Path, capsys
     assert expected in text
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert out.stat().st_size > 50_000
+    crop = out.with_name("demo_crop.png")
+    has_map = dgan.Predictor(model).spec.map is not None
+    assert crop.is_file() == has_map  # one agent's map crop, for the models with a map branch
+    if has_map:
+        assert "one agent's map crop" in text

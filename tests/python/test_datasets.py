@@ -3,11 +3,11 @@ and on the real shared data."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import shared_data
 
 import dgan
 from training.data import iter_windows
@@ -32,10 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def data_root() -> Path:
-    root = Path(os.environ.get("DGAN_DATA_ROOT", ROOT.parent / "shared" / "data"))
-    if not (root / "sdd").is_dir():
-        pytest.fail(f"shared data not found under {root}; set DGAN_DATA_ROOT to the folder holding sdd/")
-    return root
+    return shared_data("sdd")
 
 
 def toy(rows: list[tuple[int, int, int]]) -> Recording:

@@ -5,27 +5,22 @@ from __future__ import annotations
 
 import gzip
 import json
-import os
 import pickle
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import shared_data
 
 import dgan
 from dgan.demo import WAYMO_FILE
 from dgan.exceptions import InvalidFrameError, InvalidMapError
 from dgan.hdmaps import bird_eye, read_scenario, read_waymo_json, widen
 
-ROOT = Path(__file__).resolve().parents[2]
-
 
 def data_root() -> Path:
-    root = Path(os.environ.get("DGAN_DATA_ROOT", ROOT.parent / "shared" / "data"))
-    if not (root / "nuscenes_mini_scenarionet").is_dir():
-        pytest.fail(f"shared data not found under {root}; set DGAN_DATA_ROOT to the folder holding it")
-    return root
+    return shared_data("nuscenes_mini_scenarionet")
 
 
 def kinds(sc: dgan.hdmaps.Scenario) -> Counter[str]:

@@ -28,7 +28,7 @@ def test_five_leave_one_out_models_are_bundled() -> None:
 
 @pytest.mark.parametrize(
     ("name", "dt", "t_obs", "t_f", "has_map"),
-    [("sdd", 1 / 3, 8, 12, True), ("apolloscape", 0.5, 6, 6, False)],
+    [("sdd", 1 / 3, 8, 12, True), ("apolloscape", 0.5, 6, 6, False), ("hdmap", 0.2, 10, 15, True)],
 )
 def test_multiclass_models_are_bundled(name: str, dt: float, t_obs: int, t_f: int, has_map: bool) -> None:
     p = dgan.Predictor(name)
@@ -68,7 +68,7 @@ def test_scene_maps_match_their_models(zara1_frame: dgan.Frame) -> None:
     assert np.all(dist < 15.0)
 
 
-@pytest.mark.parametrize("name", ["zara1", "sdd", "apolloscape"])
+@pytest.mark.parametrize("name", ["zara1", "sdd", "apolloscape", "hdmap"])
 def test_a_bundled_model_beats_standing_still(name: str) -> None:
     """On its bundled real excerpt, a bundled model's top mode is far closer to what happened than standing still."""
     predictor = dgan.Predictor(name)

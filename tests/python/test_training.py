@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from conftest import shared_data
 
 import dgan
 from training.config import Config
@@ -26,10 +27,7 @@ INPUTS = ["trajectory", "trajectory_mask", "state", "edge_index", "edge_features
 
 
 def data_root() -> Path:
-    root = Path(os.environ.get("DGAN_DATA_ROOT", ROOT.parent / "shared" / "data"))
-    if not (root / "eth_ucy").is_dir():
-        pytest.fail(f"ETH/UCY data not found under {root}; set DGAN_DATA_ROOT to the folder holding eth_ucy/")
-    return root
+    return shared_data("eth_ucy")
 
 
 def test_config_is_typed() -> None:
@@ -65,7 +63,8 @@ def test_loss_picks_the_closest_anchor_of_the_class() -> None:
 
 
 def real_frames(spec: dgan.InputSpec) -> list[dgan.Frame]:
-    """Two real frames of the bundled demo scene that matches the spec's time base (ETH/UCY, SDD, ApolloScape)."""
+    """Two real frames of the bundled demo scene that matches the spec's time base (ETH/UCY, SDD, ApolloScape,
+    Waymo)."""
     from dgan.demo import scene_for
 
     first = scene_for(spec)
@@ -107,6 +106,7 @@ def test_every_bundled_model_has_a_checkpoint() -> None:
         ("ethucy_zara1", {"model.use_gat": False}),
         ("sdd", {}),
         ("apolloscape", {}),
+        ("hdmap", {}),
     ],
 )
 def test_fresh_exports_match_pytorch(config: str, variant: dict[str, bool], tmp_path: Path) -> None:

@@ -6,6 +6,9 @@
 //! - `decode/100`: 100 agents, K = 60 anchors, T_f = 12.
 //! - `predict/contract_map/32`: one whole predict (preprocess, raster, ONNX Runtime, decode) with the map fixture;
 //!   needs `ORT_DYLIB_PATH`.
+//! - `hdmap_waymo/raster` and `hdmap_waymo/predict`: a real Waymo Open Motion frame (45 agents, its whole vector map
+//!   of 148 elements; `tests/fixtures/waymo_frame.json`) with the bundled `hdmap` model: the rasterisation of every
+//!   agent's crop at the model's map spec, and the whole predict it is part of; needs `ORT_DYLIB_PATH`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use dgan_core::decode::{decode, Anchors};
@@ -113,5 +116,61 @@ fn bench_predict(c: &mut Criterion) {
     c.bench_function("predict/contract_map/32", |b| b.iter(|| predictor.predict(black_box(&frame))));
 }
 
-criterion_group!(benches, bench_graph, bench_raster, bench_decode, bench_predict);
+/// The real Waymo frame of `tests/fixtures/waymo_frame.json` (written by `make_waymo_frame.py`).
+fn waymo_frame() -> Frame {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/waymo_frame.json");
+    let text = std::fs::read_to_string(&path).expect("waymo_frame.json is readable");
+    let v: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
+    let floats = |key: &str| -> Vec<f64> {
+        v[key].as_array().expect("an array").iter().map(|x| x.as_f64().expect("a number")).collect()
+    };
+    let pos = v["positions"].as_array().expect("positions");
+    let (n, t) = (pos.len(), pos[0].as_array().expect("steps").len());
+    let p = Array3::from_shape_fn((n, t, 2), |(i, k, d)| pos[i][k][d].as_f64().expect("a number"));
+    let mask = Array2::from_shape_fn((n, t), |(i, k)| v["mask"][i][k].as_bool().expect("a bool"));
+    let classes: Vec<AgentClass> = v["classes"]
+        .as_array()
+        .expect("classes")
+        .iter()
+        .map(|c| c.as_str().expect("a name").parse().expect("a class"))
+        .collect();
+    let elements = v["map"]
+        .as_array()
+        .expect("map")
+        .iter()
+        .map(|e| {
+            let kind: MapElementKind = e["kind"].as_str().expect("a kind").parse().expect("a known kind");
+            let pts = e["points"].as_array().expect("points");
+            let pts = pts.iter().map(|q| [q[0].as_f64().expect("x"), q[1].as_f64().expect("y")]).collect();
+            MapElement::new(kind, pts).expect("a valid element")
+        })
+        .collect();
+    let ids = v["ids"].as_array().expect("ids").iter().map(|x| x.as_i64().expect("an id")).collect();
+    Frame::new(p, Some(mask), classes)
+        .and_then(|f| f.with_ids(ids))
+        .and_then(|f| f.with_headings(&floats("headings")))
+        .and_then(|f| f.with_lengths(&floats("lengths")))
+        .and_then(|f| f.with_widths(&floats("widths")))
+        .expect("a valid frame")
+        .with_map(Arc::new(SceneMap::Vector(VectorMap::new(elements))))
+}
+
+fn bench_hdmap(c: &mut Criterion) {
+    if std::env::var_os("ORT_DYLIB_PATH").is_none() {
+        eprintln!("hdmap_waymo bench skipped: set ORT_DYLIB_PATH to the onnxruntime wheel's libonnxruntime.so.*");
+        return;
+    }
+    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../python/dgan/models/hdmap.onnx");
+    let predictor = Predictor::load(model).expect("the bundled hdmap model loads");
+    let spec = predictor.contract().input.clone();
+    let map_spec = spec.map.clone().expect("hdmap has a map branch");
+    let frame = waymo_frame();
+    let states = traffic_states(&frame, spec.dt_s);
+    let mut g = c.benchmark_group("hdmap_waymo");
+    g.bench_function("raster", |b| b.iter(|| rasterize(black_box(&frame), &states, &map_spec)));
+    g.bench_function("predict", |b| b.iter(|| predictor.predict(black_box(&frame))));
+    g.finish();
+}
+
+criterion_group!(benches, bench_graph, bench_raster, bench_decode, bench_predict, bench_hdmap);
 criterion_main!(benches);

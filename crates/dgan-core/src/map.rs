@@ -169,12 +169,51 @@ impl FromStr for MapElementKind {
     }
 }
 
+/// How far (metres) the drawn outline of an element may stray from its vertices: dense source polylines (Waymo and
+/// nuScenes lanes carry a vertex every 0.5–1 m) are drawn through the fewest vertices within this distance: at most a
+/// fifth of a pixel at the crop resolutions of the bundled models (0.25–1 m per pixel).
+pub const DRAW_TOLERANCE_M: f64 = 0.05;
+
 /// One typed polyline or polygon, in world metres.
 #[derive(Debug, Clone)]
 pub struct MapElement {
     kind: MapElementKind,
     points: Vec<[f64; 2]>,
+    drawn: Vec<[f64; 2]>,
     bbox: [f64; 4],
+}
+
+/// Ramer–Douglas–Peucker: the vertices of `points` to keep so that no dropped vertex is farther than `tolerance` from
+/// the simplified line (the first and last are always kept).
+fn simplify(points: &[[f64; 2]], tolerance: f64) -> Vec<[f64; 2]> {
+    fn distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+        (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+    }
+    if points.len() < 3 {
+        return points.to_vec();
+    }
+    let mut keep = vec![false; points.len()];
+    keep[0] = true;
+    keep[points.len() - 1] = true;
+    let mut stack = vec![(0, points.len() - 1)];
+    while let Some((a, b)) = stack.pop() {
+        let (mut worst, mut at) = (0.0, a);
+        for i in a + 1..b {
+            let d = distance(points[i], points[a], points[b]);
+            if d > worst {
+                (worst, at) = (d, i);
+            }
+        }
+        if worst > tolerance {
+            keep[at] = true;
+            stack.push((a, at));
+            stack.push((at, b));
+        }
+    }
+    points.iter().zip(keep).filter_map(|(p, k)| k.then_some(*p)).collect()
 }
 
 impl MapElement {
@@ -191,7 +230,8 @@ impl MapElement {
         for p in &points {
             bbox = [bbox[0].min(p[0]), bbox[1].min(p[1]), bbox[2].max(p[0]), bbox[3].max(p[1])];
         }
-        Ok(Self { kind, points, bbox })
+        let drawn = simplify(&points, DRAW_TOLERANCE_M);
+        Ok(Self { kind, points, drawn, bbox })
     }
 
     /// Its kind.
@@ -202,6 +242,11 @@ impl MapElement {
     /// Its vertices, world metres.
     pub fn points(&self) -> &[[f64; 2]] {
         &self.points
+    }
+
+    /// The vertices it is drawn through: [`Self::points`] simplified to within [`DRAW_TOLERANCE_M`].
+    pub fn drawn_points(&self) -> &[[f64; 2]] {
+        &self.drawn
     }
 
     /// Axis-aligned bounds `[min_x, min_y, max_x, max_y]`.
@@ -233,6 +278,30 @@ impl VectorMap {
 mod tests {
     use super::*;
     use ndarray::Array3;
+
+    #[test]
+    fn dense_lines_are_drawn_through_few_vertices_within_tolerance() {
+        // A straight line sampled every 0.5 m keeps its two ends; a quarter circle of radius 10 m sampled every degree
+        // keeps few vertices, none of the dropped ones farther than the tolerance from the kept outline.
+        let straight: Vec<[f64; 2]> = (0..=100).map(|i| [i as f64 * 0.5, 3.0]).collect();
+        assert_eq!(simplify(&straight, DRAW_TOLERANCE_M), vec![[0.0, 3.0], [50.0, 3.0]]);
+        let arc: Vec<[f64; 2]> =
+            (0..=90).map(|d| (d as f64).to_radians()).map(|a| [10.0 * a.cos(), 10.0 * a.sin()]).collect();
+        let kept = simplify(&arc, DRAW_TOLERANCE_M);
+        assert!(kept.len() < 30 && kept.len() > 5, "{} vertices", kept.len());
+        for p in &arc {
+            let near = kept.windows(2).any(|w| {
+                let (a, b) = (w[0], w[1]);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
+                (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy) <= DRAW_TOLERANCE_M + 1e-12
+            });
+            assert!(near, "{p:?} strays from the simplified arc");
+        }
+        let e = MapElement::new(MapElementKind::LaneCenterline, straight.clone()).unwrap();
+        assert_eq!(e.points().len(), 101, "the element keeps its own vertices");
+        assert_eq!(e.drawn_points().len(), 2);
+    }
 
     #[test]
     fn raster_rejects_bad_inputs() {

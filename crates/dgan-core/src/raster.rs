@@ -14,7 +14,7 @@ use ndarray::Array4;
 use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
-use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, StrokeDash, Transform};
+use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
 /// An RGB colour.
 pub type Rgb = [u8; 3];
@@ -57,6 +57,37 @@ fn line_width_m(kind: MapElementKind) -> f64 {
 /// Dash pattern of dashed lane lines, metres: 3 m painted, 6 m gap.
 const DASH_M: (f64, f64) = (3.0, 6.0);
 
+/// Adds the dashes of a polyline `px` (pixels) that starts `at` pixels along its line: `on` pixels painted in every
+/// `period`, from the line's start. A dash that runs through a vertex stays one subpath (its join is kept).
+fn add_dashes(pb: &mut PathBuilder, px: &[(f32, f32)], at: f32, on: f32, period: f32) {
+    let mut s = at;
+    let mut down = false;
+    for w in px.windows(2) {
+        let ((ax, ay), (bx, by)) = (w[0], w[1]);
+        let len = (bx - ax).hypot(by - ay);
+        let point = |t: f32| (ax + (bx - ax) * t / len, ay + (by - ay) * t / len);
+        let mut t = 0.0f32;
+        while t < len {
+            let phase = (s + t).rem_euclid(period);
+            let (painted, left) = if phase < on { (true, on - phase) } else { (false, period - phase) };
+            let end = (t + left.max(1e-3)).min(len);
+            if painted {
+                if !down {
+                    let (u, v) = point(t);
+                    pb.move_to(u, v);
+                    down = true;
+                }
+                let (u, v) = point(end);
+                pb.line_to(u, v);
+            } else {
+                down = false;
+            }
+            t = end;
+        }
+        s += len;
+    }
+}
+
 fn paint(rgb: Rgb) -> Paint<'static> {
     let mut p = Paint::default();
     p.set_color_rgba8(rgb[0], rgb[1], rgb[2], 255);
@@ -76,8 +107,8 @@ impl Canvas<'_> {
         (u as f32, v as f32)
     }
 
-    fn path(&self, points: &[[f64; 2]], close: bool) -> Option<tiny_skia::Path> {
-        let mut pb = PathBuilder::new();
+    /// Adds a closed polygon to `pb`.
+    fn add_polygon(&self, pb: &mut PathBuilder, points: &[[f64; 2]]) {
         for (k, p) in points.iter().enumerate() {
             let (u, v) = self.pixel(*p);
             if k == 0 {
@@ -86,42 +117,112 @@ impl Canvas<'_> {
                 pb.line_to(u, v);
             }
         }
-        if close {
-            pb.close();
-        }
-        pb.finish()
+        pb.close();
     }
 
-    fn fill(&mut self, points: &[[f64; 2]], rgb: Rgb) {
-        if let Some(path) = self.path(points, true) {
-            self.pixmap.fill_path(&path, &paint(rgb), FillRule::Winding, Transform::identity(), None);
+    /// Adds a polyline to `pb`: only the runs of segments that come near the crop (and one segment either side, so
+    /// that the joins are those of the whole line), since long lane lines and road edges reach far outside it.
+    /// Dashed lines are cut into their dashes here, each run from its own arc length, so that the pattern is the one
+    /// the whole line has.
+    fn add_polyline(&self, pb: &mut PathBuilder, points: &[[f64; 2]], kind: MapElementKind) {
+        let width = self.line_width_px(kind);
+        let px: Vec<(f32, f32)> = points.iter().map(|p| self.pixel(*p)).collect();
+        // Beyond any cap or miter join (miter limit 4: at most 2 widths from its vertex).
+        let margin = 2.0 * width + 2.0;
+        let (w, h) = (self.spec.width_px as f32 + margin, self.spec.height_px as f32 + margin);
+        let segments = px.len().saturating_sub(1);
+        let near: Vec<bool> = (0..segments)
+            .map(|i| {
+                let (a, b) = (px[i], px[i + 1]);
+                a.0.max(b.0) >= -margin && a.0.min(b.0) <= w && a.1.max(b.1) >= -margin && a.1.min(b.1) <= h
+            })
+            .collect();
+        let keep = |i: usize| near[i] || (i > 0 && near[i - 1]) || (i + 1 < segments && near[i + 1]);
+        let dash = (kind == MapElementKind::LaneLineDashed).then(|| {
+            let res = self.spec.resolution_m;
+            ((DASH_M.0 / res) as f32, ((DASH_M.0 + DASH_M.1) / res) as f32)
+        });
+        let mut emit = |run: &[(f32, f32)], at: f32| match dash {
+            Some((on, period)) => add_dashes(pb, run, at, on, period),
+            None => {
+                pb.move_to(run[0].0, run[0].1);
+                for &(u, v) in &run[1..] {
+                    pb.line_to(u, v);
+                }
+            }
+        };
+        let mut run: Option<(usize, f32)> = None;
+        let mut length = 0.0f32;
+        for i in 0..segments {
+            if keep(i) {
+                run.get_or_insert((i, length));
+            } else if let Some((first, at)) = run.take() {
+                emit(&px[first..=i], at);
+            }
+            length += (px[i + 1].0 - px[i].0).hypot(px[i + 1].1 - px[i].1);
+        }
+        if let Some((first, at)) = run {
+            emit(&px[first..], at);
         }
     }
 
-    fn stroke(&mut self, points: &[[f64; 2]], kind: MapElementKind) {
-        let Some(path) = self.path(points, false) else { return };
-        let res = self.spec.resolution_m;
-        let mut stroke = Stroke { width: (line_width_m(kind) / res).max(1.0) as f32, ..Stroke::default() };
-        stroke.line_cap = LineCap::Butt;
-        if kind == MapElementKind::LaneLineDashed {
-            stroke.dash = StrokeDash::new(vec![(DASH_M.0 / res) as f32, (DASH_M.1 / res) as f32], 0.0);
+    fn line_width_px(&self, kind: MapElementKind) -> f32 {
+        (line_width_m(kind) / self.spec.resolution_m).max(1.0) as f32
+    }
+
+    /// Draws one kind's elements, batched into one path: a fill for regions, a butt-capped stroke for lines.
+    fn flush(&mut self, kind: MapElementKind, pb: PathBuilder) {
+        let Some(path) = pb.finish() else { return };
+        let paint = paint(colour(kind));
+        if kind.is_polygon() {
+            self.pixmap.fill_path(&path, &paint, FillRule::Winding, Transform::identity(), None);
+        } else {
+            // A line no wider than a pixel is drawn as an anti-aliased hairline (tiny-skia's width 0), one pixel
+            // wide, without building the stroke's outline: several times faster for the many lane lines of a crop.
+            let width = self.line_width_px(kind);
+            let stroke =
+                Stroke { width: if width <= 1.0 { 0.0 } else { width }, line_cap: LineCap::Butt, ..Stroke::default() };
+            self.pixmap.stroke_path(&path, &paint, &stroke, Transform::identity(), None);
         }
-        self.pixmap.stroke_path(&path, &paint(colour(kind)), &stroke, Transform::identity(), None);
+    }
+
+    /// World bounds `[min_x, min_y, max_x, max_y]` of the crop, widened by a few pixels (line widths, joins).
+    fn world_bounds(&self) -> [f64; 4] {
+        let (h, w) = (self.spec.height_px as f64, self.spec.width_px as f64);
+        let (r, c) = (self.spec.agent_row as f64 + 0.5, self.spec.agent_col as f64 + 0.5);
+        let pad = 2.0 * f64::from(self.line_width_px(MapElementKind::RoadEdge)) + 2.0;
+        let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+        for (row, col) in [(-pad, -pad), (-pad, w + pad), (h + pad, -pad), (h + pad, w + pad)] {
+            // Rows grow backwards and columns to the agent's right (see `MapSpec::local_to_pixel`).
+            let local = [(r - row) * self.spec.resolution_m, (c - col) * self.spec.resolution_m];
+            let p = self.pose.to_world(local);
+            b = [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
+        }
+        b
     }
 
     fn draw_vector(&mut self, map: &VectorMap) {
-        let o = self.pose.origin();
-        let reach = self.spec.reach_m();
+        let view = self.world_bounds();
+        let mut batch: Option<(MapElementKind, PathBuilder)> = None;
         for e in map.elements() {
             let b = e.bbox();
-            if b[0] > o[0] + reach || b[2] < o[0] - reach || b[1] > o[1] + reach || b[3] < o[1] - reach {
+            if b[0] > view[2] || b[2] < view[0] || b[1] > view[3] || b[3] < view[1] {
                 continue;
             }
-            if e.kind().is_polygon() {
-                self.fill(e.points(), colour(e.kind()));
-            } else {
-                self.stroke(e.points(), e.kind());
+            if batch.as_ref().is_some_and(|(k, _)| *k != e.kind()) {
+                if let Some((k, pb)) = batch.take() {
+                    self.flush(k, pb);
+                }
             }
+            let (_, pb) = batch.get_or_insert_with(|| (e.kind(), PathBuilder::new()));
+            if e.kind().is_polygon() {
+                self.add_polygon(pb, e.drawn_points());
+            } else {
+                self.add_polyline(pb, e.drawn_points(), e.kind());
+            }
+        }
+        if let Some((k, pb)) = batch {
+            self.flush(k, pb);
         }
     }
 
@@ -141,23 +242,34 @@ impl Canvas<'_> {
         }
     }
 
-    fn draw_box(&mut self, s: &TrafficState) {
-        let pose = s.pose();
-        let (hl, hw) = (s.length / 2.0, s.width / 2.0);
-        let corners = [[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]].map(|c| pose.to_world(c));
-        self.fill(&corners, AGENT);
+    /// Draws the boxes of the agents that reach into the crop, in one fill.
+    fn draw_boxes<'s>(&mut self, agents: impl Iterator<Item = &'s TrafficState>) {
+        let view = self.world_bounds();
+        let mut pb = PathBuilder::new();
+        for s in agents {
+            let (p, r) = (s.position, s.length.hypot(s.width) / 2.0);
+            if p[0] + r < view[0] || p[0] - r > view[2] || p[1] + r < view[1] || p[1] - r > view[3] {
+                continue;
+            }
+            let pose = s.pose();
+            let (hl, hw) = (s.length / 2.0, s.width / 2.0);
+            self.add_polygon(&mut pb, &[[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]].map(|c| pose.to_world(c)));
+        }
+        if let Some(path) = pb.finish() {
+            self.pixmap.fill_path(&path, &paint(AGENT), FillRule::Winding, Transform::identity(), None);
+        }
     }
 
-    fn into_chw(self) -> Vec<f32> {
-        let (h, w) = (self.spec.height_px, self.spec.width_px);
-        let data = self.pixmap.data();
-        let mut out = vec![0.0f32; 3 * h * w];
-        for px in 0..h * w {
-            for ch in 0..3 {
-                out[ch * h * w + px] = f32::from(data[px * 4 + ch]) / 255.0;
-            }
+    /// Writes the crop into `out`, `(3, H, W)` channel-major, scaled to [0, 1].
+    fn write_chw(&self, out: &mut [f32]) {
+        let plane = self.spec.height_px * self.spec.width_px;
+        let (r, rest) = out.split_at_mut(plane);
+        let (g, b) = rest.split_at_mut(plane);
+        for (k, px) in self.pixmap.data().chunks_exact(4).enumerate() {
+            r[k] = f32::from(px[0]) / 255.0;
+            g[k] = f32::from(px[1]) / 255.0;
+            b[k] = f32::from(px[2]) / 255.0;
         }
-        out
     }
 }
 
@@ -172,28 +284,24 @@ pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Resu
         RTree::bulk_load(states.iter().enumerate().map(|(i, s)| GeomWithData::new(s.position, i)).collect());
     let max_half_diag = states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max);
     let reach = spec.reach_m() + max_half_diag;
-    let crops: Vec<Vec<f32>> = states
-        .par_iter()
-        .map(|s| {
-            let pixmap = Pixmap::new(w as u32, h as u32)
-                .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {w}×{h} crop")))?;
-            let mut canvas = Canvas { pixmap, spec, pose: s.pose() };
-            match frame.map() {
-                Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
-                Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
-                None => {}
-            }
-            if spec.draw_agents {
-                for other in agents.locate_within_distance(s.position, reach * reach) {
-                    canvas.draw_box(&states[other.data]);
-                }
-            }
-            Ok(canvas.into_chw())
-        })
-        .collect::<Result<_>>()?;
-    let flat: Vec<f32> = crops.concat();
-    Array4::from_shape_vec((frame.len(), 3, h, w), flat)
-        .map_err(|e| DganError::InvalidSpec(format!("raster buffer has the wrong size: {e}")))
+    let mut out = Array4::<f32>::zeros((frame.len(), 3, h, w));
+    let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("raster buffer is not contiguous".into()))?;
+    flat.par_chunks_mut(3 * h * w).zip(states.par_iter()).try_for_each(|(crop, s)| {
+        let pixmap = Pixmap::new(w as u32, h as u32)
+            .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {w}×{h} crop")))?;
+        let mut canvas = Canvas { pixmap, spec, pose: s.pose() };
+        match frame.map() {
+            Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
+            Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
+            None => {}
+        }
+        if spec.draw_agents {
+            canvas.draw_boxes(agents.locate_within_distance(s.position, reach * reach).map(|o| &states[o.data]));
+        }
+        canvas.write_chw(crop);
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -247,6 +355,31 @@ mod tests {
             assert!(rgb(&img, row, 20)[1] > 0.4, "row {row}: {:?}", rgb(&img, row, 20));
             assert_eq!(rgb(&img, row, 25), [0.0; 3]);
         }
+    }
+
+    #[test]
+    fn long_dashed_lines_keep_their_pattern_inside_the_crop() {
+        // A dashed line along the agent's own path from 1 km behind to 1 km ahead, a vertex every 0.5 m (the crop
+        // draws only the part near it, dashed from its arc length): 3 m painted from y = -1000, then 6 m of gap.
+        let line: Vec<[f64; 2]> = (0..=4000).map(|i| [100.0, -1000.0 + i as f64 * 0.5]).collect();
+        let el = MapElement::new(MapElementKind::LaneLineDashed, line).unwrap();
+        let (f, s) = frame_with(SceneMap::Vector(VectorMap::new(vec![el])));
+        let img = rasterize(&f, &s, &spec(false)).unwrap();
+        let mut checked = (0, 0);
+        for row in 0..40 {
+            // Pixel rows span world y in [50 + (29.5 - row) / 2, 50 + (30.5 - row) / 2].
+            let (lo, hi) = (50.0 + (29.5 - row as f64) / 2.0 + 1000.0, 50.0 + (30.5 - row as f64) / 2.0 + 1000.0);
+            let (plo, phi) = (lo.rem_euclid(9.0), hi.rem_euclid(9.0));
+            let white = rgb(&img, row, 20)[0];
+            if plo < phi && phi <= 3.0 {
+                assert!(white > 0.9, "row {row} lies inside a dash: {white}");
+                checked.0 += 1;
+            } else if plo < phi && plo >= 3.0 {
+                assert_eq!(white, 0.0, "row {row} lies in a gap");
+                checked.1 += 1;
+            }
+        }
+        assert!(checked.0 >= 8 && checked.1 >= 16, "{checked:?}");
     }
 
     #[test]
