@@ -26,7 +26,7 @@ from training.multiclass import relative
 
 ROOT = Path(__file__).resolve().parents[1]
 NOMAP = ROOT / "training" / "checkpoints" / "baselines" / "hdmap-nomap.pt"
-#: One scene of each source for the map pictures: (title, path under the data root, 10 Hz step, centre or None).
+#: One scene of each source for the map pictures: (title, path under the data root, 10 Hz step).
 PICTURES = (
     (
         "nuScenes mini, scene-1094 (Singapore Holland Village)",
@@ -144,12 +144,10 @@ def evaluate_hdmap(root: Path) -> dict[str, Any]:
 
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as tmp:
+        with_map = dgan.Predictor("hdmap")
         nomap = dgan.Predictor(export_checkpoint(NOMAP, Path(tmp) / "nomap.onnx", "dgan-hdmap-nomap"))
         for dataset in ("hdmap", "argoverse2"):
-            out[dataset] = {
-                "map": evaluate(dgan.Predictor("hdmap"), dataset, root),
-                "nomap": evaluate(nomap, dataset, root),
-            }
+            out[dataset] = {"map": evaluate(with_map, dataset, root), "nomap": evaluate(nomap, dataset, root)}
     return out
 
 

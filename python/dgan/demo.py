@@ -135,9 +135,8 @@ def waymo_scene(t_obs: int, now: float | None, extent_m: float = 110.0, resoluti
     frame = sc.frame(step, t_obs, every=WAYMO_EVERY)
     rows = np.flatnonzero(sc.valid[:, step])
     moving = np.nanmax(np.linalg.norm(sc.positions[rows] - sc.positions[rows, step][:, None], axis=-1), axis=1) > 1
-    centre = np.nanmean(sc.positions[rows[moving], step], axis=0) if moving.any() else None
-    image = bird_eye(sc, step, centre, extent_m, resolution_m)
-    c = np.nanmean(sc.positions[rows, step], axis=0) if centre is None else centre
+    c = np.nanmean(sc.positions[rows[moving] if moving.any() else rows, step], axis=0)  # centred on the movers
+    image = bird_eye(sc, step, c, extent_m, resolution_m)
     half = image.shape[0] // 2
     # Pixel centres at integers: u = col + (x - cx) / res, v = row - (y - cy) / res (north up).
     w2p = np.array(

@@ -116,7 +116,7 @@ class Scenario:
     def num_steps(self) -> int:
         return int(self.positions.shape[1])
 
-    def frame(self, now: int, t_obs: int, every: int = 1, with_map: bool = True) -> Frame:
+    def frame(self, now: int, t_obs: int, every: int = 1) -> Frame:
         """The frame at step ``now``: ``t_obs`` steps ``every`` source steps apart, ending at ``now``, with every
         agent valid at ``now``."""
         if not 0 <= now < self.num_steps:
@@ -136,7 +136,7 @@ class Scenario:
             headings=self.heading[agents, now],
             lengths=self.length[agents, now],
             widths=self.width[agents, now],
-            map=self.map if with_map else None,
+            map=self.map,
         )
 
 

@@ -103,13 +103,18 @@ fn bench_decode(c: &mut Criterion) {
     c.bench_function("decode/100", |b| b.iter(|| decode(cl.view(), al.view(), off.view(), &anchors, &poses, 60)));
 }
 
-fn bench_predict(c: &mut Criterion) {
+/// The model at `path` (relative to the repository root), or None with a note when ONNX Runtime is not configured.
+fn load_model(bench: &str, path: &str) -> Option<Predictor> {
     if std::env::var_os("ORT_DYLIB_PATH").is_none() {
-        eprintln!("predict bench skipped: set ORT_DYLIB_PATH to the onnxruntime wheel's libonnxruntime.so.*");
-        return;
+        eprintln!("{bench} bench skipped: set ORT_DYLIB_PATH to the onnxruntime wheel's libonnxruntime.so.*");
+        return None;
     }
-    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/contract_map.onnx");
-    let predictor = Predictor::load(model).expect("fixture loads");
+    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..").join(path);
+    Some(Predictor::load(&model).unwrap_or_else(|e| panic!("{} does not load: {e}", model.display())))
+}
+
+fn bench_predict(c: &mut Criterion) {
+    let Some(predictor) = load_model("predict", "tests/fixtures/contract_map.onnx") else { return };
     let mut frame = road_frame(vector_map());
     // The fixture's crop is 16×16 at 1 m; the scene is the same road.
     frame = frame.with_ids((0..32).collect()).expect("unique ids");
@@ -156,12 +161,7 @@ fn waymo_frame() -> Frame {
 }
 
 fn bench_hdmap(c: &mut Criterion) {
-    if std::env::var_os("ORT_DYLIB_PATH").is_none() {
-        eprintln!("hdmap_waymo bench skipped: set ORT_DYLIB_PATH to the onnxruntime wheel's libonnxruntime.so.*");
-        return;
-    }
-    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../python/dgan/models/hdmap.onnx");
-    let predictor = Predictor::load(model).expect("the bundled hdmap model loads");
+    let Some(predictor) = load_model("hdmap_waymo", "python/dgan/models/hdmap.onnx") else { return };
     let spec = predictor.contract().input.clone();
     let map_spec = spec.map.clone().expect("hdmap has a map branch");
     let frame = waymo_frame();

@@ -13,7 +13,7 @@ use crate::transform::AgentPose;
 use ndarray::Array4;
 use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
-use rstar::RTree;
+use rstar::{RTree, AABB};
 use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
 /// An RGB colour.
@@ -99,6 +99,27 @@ struct Canvas<'a> {
     pixmap: Pixmap,
     spec: &'a MapSpec,
     pose: AgentPose,
+    /// World bounds `[min_x, min_y, max_x, max_y]` of the crop ([`world_bounds`]).
+    view: [f64; 4],
+}
+
+/// World bounds `[min_x, min_y, max_x, max_y]` of an agent's crop, widened by a few pixels (line widths, joins).
+fn world_bounds(spec: &MapSpec, pose: &AgentPose) -> [f64; 4] {
+    let (h, w) = (spec.height_px as f64, spec.width_px as f64);
+    let (r, c) = (spec.agent_row as f64 + 0.5, spec.agent_col as f64 + 0.5);
+    let pad = 2.0 * line_width_px(spec, MapElementKind::RoadEdge) as f64 + 2.0;
+    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for (row, col) in [(-pad, -pad), (-pad, w + pad), (h + pad, -pad), (h + pad, w + pad)] {
+        // Rows grow backwards and columns to the agent's right (see `MapSpec::local_to_pixel`).
+        let p = pose.to_world([(r - row) * spec.resolution_m, (c - col) * spec.resolution_m]);
+        b = [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
+    }
+    b
+}
+
+/// Drawn width in pixels of a polyline kind: its width in metres, at least one pixel.
+fn line_width_px(spec: &MapSpec, kind: MapElementKind) -> f32 {
+    (line_width_m(kind) / spec.resolution_m).max(1.0) as f32
 }
 
 impl Canvas<'_> {
@@ -125,7 +146,7 @@ impl Canvas<'_> {
     /// Dashed lines are cut into their dashes here, each run from its own arc length, so that the pattern is the one
     /// the whole line has.
     fn add_polyline(&self, pb: &mut PathBuilder, points: &[[f64; 2]], kind: MapElementKind) {
-        let width = self.line_width_px(kind);
+        let width = line_width_px(self.spec, kind);
         let px: Vec<(f32, f32)> = points.iter().map(|p| self.pixel(*p)).collect();
         // Beyond any cap or miter join (miter limit 4: at most 2 widths from its vertex).
         let margin = 2.0 * width + 2.0;
@@ -166,10 +187,6 @@ impl Canvas<'_> {
         }
     }
 
-    fn line_width_px(&self, kind: MapElementKind) -> f32 {
-        (line_width_m(kind) / self.spec.resolution_m).max(1.0) as f32
-    }
-
     /// Draws one kind's elements, batched into one path: a fill for regions, a butt-capped stroke for lines.
     fn flush(&mut self, kind: MapElementKind, pb: PathBuilder) {
         let Some(path) = pb.finish() else { return };
@@ -177,32 +194,13 @@ impl Canvas<'_> {
         if kind.is_polygon() {
             self.pixmap.fill_path(&path, &paint, FillRule::Winding, Transform::identity(), None);
         } else {
-            // A line no wider than a pixel is drawn as an anti-aliased hairline (tiny-skia's width 0), one pixel
-            // wide, without building the stroke's outline: several times faster for the many lane lines of a crop.
-            let width = self.line_width_px(kind);
-            let stroke =
-                Stroke { width: if width <= 1.0 { 0.0 } else { width }, line_cap: LineCap::Butt, ..Stroke::default() };
+            let stroke = Stroke { width: line_width_px(self.spec, kind), line_cap: LineCap::Butt, ..Stroke::default() };
             self.pixmap.stroke_path(&path, &paint, &stroke, Transform::identity(), None);
         }
     }
 
-    /// World bounds `[min_x, min_y, max_x, max_y]` of the crop, widened by a few pixels (line widths, joins).
-    fn world_bounds(&self) -> [f64; 4] {
-        let (h, w) = (self.spec.height_px as f64, self.spec.width_px as f64);
-        let (r, c) = (self.spec.agent_row as f64 + 0.5, self.spec.agent_col as f64 + 0.5);
-        let pad = 2.0 * f64::from(self.line_width_px(MapElementKind::RoadEdge)) + 2.0;
-        let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-        for (row, col) in [(-pad, -pad), (-pad, w + pad), (h + pad, -pad), (h + pad, w + pad)] {
-            // Rows grow backwards and columns to the agent's right (see `MapSpec::local_to_pixel`).
-            let local = [(r - row) * self.spec.resolution_m, (c - col) * self.spec.resolution_m];
-            let p = self.pose.to_world(local);
-            b = [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
-        }
-        b
-    }
-
     fn draw_vector(&mut self, map: &VectorMap) {
-        let view = self.world_bounds();
+        let view = self.view;
         let mut batch: Option<(MapElementKind, PathBuilder)> = None;
         for e in map.elements() {
             let b = e.bbox();
@@ -242,15 +240,10 @@ impl Canvas<'_> {
         }
     }
 
-    /// Draws the boxes of the agents that reach into the crop, in one fill.
+    /// Draws the agents' boxes, in one fill.
     fn draw_boxes<'s>(&mut self, agents: impl Iterator<Item = &'s TrafficState>) {
-        let view = self.world_bounds();
         let mut pb = PathBuilder::new();
         for s in agents {
-            let (p, r) = (s.position, s.length.hypot(s.width) / 2.0);
-            if p[0] + r < view[0] || p[0] - r > view[2] || p[1] + r < view[1] || p[1] - r > view[3] {
-                continue;
-            }
             let pose = s.pose();
             let (hl, hw) = (s.length / 2.0, s.width / 2.0);
             self.add_polygon(&mut pb, &[[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]].map(|c| pose.to_world(c)));
@@ -283,20 +276,24 @@ pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Resu
     let agents: RTree<GeomWithData<[f64; 2], usize>> =
         RTree::bulk_load(states.iter().enumerate().map(|(i, s)| GeomWithData::new(s.position, i)).collect());
     let max_half_diag = states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max);
-    let reach = spec.reach_m() + max_half_diag;
     let mut out = Array4::<f32>::zeros((frame.len(), 3, h, w));
     let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("raster buffer is not contiguous".into()))?;
     flat.par_chunks_mut(3 * h * w).zip(states.par_iter()).try_for_each(|(crop, s)| {
         let pixmap = Pixmap::new(w as u32, h as u32)
             .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {w}×{h} crop")))?;
-        let mut canvas = Canvas { pixmap, spec, pose: s.pose() };
+        let pose = s.pose();
+        let view = world_bounds(spec, &pose);
+        let mut canvas = Canvas { pixmap, spec, pose, view };
         match frame.map() {
             Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
             Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
             None => {}
         }
         if spec.draw_agents {
-            canvas.draw_boxes(agents.locate_within_distance(s.position, reach * reach).map(|o| &states[o.data]));
+            // Every agent whose box can reach into the crop.
+            let d = max_half_diag;
+            let near = AABB::from_corners([view[0] - d, view[1] - d], [view[2] + d, view[3] + d]);
+            canvas.draw_boxes(agents.locate_in_envelope(&near).map(|o| &states[o.data]));
         }
         canvas.write_chw(crop);
         Ok(())

@@ -65,13 +65,6 @@ impl MapSpec {
             (self.agent_col as f64 - col as f64) * self.resolution_m,
         ]
     }
-
-    /// Radius (metres) of a circle around the agent that contains the whole crop.
-    pub fn reach_m(&self) -> f64 {
-        let dr = self.agent_row.max(self.height_px - self.agent_row) as f64 + 1.0;
-        let dc = self.agent_col.max(self.width_px - self.agent_col) as f64 + 1.0;
-        dr.hypot(dc) * self.resolution_m
-    }
 }
 
 /// Everything preprocessing needs to build the network's inputs from a frame.
