@@ -3,6 +3,7 @@ and on the real shared data."""
 
 from __future__ import annotations
 
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -206,3 +207,34 @@ def test_hdmap_splits_by_scene_and_samples_5_hz() -> None:
     assert len(list(iter_windows(hdmap_recordings(nu)[0], info, 10, 15))) > len(
         list(iter_windows(both[0], info, 10, 15))
     )
+
+
+def test_a_run_needs_a_known_weight_selection(tmp_path: Path) -> None:
+    import torch  # noqa: F401  (training.train needs torch)
+
+    from training.train import main
+
+    config = str(ROOT / "training" / "configs" / "hdmap.toml")
+    with pytest.raises(ValueError, match=r"train\.select must be 'val_loss' or 'last', got 'best'"):
+        main(["--config", config, "--out", str(tmp_path), "--set", "train.select=best"])
+
+
+def test_hdmap_needs_10_hz_sources(tmp_path: Path) -> None:
+    # A ScenarioNet scenario at 2 Hz: readable, but not a source of the 5 Hz protocol (every second 10 Hz step).
+    t = 5
+    track = {
+        "type": "VEHICLE",
+        "state": {
+            "position": np.zeros((t, 3)),
+            "heading": np.zeros(t),
+            "velocity": np.zeros((t, 2)),
+            "valid": np.ones(t),
+            "length": np.full((t, 1), 4.5),
+            "width": np.full((t, 1), 2.0),
+        },
+    }
+    meta = {"dataset": "nuscenes", "sample_rate": 0.5}
+    path = tmp_path / "slow.pkl"
+    path.write_bytes(pickle.dumps({"tracks": {"a": track}, "map_features": {}, "metadata": meta}))
+    with pytest.raises(ValueError, match=r"slow\.pkl: expected 10 Hz states, got a step of 0\.5 s"):
+        hdmap_recordings(path)

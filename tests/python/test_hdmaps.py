@@ -141,3 +141,8 @@ def test_bad_files_are_clear_errors(tmp_path: Path) -> None:
     bad_road.write_text(json.dumps({"objects": [], "roads": [{"type": "lane", "geometry": [[1.0], [2.0]]}]}))
     with pytest.raises(InvalidMapError, match="road 0"):
         dgan.hdmaps.waymo_json_map(json.loads(bad_road.read_text())["roads"])
+
+
+def test_the_waymo_demo_scene_needs_a_full_history() -> None:
+    with pytest.raises(dgan.DganError, match=r"needs --time in 18\.\.88, got 5"):
+        dgan.demo.waymo_scene(10, 5)
