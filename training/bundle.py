@@ -36,7 +36,9 @@ def slim_checkpoint(run: Path, out: Path) -> Path:
     """Keeps what export and the parity test need of a run's best checkpoint (no optimizer state)."""
     ckpt = torch.load(run / "best.pt", weights_only=False)
     out.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({k: ckpt[k] for k in ("model", "anchors", "class_of", "config", "epoch") if k in ckpt}, out)
+    torch.save(
+        {k: ckpt[k] for k in ("model", "anchors", "class_of", "config", "epoch", "temperature") if k in ckpt}, out
+    )
     return out
 
 

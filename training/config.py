@@ -24,6 +24,10 @@ class DataConfig:
     map_width_px: int = 31
     map_resolution_m: float = 0.5
     map_agent_row: int = 24
+    # The kinematic prior the network refines (dgan.PriorSpec): "none" (absolute anchors, contract 1) or
+    # "constant_velocity"; prior_window_s > 0 estimates its velocity over that many seconds of observed positions.
+    prior: str = "none"
+    prior_window_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,11 @@ class TrainConfig:
     # one-cycle schedule; for small data where the validation loss rises with the classifier's confidence while the
     # validation errors keep falling).
     select: str = "val_loss"
+    # Map dropout: the share of target agents whose map crop is blanked (and flagged absent through map_present)
+    # in each training batch. > 0 makes the model's map optional: it serves frames with and without a map.
+    map_dropout: float = 0.0
+    # Fit a temperature of the anchor logits on the validation split after training (written into the model).
+    calibrate: bool = True
 
 
 @dataclass(frozen=True)

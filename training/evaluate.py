@@ -28,15 +28,16 @@ from training.datasets import DATASETS, recordings
 CALIBRATION_BINS = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
 
 
-def agent_metrics(pred: dgan.Prediction, gt: np.ndarray, cv: np.ndarray) -> dict[str, np.ndarray]:
-    """Per-agent metrics of one window's targets, in the units of ``gt``."""
+def agent_metrics(pred: dgan.Prediction, gt: np.ndarray, cvs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-agent metrics of one window's targets, in the units of ``gt``; ``cvs`` holds the constant-velocity
+    variants (``metrics.constant_velocity_variants``)."""
     traj, prob = pred.trajectories, pred.probabilities
     top20 = traj[:, :20]
     pairs = {
         ("ade", "fde"): metrics.ade_fde_top1(traj, gt),
         ("min_ade5", "min_fde5"): metrics.min_ade_fde(traj, gt, 5),
         ("min_ade20", "min_fde20"): metrics.min_ade_fde(top20, gt, 20),
-        ("cv_ade", "cv_fde"): metrics.ade_fde_top1(cv, gt),
+        **{(f"cv_{k}_ade", f"cv_{k}_fde"): metrics.ade_fde_top1(cv, gt) for k, cv in cvs.items()},
     }
     out = {name: value for names, values in pairs.items() for name, value in zip(names, values, strict=True)}
     out["brier_min_fde5"] = metrics.brier_min_fde(traj[:, :5], gt, prob[:, :5], 5)
@@ -61,14 +62,24 @@ def calibration(prob: np.ndarray, hit: np.ndarray) -> dict[str, Any]:
 
 
 def summarise(per: dict[str, np.ndarray], sel: np.ndarray) -> dict[str, Any]:
+    """Means over the selected agents. ``cv_ade``/``cv_fde`` are constant velocity's, the better of its two variants
+    on these agents for each of the two errors (``cv_variant`` names the better variant by ADE)."""
     out: dict[str, Any] = {k: float(v[sel].mean()) if sel.any() else float("nan") for k, v in per.items()}
     out["agents"] = int(sel.sum())
+    variants = sorted({k.split("_")[1] for k in per if k.startswith("cv_")})
+    if variants:
+        out["cv_ade"] = min(out[f"cv_{v}_ade"] for v in variants)
+        out["cv_fde"] = min(out[f"cv_{v}_fde"] for v in variants)
+        out["cv_variant"] = min(variants, key=lambda v: out[f"cv_{v}_ade"])
     return out
 
 
-def evaluate(predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str = "") -> dict[str, Any]:
+def evaluate(
+    predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str = "", with_map: bool = True
+) -> dict[str, Any]:
     """Per-agent metrics of the model and of constant velocity on a test split, averaged overall (flat keys), per
-    class (``by_class``) and per label (``by_label``), with window and agent counts."""
+    class (``by_class``) and per label (``by_label``), with window and agent counts. ``with_map=False`` runs a map
+    model on frames without their map (a model whose map is not optional then raises ``MapRequiredError``)."""
     info = DATASETS[dataset]
     spec = predictor.spec
     if (spec.t_obs, spec.t_f) != (info.t_obs, info.t_f) or abs(spec.dt_s - info.dt_s) > 1e-9:
@@ -77,17 +88,22 @@ def evaluate(predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str
             f"(dt {info.dt_s} s, {info.t_obs} + {info.t_f} steps)"
         )
     per: dict[str, list[np.ndarray]] = {}
-    labels, classes, pred_class, mode_p, mode_hit = [], [], [], [], []
+    labels, classes, pred_class, mode_p, mode_p_raw, mode_hit = [], [], [], [], [], []
+    temperature = float(predictor.contract.get("temperature", 1.0))
     windows = 0
     model_classes = list(predictor.classes)
-    for rec in recordings(dataset, data_root, "test", fold, with_map=spec.map is not None):
+    use_map = with_map and spec.map is not None
+    for rec in recordings(dataset, data_root, "test", fold, with_map=use_map):
         for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
             windows += 1
-            pred = predictor.predict(w.frame(info, spec.t_obs, with_map=spec.map is not None))
+            pred = predictor.predict(w.frame(info, spec.t_obs, with_map=use_map))
             t = w.target
             unit = rec.unit_m
             gt = w.positions[t, spec.t_obs :] / unit
-            cv = metrics.constant_velocity(w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs], spec.t_f) / unit
+            obs, obs_mask = w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs]
+            cvs = {
+                k: v / unit for k, v in metrics.constant_velocity_variants(obs, obs_mask, spec.t_f, spec.dt_s).items()
+            }
             sub = dgan.Prediction(
                 pred.agent_ids[t],
                 pred.trajectories[t] / unit,
@@ -97,13 +113,14 @@ def evaluate(predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str
                 pred.edges,
                 pred.classes,
             )
-            for k, v in agent_metrics(sub, gt, cv).items():
+            for k, v in agent_metrics(sub, gt, cvs).items():
                 per.setdefault(k, []).append(v)
             labels.append(w.label[t])
             classes.append(np.array([model_classes.index(info.label_class[k]) for k in w.label[t]]))
             pred_class.append(sub.class_probabilities.argmax(axis=1))
             ade_all = metrics.displacement(sub.trajectories, gt).mean(axis=2)  # (n, K)
             mode_p.append(sub.probabilities.ravel())
+            mode_p_raw.append(untempered(sub, temperature).ravel())
             mode_hit.append((ade_all == ade_all.min(axis=1, keepdims=True)).ravel())
     flat = {k: np.concatenate(v) for k, v in per.items()}
     label = np.concatenate(labels)
@@ -111,6 +128,7 @@ def evaluate(predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str
     everyone = np.ones(len(label), dtype=bool)
     out: dict[str, Any] = summarise(flat, everyone)
     out["windows"] = windows
+    out["with_map"] = use_map
     out["dataset"] = dataset
     out["unit"] = info.unit
     if fold:
@@ -118,7 +136,27 @@ def evaluate(predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str
     out["by_class"] = {c: summarise(flat, klass == i) for i, c in enumerate(model_classes) if (klass == i).any()}
     out["by_label"] = {n: summarise(flat, label == i) for i, n in enumerate(info.labels) if (label == i).any()}
     out["class_accuracy"] = float((np.concatenate(pred_class) == klass).mean())
-    out["calibration"] = calibration(np.concatenate(mode_p), np.concatenate(mode_hit))
+    hits = np.concatenate(mode_hit)
+    out["calibration"] = calibration(np.concatenate(mode_p), hits)
+    out["temperature"] = temperature
+    out["calibration_t1"] = calibration(np.concatenate(mode_p_raw), hits)
+    return out
+
+
+def untempered(pred: dgan.Prediction, temperature: float) -> np.ndarray:
+    """``(N, M)`` the mode probabilities the model would give at temperature 1, from those at ``temperature``
+    (all K modes needed): p(k | c) at T is softmax(l / T), so p(k | c) at 1 is proportional to p(k | c)^T."""
+    prob = pred.probabilities
+    if temperature == 1.0 or prob.size == 0:
+        return prob
+    rows = np.arange(len(prob))[:, None]
+    pc = pred.class_probabilities[rows, pred.mode_classes]
+    pk = (prob / np.maximum(pc, 1e-300)) ** temperature
+    out = np.zeros_like(prob)
+    for c in range(pred.class_probabilities.shape[1]):
+        sel = pred.mode_classes == c
+        norm = np.where(sel, pk, 0.0).sum(axis=1, keepdims=True)
+        out = np.where(sel, pc * pk / np.maximum(norm, 1e-300), out)
     return out
 
 

@@ -15,12 +15,12 @@ import dgan
 from training.config import Config
 from training.model import DGAN
 
-INPUTS = ["trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "map"]
 OUTPUTS = ["class_logits", "anchor_logits", "offsets"]
 
 
 def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
-    """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor and the config."""
+    """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor and the config.
+    The fitted temperature is :func:`checkpoint_temperature`."""
     from training.train import build_model, input_spec
 
     ckpt = torch.load(path, weights_only=False)
@@ -37,15 +37,26 @@ def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.nd
     return model, spec, anchors, class_of, cfg
 
 
+def checkpoint_temperature(path: Path) -> float:
+    """The temperature fitted on validation after training (1 for a checkpoint without one)."""
+    return float(torch.load(path, weights_only=False).get("temperature", 1.0))
+
+
 def contract(
-    spec: dgan.InputSpec, anchors: np.ndarray, class_of: np.ndarray, name: str, description: str
+    spec: dgan.InputSpec,
+    anchors: np.ndarray,
+    class_of: np.ndarray,
+    name: str,
+    description: str,
+    temperature: float = 1.0,
 ) -> dict[str, Any]:
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
-        contract_version=1,
+        contract_version=2,
         units="m",
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
+        temperature=round(float(temperature), 6),
         name=name,
         description=description,
     )
@@ -64,6 +75,8 @@ def example_inputs(spec: dgan.InputSpec, n: int = 3) -> tuple[torch.Tensor, ...]
     ]
     if spec.map is not None:
         args.append(torch.rand(n, 3, spec.map.height_px, spec.map.width_px, generator=g))
+        if spec.map.optional:
+            args.append(torch.ones(n))
     return tuple(args)
 
 
@@ -75,12 +88,15 @@ def export_model(
     path: Path,
     name: str,
     description: str = "",
+    temperature: float = 1.0,
 ) -> Path:
     """Exports under the contract; anchors must be grouped by class in the spec's class order."""
+    from training.train import INPUTS
+
     if not np.all(np.diff(class_of) >= 0) or (len(class_of) and class_of[-1] >= len(spec.classes)):
         raise ValueError("anchors must be grouped by class, in the order of spec.classes")
     args = example_inputs(spec)
-    names = INPUTS[: len(args)]
+    names = list(INPUTS[: len(args)])
     dyn = {
         "trajectory": {0: "N"},
         "trajectory_mask": {0: "N"},
@@ -88,6 +104,7 @@ def export_model(
         "edge_index": {0: "E"},
         "edge_features": {0: "E"},
         "map": {0: "N"},
+        "map_present": {0: "N"},
     }
     dynamic_axes = {k: dyn[k] for k in names} | {o: {0: "N"} for o in OUTPUTS}
     torch.onnx.export(
@@ -101,7 +118,8 @@ def export_model(
         dynamo=False,
     )
     m = onnx.load(str(path))
-    onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(contract(spec, anchors, class_of, name, description))})
+    meta = contract(spec, anchors, class_of, name, description, temperature)
+    onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(meta)})
     onnx.save(m, str(path))
     dgan.Predictor(path)  # the engine checks the contract
     return path
@@ -109,7 +127,7 @@ def export_model(
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
     model, spec, anchors, class_of, _ = load_checkpoint(ckpt)
-    return export_model(model, spec, anchors, class_of, path, name, description)
+    return export_model(model, spec, anchors, class_of, path, name, description, checkpoint_temperature(ckpt))
 
 
 def main() -> None:

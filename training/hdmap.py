@@ -146,8 +146,11 @@ def evaluate_hdmap(root: Path) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         with_map = dgan.Predictor("hdmap")
         nomap = dgan.Predictor(export_checkpoint(NOMAP, Path(tmp) / "nomap.onnx", "dgan-hdmap-nomap"))
+        optional = with_map.spec.map is not None and with_map.spec.map.optional
         for dataset in ("hdmap", "argoverse2"):
             out[dataset] = {"map": evaluate(with_map, dataset, root), "nomap": evaluate(nomap, dataset, root)}
+            if optional:  # the same model, the same frames, no map
+                out[dataset]["map_absent"] = evaluate(with_map, dataset, root, with_map=False)
     return out
 
 

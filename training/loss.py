@@ -49,21 +49,33 @@ def dgan_loss(
     return loss, parts
 
 
-def mode_probabilities(class_logits: Tensor, anchor_logits: Tensor, class_of_anchor: Tensor) -> Tensor:
-    """``(N, K)`` p(c(k)) · p(k | c(k)) of every anchor."""
+def mode_probabilities(
+    class_logits: Tensor, anchor_logits: Tensor, class_of_anchor: Tensor, temperature: float = 1.0
+) -> Tensor:
+    """``(N, K)`` p(c(k)) · p(k | c(k)) of every anchor, p(k | c) = softmax(anchor logits / temperature)."""
     pc = torch.softmax(class_logits, dim=1)[:, class_of_anchor]
     pk = torch.zeros_like(anchor_logits)
     for c in range(class_logits.shape[1]):
         sel = class_of_anchor == c
-        pk[:, sel] = torch.softmax(anchor_logits[:, sel], dim=1)
+        pk[:, sel] = torch.softmax(anchor_logits[:, sel] / temperature, dim=1)
     return pc * pk
 
 
 def decode_torch(
-    class_logits: Tensor, anchor_logits: Tensor, offsets: Tensor, anchors: Tensor, class_of_anchor: Tensor
+    class_logits: Tensor,
+    anchor_logits: Tensor,
+    offsets: Tensor,
+    anchors: Tensor,
+    class_of_anchor: Tensor,
+    prior: Tensor | None = None,
+    temperature: float = 1.0,
 ) -> tuple[Tensor, Tensor]:
-    """Agent-frame modes ``(N, K, T, 2)`` sorted by p(c) · p(k | c), and those probabilities ``(N, K)``."""
-    p = mode_probabilities(class_logits, anchor_logits, class_of_anchor)
+    """Agent-frame modes ``(N, K, T, 2)`` (the kinematic ``prior (N, T, 2)`` + anchor + offset) sorted by
+    p(c) · p(k | c), and those probabilities ``(N, K)``; the engine's decoding, in PyTorch."""
+    p = mode_probabilities(class_logits, anchor_logits, class_of_anchor, temperature)
     order = torch.argsort(-p, dim=1, stable=True)
-    traj = (anchors.unsqueeze(0) + offsets).gather(1, order[..., None, None].expand(-1, -1, *offsets.shape[2:]))
+    modes = anchors.unsqueeze(0) + offsets
+    if prior is not None:
+        modes = modes + prior.unsqueeze(1)
+    traj = modes.gather(1, order[..., None, None].expand(-1, -1, *offsets.shape[2:]))
     return traj, p.gather(1, order)

@@ -39,8 +39,10 @@ def brier_min_fde(pred: Arr, gt: Arr, prob: Arr, k: int) -> Arr:
     return out
 
 
-def constant_velocity(trajectory: Arr, mask: Arr, t_f: int) -> Arr:
-    """``(N, 1, T_f, 2)``: each agent keeps the velocity of its last two observed steps (zero with one)."""
+def constant_velocity(trajectory: Arr, mask: Arr, t_f: int, window: int = 1) -> Arr:
+    """``(N, 1, T_f, 2)``: each agent keeps a constant velocity (zero with one observed step). ``window`` = 1: the
+    velocity of its last two observed steps; ``window`` = k > 1: its mean velocity over the last k steps (from the
+    earliest observed step among them; the last two steps when none is)."""
     n = len(trajectory)
     out = np.zeros((n, 1, t_f, 2))
     for i in range(n):
@@ -48,6 +50,17 @@ def constant_velocity(trajectory: Arr, mask: Arr, t_f: int) -> Arr:
         if len(idx) < 2:
             out[i, 0] = trajectory[i, idx[-1]]
             continue
-        v = (trajectory[i, idx[-1]] - trajectory[i, idx[-2]]) / (idx[-1] - idx[-2])
+        inside = idx[idx >= idx[-1] - window]
+        first = inside[0] if window > 1 and len(inside) > 1 else idx[-2]
+        v = (trajectory[i, idx[-1]] - trajectory[i, first]) / (idx[-1] - first)
         out[i, 0] = trajectory[i, idx[-1]] + v * np.arange(1, t_f + 1)[:, None]
     return out
+
+
+def constant_velocity_variants(trajectory: Arr, mask: Arr, t_f: int, dt_s: float) -> dict[str, Arr]:
+    """The two constant-velocity baselines every accuracy table carries: ``last2`` (the last two observed steps)
+    and ``mean1s`` (the mean velocity over the last second, ``max(2, round(1 / dt))`` steps)."""
+    return {
+        "last2": constant_velocity(trajectory, mask, t_f),
+        "mean1s": constant_velocity(trajectory, mask, t_f, max(2, round(1.0 / dt_s))),
+    }

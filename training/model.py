@@ -118,6 +118,7 @@ class DGAN(nn.Module):
         num_classes: int,
         num_anchors: int,
         map_hw: tuple[int, int] | None,
+        map_optional: bool = False,
     ) -> None:
         super().__init__()
         self.cfg, self.t_f, self.k = cfg, t_f, num_anchors
@@ -130,7 +131,11 @@ class DGAN(nn.Module):
             nn.ReLU(),
         )
         self.map_enc = MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw) if (cfg.use_map and map_hw) else None
+        # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
+        # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
+        self.map_optional = map_optional and self.map_enc is not None
         node_in = cfg.lstm_dim + cfg.state_dim_out + (cfg.map_dim if self.map_enc is not None else 0)
+        node_in += 1 if self.map_optional else 0
         self.node = nn.Sequential(nn.Linear(node_in, cfg.node_dim), nn.ReLU())
         self.gat = nn.ModuleList(
             [GATLayer(cfg.node_dim, cfg.gat_heads, 6) for _ in range(cfg.gat_layers)] if cfg.use_gat else []
@@ -151,13 +156,20 @@ class DGAN(nn.Module):
         edge_index: Tensor,
         edge_features: Tensor,
         map: Tensor | None = None,
+        map_present: Tensor | None = None,
     ) -> tuple[Tensor, Tensor, Tensor]:
         x = torch.cat([trajectory, trajectory_mask.unsqueeze(-1)], dim=-1)
         _, (h_n, _) = self.lstm(self.embed(x))
         parts = [h_n[-1], self.state_mlp(state)]
         if self.map_enc is not None:
             assert map is not None, "this model has a map branch"
-            parts.append(self.map_enc(map))
+            features = self.map_enc(map)
+            if self.map_optional:
+                assert map_present is not None, "this model's map is optional: it takes map_present"
+                present = map_present.unsqueeze(-1)
+                parts += [features * present, present]
+            else:
+                parts.append(features)
         v = self.node(torch.cat(parts, dim=-1))
         if not self.cfg.use_edge_features:
             edge_features = edge_features * 0.0

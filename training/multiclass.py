@@ -48,7 +48,10 @@ def evaluate_dataset(dataset: str, root: Path) -> dict[str, Any]:
     """The bundled multi-class model and each per-class baseline on the dataset's test split."""
     from training.export import export_checkpoint
 
-    out: dict[str, Any] = {"multi": evaluate(dgan.Predictor(dataset), dataset, root)}
+    predictor = dgan.Predictor(dataset)
+    out: dict[str, Any] = {"multi": evaluate(predictor, dataset, root)}
+    if predictor.spec.map is not None and predictor.spec.map.optional:
+        out["multi_nomap"] = evaluate(predictor, dataset, root, with_map=False)
     out["per_class"] = {}
     for cls in DATASETS[dataset].classes:
         ckpt = BASELINES / f"{dataset}-{cls}.pt"

@@ -43,10 +43,21 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
     map_spec = None
     if d.use_map and cfg.model.use_map and info.has_map:
         map_spec = dgan.MapSpec(
-            d.map_height_px, d.map_width_px, d.map_resolution_m, d.map_agent_row, d.map_width_px // 2
+            d.map_height_px,
+            d.map_width_px,
+            d.map_resolution_m,
+            d.map_agent_row,
+            d.map_width_px // 2,
+            optional=cfg.train.map_dropout > 0,
         )
     return dgan.InputSpec(
-        dt_s=info.dt_s, t_obs=info.t_obs, t_f=info.t_f, classes=info.classes, attention_lambda=0.5, map=map_spec
+        dt_s=info.dt_s,
+        t_obs=info.t_obs,
+        t_f=info.t_f,
+        classes=info.classes,
+        attention_lambda=0.5,
+        map=map_spec,
+        prior=dgan.PriorSpec(d.prior, d.prior_window_s),
     )
 
 
@@ -84,22 +95,52 @@ def to_tensors(batch: dict[str, Any]) -> dict[str, torch.Tensor]:
     return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in batch.items()}
 
 
-def model_inputs(b: dict[str, torch.Tensor]) -> list[torch.Tensor]:
-    keys = ["trajectory", "trajectory_mask", "state", "edge_index", "edge_features"]
-    return [b[k] for k in keys] + ([b["map"]] if "map" in b else [])
+#: The contract's network inputs, in the order of ``DGAN.forward``.
+INPUTS = ("trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "map", "map_present")
+
+
+def forward_inputs(b: dict[str, Any]) -> list[Any]:
+    """The network inputs present in a batch, in ``DGAN.forward``'s order."""
+    return [b[k] for k in INPUTS if k in b]
+
+
+def prepared_batch(
+    w: Windows, idx: np.ndarray, spec: dgan.InputSpec, flip: np.ndarray | None = None, drop: float = 0.0
+) -> dict[str, torch.Tensor]:
+    """Windows ``idx`` as one graph with the engine's kinematic prior (``prior``, after mirroring) and, for a model
+    whose map is optional, ``map_present``: 1, or 0 for the share ``drop`` of agents whose crop is blanked."""
+    b = w.batch(idx, flip)
+    b["prior"] = dgan.kinematic_prior(b["trajectory"], b["trajectory_mask"], b["state"], spec)
+    if spec.map is not None and spec.map.optional:
+        present = np.ones(len(b["state"]), dtype=np.float32)
+        if drop > 0:
+            gone = np.random.default_rng().random(len(present)) < drop
+            present[gone] = 0.0
+            b["map"][gone] = 0.0
+        b["map_present"] = present
+    return to_tensors(b)
 
 
 def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
     hw = (spec.map.height_px, spec.map.width_px) if spec.map else None
-    return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw)
+    optional = spec.map is not None and spec.map.optional
+    return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw, optional)
 
 
-def fit_anchors(cfg: Config, train: Windows, num_classes: int) -> tuple[np.ndarray, np.ndarray]:
-    """K_c k-means anchors for every class (from all of its targets, also in a per-class run, so that the model
-    contract holds) and the class of each anchor."""
+def residual_futures(w: Windows, spec: dgan.InputSpec) -> np.ndarray:
+    """``(A, T_f, 2)`` every agent's future minus its kinematic prior (agent frame): what the anchors model."""
+    prior = dgan.kinematic_prior(w.trajectory, w.trajectory_mask, w.state, spec)
+    out: np.ndarray = w.future - prior
+    return out
+
+
+def fit_anchors(cfg: Config, train: Windows, spec: dgan.InputSpec, num_classes: int) -> tuple[np.ndarray, np.ndarray]:
+    """K_c k-means anchors of the residuals from the prior for every class (from all of its targets, also in a
+    per-class run, so that the model contract holds) and the class of each anchor."""
     out = []
+    residual = residual_futures(train, spec)
     for c in range(num_classes):
-        fut = train.future[train.target & (train.class_index == c)]
+        fut = residual[train.target & (train.class_index == c)]
         if cfg.train.mirror:
             flipped = fut.copy()
             flipped[..., 1] *= -1
@@ -112,26 +153,28 @@ def fit_anchors(cfg: Config, train: Windows, num_classes: int) -> tuple[np.ndarr
 def forward_loss(
     net: torch.nn.Module, b: dict[str, torch.Tensor], anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config
 ) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
-    """The network on a batch and the loss over its target agents; also the targets' outputs."""
-    cl, al, off = net(*model_inputs(b))
+    """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior);
+    also the targets' outputs."""
+    cl, al, off = net(*forward_inputs(b))
     t = b["target"]
     outs = (cl[t], al[t], off[t])
-    loss, parts = dgan_loss(
-        *outs, b["future"][t], b["class_index"][t], anchors, class_of, cfg.train.alpha, cfg.train.beta
-    )
+    residual = b["future"][t] - b["prior"][t]
+    loss, parts = dgan_loss(*outs, residual, b["class_index"][t], anchors, class_of, cfg.train.alpha, cfg.train.beta)
     return loss, parts, outs
 
 
 @torch.no_grad()
-def validate(model: DGAN, w: Windows, anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config) -> dict[str, float]:
+def validate(
+    model: DGAN, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config
+) -> dict[str, float]:
     model.eval()
     losses, ade1, fde1, ade20, fde20, n = [], [], [], [], [], 0
     keep = windows_with_targets(w)
     for start in range(0, len(keep), 64):
-        b = to_tensors(w.batch(keep[start : start + 64]))
+        b = prepared_batch(w, keep[start : start + 64], spec)
         t = b["target"]
         loss, _, (cl, al, off) = forward_loss(model, b, anchors, class_of, cfg)
-        traj, _ = decode_torch(cl, al, off, anchors, class_of)
+        traj, _ = decode_torch(cl, al, off, anchors, class_of, b["prior"][t])
         d = torch.linalg.norm(traj - b["future"][t].unsqueeze(1), dim=-1)  # (n, K, T)
         losses.append(float(loss) * int(t.sum()))
         ade1.append(d[:, 0].mean(-1).sum())
@@ -147,6 +190,21 @@ def validate(model: DGAN, w: Windows, anchors: torch.Tensor, class_of: torch.Ten
         "val_min_ade20": float(sum(ade20)) / n,
         "val_min_fde20": float(sum(fde20)) / n,
     }
+
+
+def calibrate(
+    path: Path, model: DGAN, val: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor
+) -> float:
+    """Fits the temperature of the kept weights' anchor logits on the validation split; stores it in ``path``."""
+    from training.calibrate import fit_temperature
+
+    ckpt = torch.load(path, weights_only=False)
+    model.load_state_dict(ckpt["model"])
+    temperature, before, after = fit_temperature(model, val, spec, anchors, class_of)
+    ckpt["temperature"] = temperature
+    torch.save(ckpt, path)
+    print(f"temperature {temperature:.3f}: validation best-mode NLL {before:.4f} -> {after:.4f}", flush=True)
+    return temperature
 
 
 def main(argv: list[str] | None = None) -> Path:
@@ -192,7 +250,7 @@ def main(argv: list[str] | None = None) -> Path:
         anchors_np, class_of_np = ckpt["anchors"], ckpt["class_of"]
     else:
         ckpt = None
-        anchors_np, class_of_np = fit_anchors(cfg, train, len(spec.classes))
+        anchors_np, class_of_np = fit_anchors(cfg, train, spec, len(spec.classes))
     if cfg.data.target_class:
         restrict_targets(train, spec, cfg.data.target_class)
         restrict_targets(val, spec, cfg.data.target_class)
@@ -242,7 +300,7 @@ def main(argv: list[str] | None = None) -> Path:
         bar = tqdm(batches, desc=f"epoch {epoch + 1}/{cfg.train.epochs}", disable=not bars, leave=False)
         for idx in bar:
             flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
-            b = to_tensors(train.batch(idx, flip))
+            b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout)
             loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg)
             opt.zero_grad()
             loss.backward()  # type: ignore[no-untyped-call]
@@ -256,7 +314,7 @@ def main(argv: list[str] | None = None) -> Path:
         if not show:
             continue
         row = {"epoch": epoch + 1, **{k: v / max(1, len(batches)) for k, v in totals.items()}}
-        row.update(validate(model, val, anchors, class_of, cfg))
+        row.update(validate(model, val, spec, anchors, class_of, cfg))
         row["lr"] = sched.get_last_lr()[0]
         row["seconds"] = time.perf_counter() - t0
         new = not log_path.exists() or epoch == 0
@@ -284,6 +342,8 @@ def main(argv: list[str] | None = None) -> Path:
     if world > 1:
         dist.barrier()
         dist.destroy_process_group()
+    if show and cfg.train.calibrate and last_epoch == cfg.train.epochs:
+        calibrate(out / "best.pt", model, val, spec, anchors, class_of)
     if show and not args.no_export and last_epoch == cfg.train.epochs:
         from training.export import export_checkpoint
 

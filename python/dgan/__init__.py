@@ -13,7 +13,16 @@ from dgan.exceptions import DganError
 from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
 from dgan.predictor import Prediction, Predictor
 from dgan.scenes import scene_map
-from dgan.spec import InputSpec, MapSpec, attention_graph, preprocess, to_agent_frame, to_world_frame
+from dgan.spec import (
+    InputSpec,
+    MapSpec,
+    PriorSpec,
+    attention_graph,
+    kinematic_prior,
+    preprocess,
+    to_agent_frame,
+    to_world_frame,
+)
 
 __all__ = [
     "CLASSES",
@@ -24,6 +33,7 @@ __all__ = [
     "MapSpec",
     "Prediction",
     "Predictor",
+    "PriorSpec",
     "RasterMap",
     "VectorMap",
     "__version__",
@@ -31,6 +41,7 @@ __all__ = [
     "demo",
     "exceptions",
     "hdmaps",
+    "kinematic_prior",
     "models",
     "preprocess",
     "scene_map",

@@ -14,6 +14,7 @@ __all__ = [
     "__version__",
     "attention_graph",
     "init_onnxruntime",
+    "kinematic_prior",
     "preprocess",
     "to_agent_frame",
     "to_world_frame",
@@ -37,6 +38,7 @@ class Frame:
         map: RasterMap | VectorMap | None,
     ) -> Frame: ...
     def __len__(self) -> int: ...
+    def without_map(self) -> Frame: ...
     @property
     def positions(self) -> npt.NDArray[np.float64]: ...
     @property
@@ -83,6 +85,12 @@ class Predictor:
 
 def preprocess(frame: Frame, spec_json: str) -> dict[str, Any]: ...
 def validate_spec(json: str) -> str: ...
+def kinematic_prior(
+    trajectory: npt.NDArray[np.float32],
+    trajectory_mask: npt.NDArray[np.float32],
+    state: npt.NDArray[np.float32],
+    spec_json: str,
+) -> npt.NDArray[np.float32]: ...
 def to_agent_frame(
     points_world: npt.NDArray[np.float64], origins: npt.NDArray[np.float64], headings: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.float64]: ...

@@ -13,6 +13,7 @@ __all__ = [
     "InvalidFrameError",
     "InvalidMapError",
     "InvalidSpecError",
+    "MapRequiredError",
     "ModelLoadError",
     "ModelNotFoundError",
     "RuntimeLibraryError",
@@ -26,6 +27,12 @@ class DganError(Exception):
 
 class InvalidFrameError(DganError, ValueError):
     """A frame's arrays are inconsistent or hold invalid values (NaN, wrong shapes, no valid step)."""
+
+
+class MapRequiredError(InvalidFrameError):
+    """A model whose map branch needs a map was given a frame without one. Pass the map in the frame
+    (``map=dgan.VectorMap(...)``, ``dgan.RasterMap(...)`` or ``dgan.scene_map(name)``), or use a model trained with
+    optional maps (``spec.map.optional``), which serves frames without a map."""
 
 
 class UnknownClassError(DganError, ValueError):

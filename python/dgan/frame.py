@@ -308,5 +308,13 @@ class Frame:
         """The scene's map."""
         return self._map
 
+    def without_map(self) -> Frame:
+        """The same agents, histories and states without a map: how a model with an optional map is run on a scene
+        whose map is unknown (a model whose map is required raises :class:`~dgan.exceptions.MapRequiredError`)."""
+        out = Frame.__new__(Frame)
+        out._map = None
+        out._frame = self._frame.without_map()
+        return out
+
     def __repr__(self) -> str:
         return f"Frame(agents={len(self)}, steps={self.positions.shape[1]}, map={self._map!r})"

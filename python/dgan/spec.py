@@ -26,6 +26,23 @@ class MapSpec:
     agent_row: int = 48
     agent_col: int = 32
     draw_agents: bool = True
+    #: The model also serves frames without a map (contract 2): it takes a ``map_present`` input, and a frame
+    #: without a map gets blank crops flagged absent. A model whose map is not optional refuses such frames
+    #: (:class:`dgan.exceptions.MapRequiredError`).
+    optional: bool = False
+
+
+@dataclass(frozen=True)
+class PriorSpec:
+    """The kinematic prior the network's outputs are relative to (``docs/model-contract.md``).
+
+    ``kind`` is ``"none"`` (anchors are absolute, every contract-1 model) or ``"constant_velocity"`` (along the
+    direction of motion). ``window_s`` = 0 takes the traffic state's velocity; > 0 the mean velocity over the last
+    ``window_s`` seconds of the observed positions.
+    """
+
+    kind: str = "none"
+    window_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -38,6 +55,7 @@ class InputSpec:
     classes: Sequence[str] = ("vehicle", "cyclist", "pedestrian")
     attention_lambda: float = 0.5
     map: MapSpec | None = field(default=None)
+    prior: PriorSpec = field(default_factory=PriorSpec)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "classes", tuple(self.classes))
@@ -58,6 +76,7 @@ class InputSpec:
             classes=tuple(d["classes"]),
             attention_lambda=float(d["attention_lambda"]),
             map=None if m is None else MapSpec(**m),
+            prior=PriorSpec(**d.get("prior", {})),
         )
 
     @property
@@ -70,11 +89,21 @@ def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:
     """The network inputs of ``frame`` (see ``docs/model-contract.md``) plus its geometry.
 
     Returns ``trajectory (N, T_obs, 2)``, ``trajectory_mask (N, T_obs)``, ``state (N, 7 + C)``,
-    ``edge_index (E, 2)``, ``edge_features (E, 6)``, ``map (N, 3, H, W)`` for map models, and ``origin (N, 2)``,
+    ``edge_index (E, 2)``, ``edge_features (E, 6)``, ``map (N, 3, H, W)`` for map models, ``map_present (N,)`` for
+    models whose map is optional, the kinematic ``prior (N, T_f, 2)`` in each agent's frame, and ``origin (N, 2)``,
     ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and undirected ``edges``.
     """
     out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, spec.to_json())
     return out
+
+
+def kinematic_prior(
+    trajectory: npt.ArrayLike, trajectory_mask: npt.ArrayLike, state: npt.ArrayLike, spec: InputSpec
+) -> npt.NDArray[np.float32]:
+    """The engine's kinematic prior ``(N, T_f, 2)`` (agent frame) from the network inputs ``trajectory``,
+    ``trajectory_mask`` and ``state``; training fits its anchors and offsets to the residual from it."""
+    t, m, s = (np.ascontiguousarray(a, dtype=np.float32) for a in (trajectory, trajectory_mask, state))
+    return _dgan.kinematic_prior(t, m, s, spec.to_json())
 
 
 def to_agent_frame(

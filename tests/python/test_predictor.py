@@ -166,3 +166,46 @@ def test_contract_is_exposed(nomap_model: Path) -> None:
         "pedestrian": (2, 12, 2),
     }
     assert "contract-fixture" in repr(predictor.contract["name"])
+
+
+def test_a_required_map_is_a_typed_error_that_names_the_fix(map_model: Path, zara1_frame: dgan.Frame) -> None:
+    # A contract-1 map model cannot run without a map: never a silent black crop.
+    predictor = dgan.Predictor(map_model)
+    assert not predictor.spec.map.optional  # type: ignore[union-attr]
+    with pytest.raises(exc.MapRequiredError, match=r"pass the scene's map") as info:
+        predictor.predict(zara1_frame)
+    assert isinstance(info.value, exc.InvalidFrameError)
+    assert isinstance(info.value, ValueError)
+
+
+def test_bundled_map_models_also_serve_frames_without_a_map(zara1_frame: dgan.Frame) -> None:
+    predictor = dgan.Predictor("zara1")
+    spec = predictor.spec
+    assert spec.map is not None
+    assert spec.map.optional
+    with_map = dgan.Frame(zara1_frame.positions, mask=zara1_frame.mask, map=dgan.scene_map("zara1"))
+    x = dgan.preprocess(with_map, spec)
+    assert x["map_present"].tolist() == [1.0] * len(with_map)
+    blank = dgan.preprocess(with_map.without_map(), spec)
+    assert blank["map_present"].tolist() == [0.0] * len(with_map)
+    assert not blank["map"].any()
+    a, b = predictor.predict(with_map), predictor.predict(with_map.without_map())
+    assert a.trajectories.shape == b.trajectories.shape
+    assert not np.allclose(a.trajectories, b.trajectories)  # the map is used when it is there
+
+
+def test_the_prior_and_temperature_are_declared(zara1_frame: dgan.Frame) -> None:
+    predictor = dgan.Predictor("zara1")
+    c = predictor.contract
+    assert c["contract_version"] == 2
+    assert c["prior"]["kind"] == "constant_velocity"
+    assert 0.001 <= c["temperature"] <= 1000
+    # The engine's prior is constant velocity along the direction of motion: v · t · dt in the agent frame.
+    x = dgan.preprocess(zara1_frame.without_map(), predictor.spec)
+    speed, cos, sin = x["state"][:, 0], x["state"][:, 3], x["state"][:, 4]
+    t = np.arange(1, 13) * 0.4
+    want = np.stack([np.outer(speed * cos, t), np.outer(speed * sin, t)], axis=-1)
+    np.testing.assert_allclose(x["prior"], want, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(
+        dgan.kinematic_prior(x["trajectory"], x["trajectory_mask"], x["state"], predictor.spec), x["prior"]
+    )

@@ -16,14 +16,13 @@ from conftest import shared_data
 
 import dgan
 from training.config import Config
-from training.export import export_model, load_checkpoint
+from training.export import checkpoint_temperature, export_model, load_checkpoint
 from training.loss import closest_anchor, decode_torch, dgan_loss
-from training.train import build_model, input_spec
+from training.train import INPUTS, build_model, input_spec
 
 ROOT = Path(__file__).resolve().parents[2]
 CHECKPOINTS = ROOT / "training" / "checkpoints"
 CONFIG = ROOT / "training" / "configs" / "ethucy_zara1.toml"
-INPUTS = ["trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "map"]
 
 
 def data_root() -> Path:
@@ -72,14 +71,26 @@ def real_frames(spec: dgan.InputSpec) -> list[dgan.Frame]:
 
 
 def assert_parity(
-    model: torch.nn.Module, spec: dgan.InputSpec, anchors: np.ndarray, class_of: np.ndarray, onnx_path: Path
+    model: torch.nn.Module,
+    spec: dgan.InputSpec,
+    anchors: np.ndarray,
+    class_of: np.ndarray,
+    onnx_path: Path,
+    temperature: float = 1.0,
 ) -> None:
+    """The engine's predictions equal PyTorch's (model, kinematic prior, decoding at ``temperature``) on real
+    frames, and, for a model whose map is optional, on the same frames without their map."""
     predictor = dgan.Predictor(onnx_path)
-    for frame in real_frames(spec):
+    frames = real_frames(spec)
+    if spec.map is not None and spec.map.optional:
+        frames += [frame.without_map() for frame in frames]
+    for frame in frames:
         x = dgan.preprocess(frame, spec)
         with torch.no_grad():
             cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
-            traj, prob = decode_torch(cl, al, off, torch.from_numpy(anchors), torch.from_numpy(class_of).long())
+            prior = torch.from_numpy(x["prior"])
+            a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
+            traj, prob = decode_torch(cl, al, off, a, c, prior, temperature)
         n, k = traj.shape[:2]
         flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
         world = dgan.to_world_frame(flat, x["origin"], x["heading"]).reshape(n, k, -1, 2)
@@ -91,7 +102,8 @@ def assert_parity(
 @pytest.mark.parametrize("name", sorted(p.stem for p in CHECKPOINTS.glob("*.pt")))
 def test_bundled_models_match_pytorch(name: str) -> None:
     model, spec, anchors, class_of, _ = load_checkpoint(CHECKPOINTS / f"{name}.pt")
-    assert_parity(model, spec, anchors, class_of, dgan.models.path(name))
+    temperature = checkpoint_temperature(CHECKPOINTS / f"{name}.pt")
+    assert_parity(model, spec, anchors, class_of, dgan.models.path(name), temperature)
 
 
 def test_every_bundled_model_has_a_checkpoint() -> None:
@@ -107,9 +119,11 @@ def test_every_bundled_model_has_a_checkpoint() -> None:
         ("sdd", {}),
         ("apolloscape", {}),
         ("hdmap", {}),
+        ("hdmap", {"train.map_dropout": 0.0}),
+        ("ethucy_zara1", {"data.prior": "none", "train.map_dropout": 0.0}),
     ],
 )
-def test_fresh_exports_match_pytorch(config: str, variant: dict[str, bool], tmp_path: Path) -> None:
+def test_fresh_exports_match_pytorch(config: str, variant: dict[str, object], tmp_path: Path) -> None:
     torch.manual_seed(1)
     cfg = Config.load(ROOT / "training" / "configs" / f"{config}.toml", variant)
     spec = input_spec(cfg)
@@ -124,9 +138,12 @@ def test_fresh_exports_match_pytorch(config: str, variant: dict[str, bool], tmp_
             assert m.running_var is not None
             m.running_mean.uniform_(-0.5, 0.5)
             m.running_var.uniform_(0.5, 2.0)
-    path = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "fresh")
-    assert dgan.Predictor(path).classes == spec.classes
-    assert_parity(model, spec, anchors, class_of, path)
+    path = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "fresh", temperature=1.7)
+    predictor = dgan.Predictor(path)
+    assert predictor.classes == spec.classes
+    assert predictor.contract["contract_version"] == 2
+    assert predictor.contract["temperature"] == pytest.approx(1.7)
+    assert_parity(model, spec, anchors, class_of, path, temperature=1.7)
 
 
 def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:

@@ -11,7 +11,7 @@
 //!   agent's crop at the model's map spec, and the whole predict it is part of; needs `ORT_DYLIB_PATH`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use dgan_core::decode::{decode, Anchors};
+use dgan_core::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
 use dgan_core::graph::{attention_zone_edges, attention_zone_edges_brute_force};
 use dgan_core::raster::rasterize;
 use dgan_core::state::traffic_states;
@@ -78,8 +78,15 @@ fn vector_map() -> SceneMap {
 }
 
 fn bench_raster(c: &mut Criterion) {
-    let spec =
-        MapSpec { height_px: 64, width_px: 64, resolution_m: 0.5, agent_row: 48, agent_col: 32, draw_agents: true };
+    let spec = MapSpec {
+        height_px: 64,
+        width_px: 64,
+        resolution_m: 0.5,
+        agent_row: 48,
+        agent_col: 32,
+        draw_agents: true,
+        optional: false,
+    };
     let mut g = c.benchmark_group("raster");
     let frame = road_frame(vector_map());
     let states = traffic_states(&frame, 0.2);
@@ -99,8 +106,11 @@ fn bench_decode(c: &mut Criterion) {
     let cl = Array2::from_shape_fn((n, 3), |_| rng.random_range(-2.0f32..2.0));
     let al = Array2::from_shape_fn((n, 60), |_| rng.random_range(-2.0f32..2.0));
     let off = Array4::from_shape_fn((n, 60, t_f, 2), |_| rng.random_range(-0.5f32..0.5));
+    let prior = Array3::from_shape_fn((n, t_f, 2), |(i, t, d)| (i * t + d) as f32 * 0.05);
     let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, 0.0], i as f64 * 0.1)).collect();
-    c.bench_function("decode/100", |b| b.iter(|| decode(cl.view(), al.view(), off.view(), &anchors, &poses, 60)));
+    let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
+    let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), temperature: 1.3 };
+    c.bench_function("decode/100", |b| b.iter(|| decode(out, params, &poses, 60)));
 }
 
 /// The model at `path` (relative to the repository root), or None with a note when ONNX Runtime is not configured.

@@ -4,13 +4,18 @@
 use crate::class::AgentClass;
 use crate::decode::Anchors;
 use crate::error::{DganError, Result};
+use crate::prior::PriorSpec;
 use crate::spec::{InputSpec, EDGE_FEATURES};
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// The contract version this engine reads and the exporter writes.
-pub const CONTRACT_VERSION: u32 = 1;
+/// The contract version the exporter writes. Version 2 adds the kinematic prior, optional maps (`map_present`)
+/// and the temperature of the anchor logits.
+pub const CONTRACT_VERSION: u32 = 2;
+/// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
+/// without.
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 2] = [1, 2];
 /// The ONNX `metadata_props` key holding the contract as JSON.
 pub const METADATA_KEY: &str = "dgan_contract";
 
@@ -26,6 +31,8 @@ pub const INPUT_EDGE_INDEX: &str = "edge_index";
 pub const INPUT_EDGE_FEATURES: &str = "edge_features";
 /// Input (map models only): agent-centric RGB crops `(N, 3, H, W)` f32 in [0, 1].
 pub const INPUT_MAP: &str = "map";
+/// Input (models with an optional map only): `(N,)` f32, 1 where the agent's crop holds a map, 0 where it is blank.
+pub const INPUT_MAP_PRESENT: &str = "map_present";
 /// Output: class logits `(N, C)` f32.
 pub const OUTPUT_CLASS_LOGITS: &str = "class_logits";
 /// Output: anchor logits `(N, K)` f32, K = Σ K_c, grouped by class in the model's class order.
@@ -74,14 +81,21 @@ pub struct ModelContract {
     /// The input specification (flattened into the same JSON object).
     #[serde(flatten)]
     pub input: InputSpec,
-    /// Anchors per class name: `K_c × T_f` points `[x, y]` in the agent-centric frame.
+    /// Anchors per class name: `K_c × T_f` points `[x, y]` in the agent-centric frame, relative to the prior.
     pub anchors: BTreeMap<String, Vec<Vec<[f64; 2]>>>,
+    /// The anchor logits are divided by this before their softmax (fitted on a validation split; 1 = as trained).
+    #[serde(default = "unit_temperature")]
+    pub temperature: f64,
     /// A short model name.
     #[serde(default)]
     pub name: String,
     /// Free-form provenance (data, protocol, metrics).
     #[serde(default)]
     pub description: String,
+}
+
+fn unit_temperature() -> f64 {
+    1.0
 }
 
 impl ModelContract {
@@ -100,10 +114,26 @@ impl ModelContract {
 
     /// Checks the version, units, input specification and anchors.
     pub fn validate(&self) -> Result<()> {
-        if self.contract_version != CONTRACT_VERSION {
+        if !SUPPORTED_CONTRACT_VERSIONS.contains(&self.contract_version) {
             return Err(DganError::Contract(format!(
-                "contract_version {} is not supported; this engine reads version {CONTRACT_VERSION}",
+                "contract_version {} is not supported; this engine reads versions {SUPPORTED_CONTRACT_VERSIONS:?}",
                 self.contract_version
+            )));
+        }
+        if self.contract_version < 2 {
+            let optional_map = self.input.map.as_ref().is_some_and(|m| m.optional);
+            if self.input.prior != PriorSpec::NONE || optional_map || self.temperature != 1.0 {
+                return Err(DganError::Contract(
+                    "prior, map.optional and temperature are contract-2 keys; a contract_version 1 model cannot \
+                     declare them"
+                        .into(),
+                ));
+            }
+        }
+        if !(self.temperature.is_finite() && (1e-3..=1e3).contains(&self.temperature)) {
+            return Err(DganError::Contract(format!(
+                "temperature must be a number in [0.001, 1000], got {}",
+                self.temperature
             )));
         }
         if self.units != "m" {
@@ -187,6 +217,9 @@ pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
             dtype: DType::F32,
             dims: vec![Dim::Agents, Dim::Fixed(3), Dim::Fixed(m.height_px), Dim::Fixed(m.width_px)],
         });
+        if m.optional {
+            v.push(TensorSpec { name: INPUT_MAP_PRESENT, dtype: DType::F32, dims: vec![Dim::Agents] });
+        }
     }
     v
 }
@@ -243,9 +276,30 @@ mod tests {
     }
 
     #[test]
+    fn version_2_declares_prior_temperature_and_optional_maps() {
+        let v2 = json().replace("\"contract_version\": 1", "\"contract_version\": 2").replace(
+            "\"map\": null",
+            "\"map\": {\"height_px\": 8, \"width_px\": 8, \"resolution_m\": 1, \"agent_row\": 4, \"agent_col\": 4, \
+             \"optional\": true}, \"prior\": {\"kind\": \"constant_velocity\", \"window_s\": 0.8}, \"temperature\": 1.5",
+        );
+        let c = ModelContract::from_json(&v2).unwrap();
+        assert_eq!(c.temperature, 1.5);
+        assert_eq!(c.input.prior.kind, crate::prior::PriorKind::ConstantVelocity);
+        let names: Vec<_> = c.expected_inputs().iter().map(|t| t.name).collect();
+        assert_eq!(names.last(), Some(&INPUT_MAP_PRESENT));
+        // Version 1: no prior, temperature 1.
+        let v1 = ModelContract::from_json(&json()).unwrap();
+        assert_eq!((v1.input.prior, v1.temperature), (PriorSpec::NONE, 1.0));
+    }
+
+    #[test]
     fn rejects_broken_contracts() {
         let cases = [
-            json().replace("\"contract_version\": 1", "\"contract_version\": 2"),
+            json().replace("\"contract_version\": 1", "\"contract_version\": 3"),
+            json().replace("\"map\": null", "\"map\": null, \"temperature\": 2.0"),
+            json()
+                .replace("\"contract_version\": 1", "\"contract_version\": 2")
+                .replace("\"map\": null", "\"map\": null, \"temperature\": -1"),
             json().replace("\"units\": \"m\"", "\"units\": \"px\""),
             json().replace("\"vehicle\": [[[1, 0], [2, 0]]], ", ""),
             json().replace("[[1, 0], [2, 0]]", "[[1, 0]]"),

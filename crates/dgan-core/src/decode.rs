@@ -1,10 +1,10 @@
-//! Anchor decoding: hierarchical probabilities p(mode) = p(c) · p(k | c), trajectories = anchor + offset taken
-//! back to the world frame, modes ranked by probability.
+//! Anchor decoding: hierarchical probabilities p(mode) = p(c) · p(k | c) with p(k | c) = softmax(anchor logits / T),
+//! trajectories = kinematic prior + anchor + offset taken back to the world frame, modes ranked by probability.
 
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
 use crate::transform::AgentPose;
-use ndarray::{Array2, Array3, Array4, ArrayView2, ArrayView4};
+use ndarray::{Array2, Array3, Array4, ArrayView2, ArrayView3, ArrayView4};
 
 /// Per-class anchor trajectories in the agent-centric frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -99,16 +99,34 @@ fn softmax(logits: impl Iterator<Item = f64>) -> Vec<f64> {
     e.into_iter().map(|x| x / sum).collect()
 }
 
+/// The network's outputs for N agents.
+#[derive(Debug, Clone, Copy)]
+pub struct NetworkOutputs<'a> {
+    /// `(N, C)` logits of p(c).
+    pub class_logits: ArrayView2<'a, f32>,
+    /// `(N, K)` logits of p(k | c), grouped by class.
+    pub anchor_logits: ArrayView2<'a, f32>,
+    /// `(N, K, T_f, 2)` agent-frame offsets from each anchor.
+    pub offsets: ArrayView4<'a, f32>,
+}
+
+/// How to turn outputs into modes: the anchors, the kinematic prior `(N, T_f, 2)` they are relative to (agent
+/// frame; `None` for none) and the temperature of the anchor logits.
+#[derive(Debug, Clone, Copy)]
+pub struct DecodeParams<'a> {
+    /// The model's anchors.
+    pub anchors: &'a Anchors,
+    /// The kinematic prior of each agent, added to every mode.
+    pub prior: Option<ArrayView3<'a, f32>>,
+    /// p(k | c) = softmax(anchor_logits / temperature).
+    pub temperature: f64,
+}
+
 /// Decodes the network's outputs for agents whose agent-centric frames are `poses`, keeping the top `modes`
-/// (at most K). `class_logits` is `(N, C)`, `anchor_logits` `(N, K)`, `offsets` `(N, K, T_f, 2)`.
-pub fn decode(
-    class_logits: ArrayView2<'_, f32>,
-    anchor_logits: ArrayView2<'_, f32>,
-    offsets: ArrayView4<'_, f32>,
-    anchors: &Anchors,
-    poses: &[AgentPose],
-    modes: usize,
-) -> Result<Decoded> {
+/// (at most K).
+pub fn decode(out: NetworkOutputs<'_>, params: DecodeParams<'_>, poses: &[AgentPose], modes: usize) -> Result<Decoded> {
+    let NetworkOutputs { class_logits, anchor_logits, offsets } = out;
+    let DecodeParams { anchors, prior, temperature } = params;
     let n = poses.len();
     let c = anchors.classes().len();
     let k_total = anchors.total();
@@ -122,6 +140,14 @@ pub fn decode(
     }
     if offsets.dim() != (n, k_total, t_f, 2) {
         return bad(format!("offsets has shape {:?}, expected ({n}, {k_total}, {t_f}, 2)", offsets.dim()));
+    }
+    if let Some(p) = prior {
+        if p.dim() != (n, t_f, 2) {
+            return bad(format!("the prior has shape {:?}, expected ({n}, {t_f}, 2)", p.dim()));
+        }
+    }
+    if !(temperature.is_finite() && temperature > 0.0) {
+        return Err(DganError::Contract(format!("temperature must be positive, got {temperature}")));
     }
     if class_logits.iter().chain(anchor_logits.iter()).chain(offsets.iter()).any(|v| !v.is_finite()) {
         return bad("the model produced NaN or infinite values".into());
@@ -141,7 +167,7 @@ pub fn decode(
         let mut p = Vec::with_capacity(k_total);
         let mut start = 0;
         for (ci, &kc) in per_class.iter().enumerate() {
-            let pk = softmax((start..start + kc).map(|k| f64::from(anchor_logits[[i, k]])));
+            let pk = softmax((start..start + kc).map(|k| f64::from(anchor_logits[[i, k]]) / temperature));
             p.extend(pk.into_iter().map(|v| v * pc[ci]));
             start += kc;
         }
@@ -157,9 +183,10 @@ pub fn decode(
             out.mode_anchors[[i, mi]] = k as i64;
             let Some(anchor) = anchors.anchor(k) else { continue };
             for t in 0..t_f {
+                let base = prior.map_or([0.0, 0.0], |p| [f64::from(p[[i, t, 0]]), f64::from(p[[i, t, 1]])]);
                 let local = [
-                    anchor[[t, 0]] + f64::from(offsets[[i, k, t, 0]]),
-                    anchor[[t, 1]] + f64::from(offsets[[i, k, t, 1]]),
+                    base[0] + anchor[[t, 0]] + f64::from(offsets[[i, k, t, 0]]),
+                    base[1] + anchor[[t, 1]] + f64::from(offsets[[i, k, t, 1]]),
                 ];
                 let w = pose.to_world(local);
                 out.trajectories[[i, mi, t, 0]] = w[0];
@@ -173,7 +200,48 @@ pub fn decode(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ndarray::{array, Array4};
+    use ndarray::array;
+
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        class_logits: &Array2<f32>,
+        anchor_logits: &Array2<f32>,
+        offsets: &Array4<f32>,
+        anchors: &Anchors,
+        prior: Option<&Array3<f32>>,
+        temperature: f64,
+        pose: AgentPose,
+        modes: usize,
+    ) -> Result<Decoded> {
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let params = DecodeParams { anchors, prior: prior.map(|p| p.view()), temperature };
+        decode(out, params, &[pose], modes)
+    }
+
+    #[test]
+    fn prior_and_temperature() {
+        let anchors = Anchors::new(vec![AgentClass::Pedestrian], vec![array![[[1.0, 0.0]], [[2.0, 0.0]]]]).unwrap();
+        let pose = AgentPose::new([0.0, 0.0], 0.0);
+        let offsets = Array4::<f32>::zeros((1, 2, 1, 2));
+        let logits = array![[0.0f32, 2.0f32.ln()]];
+        let prior = array![[[0.5f32, -1.0]]];
+        let d = run(&array![[0.0f32]], &logits, &offsets, &anchors, Some(&prior), 1.0, pose, 2).unwrap();
+        // The prior is added to every mode.
+        assert_eq!(d.trajectories[[0, 0, 0, 0]], 2.5);
+        assert_eq!(d.trajectories[[0, 0, 0, 1]], -1.0);
+        assert!((d.probabilities[[0, 0]] - 2.0 / 3.0).abs() < 1e-9);
+        // T = 2 halves the logits: softmax(0, ln 2 / 2) = (1, √2) / (1 + √2).
+        let d = run(&array![[0.0f32]], &logits, &offsets, &anchors, Some(&prior), 2.0, pose, 2).unwrap();
+        let want = 2f64.sqrt() / (1.0 + 2f64.sqrt());
+        assert!((d.probabilities[[0, 0]] - want).abs() < 1e-7, "{}", d.probabilities[[0, 0]]);
+        let bad = array![[[0.5f32, -1.0], [0.0, 0.0]]];
+        assert!(run(&array![[0.0f32]], &logits, &offsets, &anchors, Some(&bad), 1.0, pose, 2).is_err());
+        assert!(run(&array![[0.0f32]], &logits, &offsets, &anchors, None, 0.0, pose, 2).is_err());
+    }
 
     #[test]
     fn hand_computed_case() {
@@ -190,7 +258,7 @@ mod tests {
         offsets[[0, 1, 0, 1]] = 0.5;
         // Agent at (10, 20) facing +y: local (x, y) → world (10 - y, 20 + x).
         let pose = AgentPose::new([10.0, 20.0], std::f64::consts::FRAC_PI_2);
-        let d = decode(class_logits.view(), anchor_logits.view(), offsets.view(), &anchors, &[pose], 3).unwrap();
+        let d = run(&class_logits, &anchor_logits, &offsets, &anchors, None, 1.0, pose, 3).unwrap();
         let expect_p = [0.5, 0.25, 0.25];
         for (got, want) in d.probabilities.iter().zip(expect_p) {
             assert!((got - want).abs() < 1e-6, "{got} vs {want}");
@@ -211,13 +279,12 @@ mod tests {
         let anchors = Anchors::new(vec![AgentClass::Pedestrian], vec![array![[[1.0, 0.0]], [[2.0, 0.0]]]]).unwrap();
         let pose = AgentPose::new([0.0, 0.0], 0.0);
         let offsets = Array4::<f32>::zeros((1, 2, 1, 2));
-        let d = decode(array![[0.0f32]].view(), array![[0.0f32, 1.0]].view(), offsets.view(), &anchors, &[pose], 1)
-            .unwrap();
+        let d = run(&array![[0.0f32]], &array![[0.0f32, 1.0]], &offsets, &anchors, None, 1.0, pose, 1).unwrap();
         assert_eq!(d.trajectories.dim(), (1, 1, 1, 2));
         assert_eq!(d.trajectories[[0, 0, 0, 0]], 2.0);
-        let nan = decode(array![[f32::NAN]].view(), array![[0.0f32, 1.0]].view(), offsets.view(), &anchors, &[pose], 1);
+        let nan = run(&array![[f32::NAN]], &array![[0.0f32, 1.0]], &offsets, &anchors, None, 1.0, pose, 1);
         assert!(matches!(nan, Err(DganError::Inference(_))));
-        let shape = decode(array![[0.0f32]].view(), array![[0.0f32]].view(), offsets.view(), &anchors, &[pose], 1);
+        let shape = run(&array![[0.0f32]], &array![[0.0f32]], &offsets, &anchors, None, 1.0, pose, 1);
         assert!(matches!(shape, Err(DganError::Inference(_))));
     }
 }

@@ -12,6 +12,9 @@ pub enum DganError {
     /// A class name or index that neither the engine nor the model knows.
     #[error("unknown class: {0}")]
     UnknownClass(String),
+    /// The model's map branch needs a map and the frame has none.
+    #[error("map required: {0}")]
+    MapRequired(String),
     /// A raster or vector map that cannot be used (bad image shape, singular homography, degenerate geometry).
     #[error("invalid map: {0}")]
     InvalidMap(String),

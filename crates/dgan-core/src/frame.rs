@@ -144,6 +144,11 @@ impl Frame {
         self
     }
 
+    /// The same agents without a map (a model whose map is optional then sees blank crops flagged absent).
+    pub fn without_map(&self) -> Self {
+        Self { map: None, ..self.clone() }
+    }
+
     fn merge_sizes(what: &str, target: &mut [f64], given: &[f64]) -> Result<()> {
         for (i, (t, g)) in target.iter_mut().zip(given).enumerate() {
             if g.is_nan() {

@@ -7,6 +7,7 @@
 //! - [`state`]: speed, acceleration, heading and yaw rate from the history; [`transform`]: agent-centric SE(2).
 //! - [`graph`]: the attention-zone graph r = v · T_f + λ · length, sub-quadratic and exact.
 //! - [`raster`]: agent-centric RGB map crops in the paper's colours.
+//! - [`prior`]: the kinematic rollout the network refines.
 //! - [`preprocess`]: frame → network inputs; [`decode`]: p(c) · p(k | c), anchors + offsets → world modes.
 //! - [`contract`]: the model contract; [`runtime`]: the ONNX Runtime session and [`Predictor`].
 //!
@@ -33,6 +34,7 @@ pub mod frame;
 pub mod graph;
 pub mod map;
 pub mod preprocess;
+pub mod prior;
 pub mod raster;
 pub mod runtime;
 pub mod spec;
@@ -44,5 +46,6 @@ pub use contract::ModelContract;
 pub use error::{DganError, Result};
 pub use frame::Frame;
 pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
+pub use prior::{PriorKind, PriorSpec};
 pub use runtime::{init_onnxruntime, Prediction, Predictor, PredictorOptions};
 pub use spec::{InputSpec, MapSpec};

@@ -1,14 +1,14 @@
 //! Frame → the exact tensors the network receives. Training calls this same code through the Python bindings, so
 //! training and inference cannot drift.
 
-use crate::error::{invalid_frame, Result};
+use crate::error::{invalid_frame, DganError, Result};
 use crate::frame::Frame;
 use crate::graph::{attention_radius, attention_zone_edges};
 use crate::raster::rasterize;
 use crate::spec::{InputSpec, EDGE_FEATURES, STATE_FEATURES};
 use crate::state::{traffic_states, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
-use ndarray::{Array2, Array3, Array4};
+use ndarray::{Array1, Array2, Array3, Array4};
 
 /// The network's input tensors (see `docs/model-contract.md`).
 #[derive(Debug, Clone)]
@@ -24,8 +24,10 @@ pub struct NetworkInputs {
     pub edge_index: Array2<i64>,
     /// `(E, 6)` the sender's position, velocity relative to the receiver's, and heading, in the receiver's frame.
     pub edge_features: Array2<f32>,
-    /// `(N, 3, H, W)` agent-centric map crops, for models with a map branch.
+    /// `(N, 3, H, W)` agent-centric map crops, for models with a map branch (zeros where the frame has no map).
     pub map: Option<Array4<f32>>,
+    /// `(N,)` 1 where the crop holds a map, 0 where the frame has none: for models whose map is optional.
+    pub map_present: Option<Array1<f32>>,
 }
 
 /// A preprocessed frame: network inputs plus the geometry needed to decode and inspect the outputs.
@@ -33,6 +35,8 @@ pub struct NetworkInputs {
 pub struct Preprocessed {
     /// The network inputs.
     pub inputs: NetworkInputs,
+    /// `(N, T_f, 2)` the kinematic prior in each agent's frame (zeros for a model without one); decoding adds it.
+    pub prior: Array3<f32>,
     /// Each agent's frame at t_obs.
     pub poses: Vec<AgentPose>,
     /// Each agent's traffic state.
@@ -115,12 +119,25 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
         }
     }
 
-    let map = match &spec.map {
-        Some(m) => Some(rasterize(frame, &states, m)?),
-        None => None,
+    let prior = spec.prior.rollout(trajectory.view(), trajectory_mask.view(), state.view(), spec.dt_s, spec.t_f)?;
+    let (map, map_present) = match (&spec.map, frame.map()) {
+        (None, _) => (None, None),
+        (Some(m), Some(_)) => (Some(rasterize(frame, &states, m)?), m.optional.then(|| Array1::ones(n))),
+        (Some(m), None) if m.optional || n == 0 => {
+            (Some(Array4::zeros((n, 3, m.height_px, m.width_px))), m.optional.then(|| Array1::zeros(n)))
+        }
+        (Some(_), None) => {
+            return Err(DganError::MapRequired(
+                "this model's map branch needs a map and the frame has none: pass the scene's map in the frame \
+                 (map=dgan.VectorMap(...), dgan.RasterMap(...) or dgan.scene_map(name)), or use a model trained \
+                 with optional maps (contract 2, map.optional = true), which serves frames without one"
+                    .into(),
+            ))
+        }
     };
     Ok(Preprocessed {
-        inputs: NetworkInputs { trajectory, trajectory_mask, state, edge_index, edge_features, map },
+        inputs: NetworkInputs { trajectory, trajectory_mask, state, edge_index, edge_features, map, map_present },
+        prior,
         poses,
         states,
         radii,
@@ -132,11 +149,15 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
 mod tests {
     use super::*;
     use crate::class::AgentClass;
-    use crate::error::DganError;
+    use crate::prior::{PriorKind, PriorSpec};
     use crate::spec::MapSpec;
     use ndarray::Array3;
 
     fn spec(map: bool) -> InputSpec {
+        spec_with(map, false)
+    }
+
+    fn spec_with(map: bool, optional: bool) -> InputSpec {
         InputSpec {
             dt_s: 0.5,
             t_obs: 3,
@@ -150,7 +171,9 @@ mod tests {
                 agent_row: 6,
                 agent_col: 4,
                 draw_agents: true,
+                optional,
             }),
+            prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.0 },
         }
     }
 
@@ -164,7 +187,7 @@ mod tests {
             p[[2, t, 0]] = 1000.0;
         }
         let f = Frame::new(p, None, vec![AgentClass::Pedestrian, AgentClass::Pedestrian, AgentClass::Vehicle]).unwrap();
-        let pre = preprocess(&f, &spec(true)).unwrap();
+        let pre = preprocess(&f, &spec_with(true, true)).unwrap();
         let x = &pre.inputs;
         assert_eq!(x.trajectory.dim(), (3, 3, 2));
         assert_eq!(x.trajectory[[0, 0, 0]], -1.0);
@@ -176,8 +199,16 @@ mod tests {
         assert_eq!(ei, vec![[0, 0], [0, 1], [1, 0], [1, 1], [2, 2]]);
         // Agent 1 seen from agent 0: 2 m ahead, closing at 1 m/s.
         assert_eq!(x.edge_features.row(1).to_vec(), vec![2.0, 0.0, -1.0, 0.0, 1.0, 0.0]);
+        // No map in the frame, optional map: blank crops flagged absent.
         assert_eq!(x.map.as_ref().map(|m| m.dim()), Some((3, 3, 8, 8)));
+        assert!(x.map.as_ref().unwrap().iter().all(|v| *v == 0.0));
+        assert_eq!(x.map_present.as_ref().unwrap().to_vec(), vec![0.0; 3]);
+        // Constant velocity: agent 0 moves 1 m/s ahead, 0.5 m per step.
+        assert_eq!(pre.prior[[0, 3, 0]], 2.0);
+        assert_eq!(pre.prior[[1, 3, 0]], 0.0);
         assert!(preprocess(&f, &spec(false)).unwrap().inputs.map.is_none());
+        // A map that is not optional is required.
+        assert!(matches!(preprocess(&f, &spec(true)), Err(DganError::MapRequired(_))));
     }
 
     #[test]

@@ -311,7 +311,15 @@ mod tests {
     use std::sync::Arc;
 
     fn spec(draw_agents: bool) -> MapSpec {
-        MapSpec { height_px: 40, width_px: 40, resolution_m: 0.5, agent_row: 30, agent_col: 20, draw_agents }
+        MapSpec {
+            height_px: 40,
+            width_px: 40,
+            resolution_m: 0.5,
+            agent_row: 30,
+            agent_col: 20,
+            draw_agents,
+            optional: false,
+        }
     }
 
     /// One agent at (100, 50) heading +y (north): its forward is image-up, its left (world -x) is image-left.

@@ -6,10 +6,10 @@
 
 use crate::contract::{check_tensor, DType, ModelContract, METADATA_KEY};
 use crate::contract::{
-    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_STATE, INPUT_TRAJECTORY, INPUT_TRAJECTORY_MASK,
-    OUTPUT_ANCHOR_LOGITS, OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
+    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_PRESENT, INPUT_STATE, INPUT_TRAJECTORY,
+    INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS, OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
 };
-use crate::decode::{decode, Anchors};
+use crate::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
 use crate::preprocess::{preprocess, NetworkInputs};
@@ -225,7 +225,17 @@ impl Predictor {
             });
         }
         let (class_logits, anchor_logits, offsets) = self.run(pre.inputs)?;
-        let d = decode(class_logits.view(), anchor_logits.view(), offsets.view(), &self.anchors, &pre.poses, modes)?;
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let params = DecodeParams {
+            anchors: &self.anchors,
+            prior: Some(pre.prior.view()),
+            temperature: self.contract.temperature,
+        };
+        let d = decode(out, params, &pre.poses, modes)?;
         Ok(Prediction {
             agent_ids: frame.ids().to_vec(),
             trajectories: d.trajectories,
@@ -248,6 +258,9 @@ impl Predictor {
         ];
         if let Some(map) = inputs.map {
             feed.push((INPUT_MAP, Tensor::from_array(map).map_err(infer)?.into()));
+        }
+        if let Some(present) = inputs.map_present {
+            feed.push((INPUT_MAP_PRESENT, Tensor::from_array(present).map_err(infer)?.into()));
         }
         let mut session = self.session.lock().map_err(|_| DganError::Inference("session lock poisoned".into()))?;
         let outputs = session.run(feed).map_err(infer)?;

@@ -3,6 +3,7 @@
 
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
+use crate::prior::PriorSpec;
 use serde::{Deserialize, Serialize};
 
 /// The agent-centric map crop each agent's map branch sees.
@@ -25,6 +26,11 @@ pub struct MapSpec {
     /// Whether the agents are drawn into the crop as blue boxes.
     #[serde(default = "default_true")]
     pub draw_agents: bool,
+    /// Whether the model also serves frames without a map (contract 2): it then takes a `map_present` input,
+    /// 1 where the agent's crop holds a map and 0 where the crop is blank because the frame has none. A model
+    /// whose map is not optional refuses frames without a map.
+    #[serde(default)]
+    pub optional: bool,
 }
 
 fn default_true() -> bool {
@@ -82,6 +88,9 @@ pub struct InputSpec {
     pub attention_lambda: f64,
     /// The map crop, or `None` for a model without a map branch.
     pub map: Option<MapSpec>,
+    /// The kinematic prior the network's outputs are relative to (contract 2; none before).
+    #[serde(default)]
+    pub prior: PriorSpec,
 }
 
 impl InputSpec {
@@ -109,7 +118,7 @@ impl InputSpec {
         if let Some(m) = &self.map {
             m.validate()?;
         }
-        Ok(())
+        self.prior.validate()
     }
 
     /// The prediction horizon T_f · dt in seconds.
@@ -157,7 +166,9 @@ mod tests {
                 agent_row: 24,
                 agent_col: 16,
                 draw_agents: true,
+                optional: false,
             }),
+            prior: PriorSpec::NONE,
         }
     }
 

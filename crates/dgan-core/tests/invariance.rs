@@ -2,7 +2,9 @@
 //! network input unchanged.
 
 use dgan_core::preprocess::preprocess;
-use dgan_core::{AgentClass, Frame, InputSpec, MapElement, MapElementKind, MapSpec, SceneMap, VectorMap};
+use dgan_core::{
+    AgentClass, Frame, InputSpec, MapElement, MapElementKind, MapSpec, PriorKind, PriorSpec, SceneMap, VectorMap,
+};
 use ndarray::{Array2, Array3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -87,7 +89,9 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
             agent_row: 48,
             agent_col: 32,
             draw_agents: true,
+            optional: false,
         }),
+        prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.8 },
     };
     let base = preprocess(&frame(0.0, [0.0, 0.0]), &spec).unwrap();
     for (angle, shift) in [(1.0, [100.0, -50.0]), (-2.5, [3000.0, 4000.0]), (std::f64::consts::PI, [0.0, 0.0])] {
@@ -98,6 +102,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
         close(a.state.as_slice().unwrap(), b.state.as_slice().unwrap(), 1e-3, "state");
         assert_eq!(a.edge_index, b.edge_index, "edges");
         close(a.edge_features.as_slice().unwrap(), b.edge_features.as_slice().unwrap(), 1e-3, "edge features");
+        close(base.prior.as_slice().unwrap(), moved.prior.as_slice().unwrap(), 1e-3, "kinematic prior");
         // Anti-aliased drawing of the same geometry differs only by rounding at a few edge pixels.
         let (ma, mb) = (a.map.as_ref().unwrap(), b.map.as_ref().unwrap());
         let diff: Vec<f32> = ma.iter().zip(mb.iter()).map(|(x, y)| (x - y).abs()).collect();

@@ -3,8 +3,11 @@
 mod common;
 
 use common::{fixture, onnxruntime_library};
-use dgan_core::{AgentClass, DganError, Frame, Predictor, PredictorOptions};
+use dgan_core::{
+    AgentClass, DganError, Frame, MapElement, MapElementKind, Predictor, PredictorOptions, SceneMap, VectorMap,
+};
 use ndarray::Array3;
+use std::sync::Arc;
 
 fn load(name: &str) -> dgan_core::Result<Predictor> {
     let options = PredictorOptions { onnxruntime_library: Some(onnxruntime_library()), ..Default::default() };
@@ -24,10 +27,14 @@ fn walkers(n: usize) -> Frame {
 
 #[test]
 fn predicts_sorted_normalised_modes() {
+    let lane = VectorMap::new(vec![
+        MapElement::new(MapElementKind::LaneCenterline, vec![[-50.0, 0.0], [50.0, 0.0]]).expect("a valid line")
+    ]);
     for name in ["contract_nomap.onnx", "contract_map.onnx"] {
         let p = load(name).unwrap();
         assert_eq!(p.anchors().total(), 7);
-        let out = p.predict(&walkers(5)).unwrap();
+        let frame = walkers(5).with_map(Arc::new(SceneMap::Vector(lane.clone())));
+        let out = p.predict(&frame).unwrap();
         assert_eq!(out.trajectories.dim(), (5, 7, 12, 2));
         for i in 0..5 {
             let row = out.probabilities.row(i);
@@ -35,10 +42,17 @@ fn predicts_sorted_normalised_modes() {
             assert!(row.windows(2).into_iter().all(|w| w[0] >= w[1]), "{name}: sorted");
             assert!((out.class_probabilities.row(i).sum() - 1.0).abs() < 1e-9);
         }
-        let top = p.predict_modes(&walkers(5), 3).unwrap();
+        let top = p.predict_modes(&frame, 3).unwrap();
         assert_eq!(top.trajectories.dim(), (5, 3, 12, 2));
         assert_eq!(top.trajectories, out.trajectories.slice(ndarray::s![.., ..3, .., ..]).to_owned());
     }
+}
+
+#[test]
+fn a_required_map_is_a_typed_error() {
+    // contract_map.onnx is a contract-1 map model: its map is not optional.
+    let p = load("contract_map.onnx").unwrap();
+    assert!(matches!(p.predict(&walkers(3)), Err(DganError::MapRequired(_))));
 }
 
 #[test]

@@ -10,6 +10,7 @@ fn class_name(err: &DganError) -> &'static str {
     match err {
         DganError::InvalidFrame(_) => "InvalidFrameError",
         DganError::UnknownClass(_) => "UnknownClassError",
+        DganError::MapRequired(_) => "MapRequiredError",
         DganError::InvalidMap(_) => "InvalidMapError",
         DganError::InvalidSpec(_) => "InvalidSpecError",
         DganError::ModelNotFound(_) => "ModelNotFoundError",

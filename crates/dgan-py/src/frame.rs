@@ -98,6 +98,11 @@ impl PyFrame {
         self.inner.len()
     }
 
+    /// The same agents without a map.
+    fn without_map(&self) -> Self {
+        Self { inner: self.inner.without_map() }
+    }
+
     #[getter]
     fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
         self.inner.positions().clone().into_pyarray(py)

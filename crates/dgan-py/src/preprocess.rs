@@ -5,7 +5,7 @@ use crate::frame::PyFrame;
 use dgan_core::preprocess::preprocess as core_preprocess;
 use dgan_core::{DganError, InputSpec};
 use ndarray::Array2;
-use numpy::IntoPyArray;
+use numpy::{IntoPyArray, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -40,6 +40,10 @@ pub fn preprocess<'py>(py: Python<'py>, frame: &PyFrame, spec_json: &str) -> PyR
     if let Some(m) = x.map {
         d.set_item("map", m.into_pyarray(py))?;
     }
+    if let Some(m) = x.map_present {
+        d.set_item("map_present", m.into_pyarray(py))?;
+    }
+    d.set_item("prior", pre.prior.into_pyarray(py))?;
     let n = pre.poses.len();
     d.set_item("origin", Array2::from_shape_fn((n, 2), |(i, k)| pre.poses[i].origin()[k]).into_pyarray(py))?;
     d.set_item("heading", pre.poses.iter().map(|p| p.heading()).collect::<Vec<_>>().into_pyarray(py))?;
@@ -48,4 +52,20 @@ pub fn preprocess<'py>(py: Python<'py>, frame: &PyFrame, spec_json: &str) -> PyR
     let edges = Array2::from_shape_fn((pre.edges.len(), 2), |(e, k)| i64::from(pre.edges[e][k]));
     d.set_item("edges", edges.into_pyarray(py))?;
     Ok(d)
+}
+
+/// The kinematic prior `(N, T_f, 2)` (agent frame) of the spec, from network inputs `trajectory (N, T_obs, 2)`,
+/// `trajectory_mask (N, T_obs)` and `state (N, S)`: the engine's own rollout, for training on the residuals.
+#[pyfunction]
+pub fn kinematic_prior<'py>(
+    py: Python<'py>,
+    trajectory: PyReadonlyArray3<'py, f32>,
+    trajectory_mask: PyReadonlyArray2<'py, f32>,
+    state: PyReadonlyArray2<'py, f32>,
+    spec_json: &str,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let spec = parse_spec(spec_json).py()?;
+    let (t, m, s) = (trajectory.as_array(), trajectory_mask.as_array(), state.as_array());
+    let prior = py.detach(|| spec.prior.rollout(t, m, s, spec.dt_s, spec.t_f)).py()?;
+    Ok(prior.into_pyarray(py))
 }
