@@ -42,6 +42,40 @@ def slim_checkpoint(run: Path, out: Path) -> Path:
     return out
 
 
+def cv_row(metrics: dict[str, Any]) -> str:
+    """The card's constant-velocity row: the better of the two variants on the same targets."""
+    return (
+        f"| constant velocity ({metrics['cv_variant']}) | {metrics['cv_ade']:.3f} | {metrics['cv_fde']:.3f} | | | | | |"
+    )
+
+
+def nomap_row(metrics: dict[str, Any]) -> str:
+    """The card's row of the same model on the same frames without their map, if it was measured."""
+    n = metrics.get("without_map")
+    if not n:
+        return ""
+    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
+    return "| DGAN without the map | " + " | ".join(f"{n[k]:.3f}" for k in keys) + " |\n"
+
+
+def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
+    """What the model declares under contract 2: its prior, its optional map and its temperature."""
+    d, t = cfg["data"], cfg["train"]
+    prior = d.get("prior", "none")
+    parts = []
+    if prior != "none":
+        window = d.get("prior_window_s", 0.0)
+        how = f"the mean velocity over the last {window:g} s" if window else "the velocity of the last two steps"
+        parts.append(f"The network refines a constant-velocity rollout ({how}) computed by the engine.")
+    if t.get("map_dropout", 0.0) > 0 and d.get("use_map", True) and cfg["model"].get("use_map", True):
+        parts.append(
+            f"Trained with map dropout ({t['map_dropout']:g} of the crops blanked), so it also runs without a map "
+            "(`map.optional`)."
+        )
+    parts.append(f"Mode probabilities at the temperature {metrics.get('temperature', 1.0):.2f} fitted on validation.")
+    return " ".join(parts)
+
+
 def card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
     rows, seconds, best = training_log(run)
     scene = cfg["data"]["scene"]
@@ -65,7 +99,7 @@ training.
   with neighbour geometry on the edges, {cfg["train"]["anchors_per_class"]} k-means anchors with offset regression.
   Loss: the paper's hierarchical classification and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
   β = {cfg["train"]["beta"]} times the error of the most probable mode (see `docs/results.md`).
-  One class (pedestrian).
+  One class (pedestrian). {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs, best at epoch {best["epoch"]}, {seconds / 60:.1f} min on 2 CPU cores; seed
   {cfg["train"]["seed"]}; left-right mirroring.
 - **Test metrics** (engine, world metres, {metrics["windows"]} windows, {metrics["agents"]} agents):
@@ -73,7 +107,7 @@ training.
 | | top-1 ADE | top-1 FDE | minADE5 | minFDE5 | minADE20 | minFDE20 | Brier-minFDE20 |
 |---|---|---|---|---|---|---|---|
 | DGAN | {row} |
-| constant velocity | {metrics["cv_ade"]:.3f} | {metrics["cv_fde"]:.3f} | | | | | |
+{nomap_row(metrics)}{cv_row(metrics)}
 
 - **Licence**: the weights are derived from ETH (BIWI) and UCY data, which are for **non-commercial research use
   only**. Cite Pellegrini et al. 2009 and Lerner et al. 2007.
@@ -113,7 +147,8 @@ MULTICLASS = {
     "hdmap": {
         "title": "driving scenes with a vector HD map (nuScenes mini and Waymo Open Motion)",
         "data": "nuScenes v1.0-mini (all 10 scenes, ScenarioNet conversion) and 35 Waymo Open Motion scenarios "
-        "(GPUDrive JSON and ScenarioNet), read by `dgan.hdmaps`, split by scene (`training.datasets.HDMAP_TEST`: "
+        "(GPUDrive JSON and ScenarioNet), read by `dgan.datasets.hdmaps`, split by scene "
+        "(`training.datasets.HDMAP_TEST`: "
         "nuScenes scene-0103 and scene-1094 and six Waymo scenarios; val: scene-0553 and two Waymo scenarios; the "
         "other 34 scenes train). Measured headings and boxes. The map branch sees each agent's heading-aligned crop of "
         "the vector map (lane centre lines, dashed and solid lane lines, road edges, crosswalks, bike lanes, medians "
@@ -156,7 +191,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
   direction of motion, length, width, one-hot class), {map_line}{m["gat_layers"]} GAT layers × {m["gat_heads"]} heads
   over the attention-zone graph (λ = 0.5) with neighbour geometry on the edges. Loss: hierarchical classification and
   closest-anchor regression (α = {cfg["train"]["alpha"]}) plus β = {cfg["train"]["beta"]} times the error of the most
-  probable mode.
+  probable mode. {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}
   ({"the last" if cfg["train"].get("select") == "last" else "lowest validation loss"}),
   {seconds / 60:.1f} min on 2 CPU cores; seed {cfg["train"]["seed"]}; left-right mirroring.
@@ -192,9 +227,11 @@ def bundle(run: Path, name: str, data_root: Path) -> dict[str, Any]:
         )
     model_name = f"dgan-ethucy-{name}" if dataset == "ethucy" else f"dgan-{name}"
     onnx_path = export_checkpoint(CHECKPOINTS / f"{name}.pt", MODELS / f"{name}.onnx", model_name, description)
-    metrics = evaluate(
-        dgan.Predictor(onnx_path), dataset, data_root, cfg["data"]["scene"] if dataset == "ethucy" else ""
-    )
+    predictor = dgan.Predictor(onnx_path)
+    fold = cfg["data"]["scene"] if dataset == "ethucy" else ""
+    metrics = evaluate(predictor, dataset, data_root, fold)
+    if dataset == "ethucy" and predictor.spec.map is not None and predictor.spec.map.optional:
+        metrics["without_map"] = evaluate(predictor, dataset, data_root, fold, with_map=False)
     text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
     (MODELS / f"{name}.md").write_text(text)
     (run / "metrics.json").write_text(json.dumps(metrics, indent=2))

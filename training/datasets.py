@@ -8,13 +8,13 @@
   video's ``reference.jpg``, box-filtered to about 0.25 m per pixel, is its raster map.
 - ``apolloscape``: ApolloScape trajectory (2 Hz, measured class, length, width and heading), split by recording;
   no map. Its "others" take part as neighbours only, never as targets.
-- ``hdmap``: driving scenes with vector HD maps, nuScenes mini (ScenarioNet) and Waymo Open Motion (GPUDrive JSON
-  and ScenarioNet), read by :mod:`dgan.hdmaps`, at 5 Hz: 2 s observed (10 steps), 3 s predicted (15 steps), split
+- ``hdmap``: driving scenes with vector HD maps, nuScenes mini (ScenarioNet) and Waymo Open Motion (GPUDrive JSON and
+  ScenarioNet), read by :mod:`dgan.datasets.hdmaps`, at 5 Hz: 2 s observed (10 steps), 3 s predicted (15 steps), split
   by scene (:data:`HDMAP_TEST`, :data:`HDMAP_VAL`). Targets are agents seen at all 25 steps that move more than 1 m
   over them. The 10 Hz sources are sampled every second step, in both phases (each scenario gives two recordings,
-  steps 0, 2, 4 … and 1, 3, 5 …). nuScenes annotates agents only at 2 Hz keyframes, every fifth 10 Hz step, and
-  the conversion interpolated linearly between them: its test windows end at a keyframe, so t_obs and the 3 s
-  endpoint (FDE) are real annotations and the points between are linear interpolations of real ones.
+  steps 0, 2, 4 … and 1, 3, 5 …). nuScenes annotates agents only at 2 Hz keyframes, every fifth 10 Hz step, and the
+  conversion interpolated linearly between them: its test windows end at a keyframe, so t_obs and the 3 s endpoint
+  (FDE) are real annotations and the points between are linear interpolations of real ones.
 - ``argoverse2``: the three Argoverse 2 scenes (one motion-forecasting scenario, two sensor logs), never trained on:
   a test of the ``hdmap`` protocol on a source the model has not seen.
 
@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
-from dgan.hdmaps import read_scenario
+from dgan.datasets.hdmaps import read_scenario
 from dgan.scenes import APOLLO_TYPES, SDD_LABEL_CLASS, scene_raster_map, sdd_raster_map
 
 Arr = npt.NDArray[Any]

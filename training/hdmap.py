@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 import dgan
-from dgan.hdmaps import bird_eye, read_scenario
+from dgan.datasets.hdmaps import bird_eye, read_scenario
 from training.datasets import DATASETS
 from training.evaluate import evaluate
 from training.multiclass import relative
@@ -51,7 +51,7 @@ METRICS = (("ade", "fde"), ("min_ade5", "min_fde5"))
 
 def _source_lines(path: Path) -> list[tuple[str, np.ndarray]]:
     """The source's own map geometry with its own type names, read straight from the file (not through
-    :mod:`dgan.hdmaps`), so that the picture checks the conversion as well as the rasteriser."""
+    :mod:`dgan.datasets.hdmaps`), so that the picture checks the conversion as well as the rasteriser."""
     out: list[tuple[str, np.ndarray]] = []
     if path.suffix == ".pkl":
         with path.open("rb") as fh:

@@ -364,10 +364,10 @@ that probability was the best of the K modes (smallest ADE), and the small numbe
 ![Each source's map beside the engine's raster of it](images/hdmap_sources.png)
 
 Left: each source's map as its file has it, coloured by the source's own element types (read straight from the file,
-not through `dgan.hdmaps`). Right: the same square of the world rasterised by the engine, exactly as the network's
-crops are drawn (a virtual agent at the centre heading north): green lane centre lines, white dashed and solid lane
-lines, yellow road edges, grey crosswalks, white bike-lane regions, pink medians and static obstacles, the agents as
-blue boxes. `python -m training.results` redraws it.
+not through `dgan.datasets.hdmaps`). Right: the same square of the world rasterised by the engine, exactly as the
+network's crops are drawn (a virtual agent at the centre heading north): green lane centre lines, white dashed and
+solid lane lines, yellow road edges, grey crosswalks, white bike-lane regions, pink medians and static obstacles,
+the agents as blue boxes. `python -m training.results` redraws it.
 
 **Reading the HD-map tables (where the paper's finding does not hold here, and why).**
 

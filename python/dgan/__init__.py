@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-from dgan import demo, exceptions, hdmaps, models, scenes
+from dgan import demo, exceptions, models, scenes
 from dgan._dgan import __version__
 from dgan.exceptions import DganError
 from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
@@ -40,7 +40,6 @@ __all__ = [
     "attention_graph",
     "demo",
     "exceptions",
-    "hdmaps",
     "kinematic_prior",
     "models",
     "preprocess",

@@ -125,7 +125,7 @@ def apollo_scene(t_obs: int, now: float | None) -> DemoScene:
 def waymo_scene(t_obs: int, now: float | None, extent_m: float = 110.0, resolution_m: float = 0.2) -> DemoScene:
     """The bundled Waymo scenario (10 Hz steps 0..90, sampled every second step; ``now`` in 18..60), over the
     engine's north-up rendering of its vector map."""
-    from dgan.hdmaps import bird_eye, read_waymo_json
+    from dgan.datasets.hdmaps import bird_eye, read_waymo_json
 
     step = 40 if now is None else int(now)
     sc = read_waymo_json(WAYMO_FILE)

@@ -1,4 +1,4 @@
-"""The HD-map readers (``dgan.hdmaps``): nuScenes and Waymo in ScenarioNet pickles, Waymo in GPUDrive JSON and
+"""The HD-map readers (``dgan.datasets.hdmaps``): nuScenes and Waymo in ScenarioNet pickles, Waymo in GPUDrive JSON and
 Argoverse 2, their element kinds, frames cut from them, the engine's picture of their maps, and bad input."""
 
 from __future__ import annotations
@@ -14,16 +14,17 @@ import pytest
 from conftest import shared_data
 
 import dgan
+from dgan.datasets import hdmaps
+from dgan.datasets.hdmaps import bird_eye, read_scenario, read_waymo_json, widen
 from dgan.demo import WAYMO_FILE
 from dgan.exceptions import InvalidFrameError, InvalidMapError
-from dgan.hdmaps import bird_eye, read_scenario, read_waymo_json, widen
 
 
 def data_root() -> Path:
     return shared_data("nuscenes_mini_scenarionet")
 
 
-def kinds(sc: dgan.hdmaps.Scenario) -> Counter[str]:
+def kinds(sc: hdmaps.Scenario) -> Counter[str]:
     return Counter(k for k, _ in sc.map.elements())
 
 
@@ -136,13 +137,38 @@ def test_bad_files_are_clear_errors(tmp_path: Path) -> None:
     bad_map = folder / "log_map_archive_x.json"
     bad_map.write_text("{}")
     with pytest.raises(InvalidMapError, match="not an Argoverse 2 map"):
-        dgan.hdmaps.av2_map(bad_map)
+        hdmaps.av2_map(bad_map)
     bad_road = tmp_path / "road.json"
     bad_road.write_text(json.dumps({"objects": [], "roads": [{"type": "lane", "geometry": [[1.0], [2.0]]}]}))
     with pytest.raises(InvalidMapError, match="road 0"):
-        dgan.hdmaps.waymo_json_map(json.loads(bad_road.read_text())["roads"])
+        hdmaps.waymo_json_map(json.loads(bad_road.read_text())["roads"])
 
 
 def test_the_waymo_demo_scene_needs_a_full_history() -> None:
     with pytest.raises(dgan.DganError, match=r"needs --time in 18\.\.88, got 5"):
         dgan.demo.waymo_scene(10, 5)
+
+
+def test_readers_sit_behind_a_registry_outside_the_runtime_import() -> None:
+    import subprocess
+    import sys
+
+    import dgan.datasets as datasets
+
+    code = "import sys, dgan; print('dgan.datasets.hdmaps' in sys.modules, 'pyarrow' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "False"]
+    assert datasets.formats() == ("argoverse2_scenario", "argoverse2_sensor_log", "scenarionet", "waymo_json")
+    sc = datasets.read(WAYMO_FILE, "waymo_json")
+    assert len(sc.ids) > 0
+    assert datasets.read(WAYMO_FILE).ids.tolist() == sc.ids.tolist()
+    with pytest.raises(InvalidFrameError, match="unknown scenario format 'kitti'"):
+        datasets.reader("kitti")
+    with pytest.raises(ValueError, match="module:function"):
+        datasets.register("bad", "no_colon")
+    import importlib
+
+    old = importlib.import_module("dgan.hdmaps")
+    with pytest.warns(DeprecationWarning, match=r"dgan\.datasets\.hdmaps"):
+        importlib.reload(old)
+    assert old.read_scenario is read_scenario

@@ -1,0 +1,68 @@
+"""Dataset readers, kept outside the runtime's import path: ``import dgan`` loads the engine, frames, maps and the
+predictor, and none of these; a reader module is imported when it is first used.
+
+The registry maps a format name to its reader (``module:function``). Each reader turns a source's file or folder into
+a :class:`dgan.datasets.hdmaps.Scenario` (every agent's states on the source's grid and the scene's vector map),
+whose :meth:`~dgan.datasets.hdmaps.Scenario.frame` cuts a :class:`dgan.Frame` at any step:
+
+>>> from dgan import datasets
+>>> datasets.formats()
+('argoverse2_scenario', 'argoverse2_sensor_log', 'scenarionet', 'waymo_json')
+>>> scenario = datasets.read("waymo_motion_samples/gpudrive_json/<id>.json.gz")  # doctest: +SKIP
+
+The ETH/UCY, Stanford Drone and ApolloScape readers that training uses live in ``training.datasets``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from dgan.exceptions import InvalidFrameError
+
+if TYPE_CHECKING:
+    from dgan.datasets.hdmaps import Scenario
+
+__all__ = ["formats", "read", "reader", "register"]
+
+#: Format name → ``"module:function"`` of its reader.
+_REGISTRY: dict[str, str] = {
+    "scenarionet": "dgan.datasets.hdmaps:read_scenarionet",
+    "waymo_json": "dgan.datasets.hdmaps:read_waymo_json",
+    "argoverse2_scenario": "dgan.datasets.hdmaps:read_av2_scenario",
+    "argoverse2_sensor_log": "dgan.datasets.hdmaps:read_av2_sensor_log",
+}
+
+
+def register(name: str, target: str) -> None:
+    """Adds a reader: ``target`` is ``"package.module:function"``, a function of one path returning a Scenario."""
+    module, sep, function = target.partition(":")
+    if not (name and module and sep and function):
+        raise ValueError(f"a reader is registered as 'module:function', got {target!r} for {name!r}")
+    _REGISTRY[name] = target
+
+
+def formats() -> tuple[str, ...]:
+    """The registered format names."""
+    return tuple(sorted(_REGISTRY))
+
+
+def reader(name: str) -> Callable[[str | os.PathLike[str]], Scenario]:
+    """The reader of a format, imported now."""
+    if name not in _REGISTRY:
+        raise InvalidFrameError(f"unknown scenario format {name!r}; registered: {', '.join(formats())}")
+    module, _, function = _REGISTRY[name].partition(":")
+    fn: Callable[[str | os.PathLike[str]], Scenario] = getattr(importlib.import_module(module), function)
+    return fn
+
+
+def read(path: str | os.PathLike[str], format: str | None = None) -> Scenario:
+    """A scenario from ``path``, by its registered ``format``, or guessed from the path when None (``*.pkl``:
+    ScenarioNet; ``*.json[.gz]``: Waymo GPUDrive JSON; an Argoverse 2 scenario or sensor-log folder)."""
+    if format is not None:
+        return reader(format)(path)
+    hdmaps: Any = importlib.import_module("dgan.datasets.hdmaps")
+    scenario: Scenario = hdmaps.read_scenario(path)
+    return scenario
