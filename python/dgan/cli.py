@@ -67,7 +67,15 @@ def _info(args: argparse.Namespace) -> int:
     else:
         m = spec.map
         where = f"agent at pixel ({m.agent_row}, {m.agent_col})"
-        print(f"map        {m.height_px}x{m.width_px} px at {m.resolution_m} m/px, {where}")
+        needed = "optional (runs without a map too)" if m.optional else "required"
+        print(f"map        {m.height_px}x{m.width_px} px at {m.resolution_m} m/px, {where}; {needed}")
+    prior = spec.prior
+    if prior.kind == "none":
+        print("prior      none (absolute anchors, contract 1)")
+    else:
+        how = f"mean velocity over {prior.window_s:g} s" if prior.window_s else "velocity of the last two steps"
+        print(f"prior      {prior.kind} ({how})")
+    print(f"temperature {c.get('temperature', 1.0):g} (of the anchor logits; contract {c['contract_version']})")
     if c.get("description"):
         print(f"about      {c['description']}")
     return 0

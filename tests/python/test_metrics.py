@@ -40,3 +40,38 @@ def test_constant_velocity_uses_the_last_two_observed_steps() -> None:
     np.testing.assert_allclose(metrics.constant_velocity(traj, gap, 1)[0, 0], [[2.0 + 2.0 / 3, 0.0]])
     single = np.array([[False, False, False, True]])
     np.testing.assert_allclose(metrics.constant_velocity(traj, single, 2)[0, 0], [[2.0, 0.0], [2.0, 0.0]])
+
+
+def test_constant_velocity_over_the_last_second() -> None:
+    # Steps of 0.5 s: x = 0, 1, 3, 6 (speeding up); the last second is two steps: (6 - 1) / 2 = 2.5 per step.
+    traj = np.array([[[0.0, 0.0], [1.0, 0.0], [3.0, 0.0], [6.0, 0.0]]])
+    mask = np.ones((1, 4), dtype=bool)
+    v = metrics.constant_velocity_variants(traj, mask, 2, 0.5)
+    assert v["last2"][0, 0, :, 0].tolist() == [9.0, 12.0]
+    assert v["mean1s"][0, 0, :, 0].tolist() == [8.5, 11.0]
+    # A missing step inside the window: from the earliest observed one (3 steps back: step 0, 6 m in 3 steps).
+    mask[0, 1] = False
+    assert metrics.constant_velocity(traj, mask, 1, 3)[0, 0, 0, 0] == pytest.approx(6.0 + 2.0)
+    assert metrics.constant_velocity(traj, mask, 1, 2)[0, 0, 0, 0] == pytest.approx(6.0 + 3.0)
+
+
+def test_untempered_probabilities_invert_the_temperature() -> None:
+    import dgan
+    from training.evaluate import untempered
+
+    rng = np.random.default_rng(0)
+    logits = rng.normal(size=(3, 5))
+    classes = np.array([0, 0, 0, 1, 1])
+    pc = np.array([[0.7, 0.3]] * 3)
+
+    def probs(t: float) -> np.ndarray:
+        out = np.zeros_like(logits)
+        for c in (0, 1):
+            e = np.exp(logits[:, classes == c] / t)
+            out[:, classes == c] = pc[:, [c]] * e / e.sum(axis=1, keepdims=True)
+        return out
+
+    pred = dgan.Prediction(
+        np.arange(3), np.zeros((3, 5, 1, 2)), probs(2.0), pc, np.tile(classes, (3, 1)), np.zeros((0, 2), np.int64), ()
+    )
+    np.testing.assert_allclose(untempered(pred, 2.0), probs(1.0), rtol=1e-9)
