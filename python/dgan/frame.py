@@ -304,6 +304,16 @@ class Frame:
         return self._frame.widths
 
     @property
+    def headings(self) -> npt.NDArray[np.float64]:
+        """``(N,)`` given headings in world radians, NaN where unknown (then estimated from the motion)."""
+        return self._frame.headings
+
+    @property
+    def velocities(self) -> npt.NDArray[np.float64]:
+        """``(N, 2)`` given velocities in world m/s, NaN where unknown (then from the last two steps)."""
+        return self._frame.velocities
+
+    @property
     def map(self) -> RasterMap | VectorMap | None:
         """The scene's map."""
         return self._map

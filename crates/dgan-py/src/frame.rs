@@ -133,6 +133,19 @@ impl PyFrame {
         self.inner.widths().to_vec().into_pyarray(py)
     }
 
+    /// Given headings in world radians, NaN where unknown.
+    #[getter]
+    fn headings<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.inner.headings().iter().map(|h| h.unwrap_or(f64::NAN)).collect::<Vec<_>>().into_pyarray(py)
+    }
+
+    /// Given velocities `(N, 2)` in world m/s, NaN where unknown.
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let v = self.inner.velocities();
+        ndarray::Array2::from_shape_fn((v.len(), 2), |(i, k)| v[i].map_or(f64::NAN, |x| x[k])).into_pyarray(py)
+    }
+
     #[getter]
     fn has_map(&self) -> bool {
         self.inner.map().is_some()

@@ -1,0 +1,187 @@
+"""The engine against a bare ONNX Runtime session and the PyTorch-eager pipeline, measured in one run, one thread.
+
+    python benches/bench.py [--models zara1 hdmap] [--agents 8 32 128 256] [--repeat 30]     # or: ./dev bench py
+
+For every bundled model, the real bundled scene of its time base (`dgan.demo.scene_for`) is tiled to N agents
+(copies of the scene shifted by 60 m, so each copy keeps its own neighbourhood and map), and each figure is the
+median over ``--repeat`` runs after warm-up:
+
+- ``predict``: `dgan.Predictor.predict` (preprocessing, the network in ONNX Runtime, decoding), one intra-op thread;
+- ``preprocess``: `dgan.preprocess` alone (traffic state, graph, map crops, prior);
+- ``bare ORT``: an `onnxruntime.InferenceSession` (one thread) on the same preprocessed tensors;
+- ``torch``: the training code's model from the same checkpoint (`training/checkpoints/<name>.pt`), eager, one
+  thread, on the same tensors, plus `decode_torch`; ``torch pipeline`` adds the engine's preprocessing to it;
+- ``vs torch``: torch pipeline / predict (above 1: the engine is faster).
+
+Then the throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of
+`predict`. The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark,
+not a test; no figure here is asserted anywhere.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import threading
+import time
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import dgan  # noqa: E402
+from dgan.demo import scene_for  # noqa: E402
+
+SPACING_M = 60.0
+
+
+def tiled(frame: dgan.Frame, n: int) -> dgan.Frame:
+    """``n`` agents: copies of ``frame`` side by side, ``SPACING_M`` apart, cut to ``n``."""
+    k = -(-n // len(frame))
+    side = int(np.ceil(np.sqrt(k)))
+    shifts = np.array([[SPACING_M * (i % side), SPACING_M * (i // side)] for i in range(k)])
+    pos = np.concatenate([frame.positions + s for s in shifts])[:n]
+
+    def rep(a: np.ndarray) -> np.ndarray:
+        return np.concatenate([a] * k)[:n]
+
+    return dgan.Frame(
+        pos,
+        mask=rep(frame.mask),
+        classes=rep(np.array(frame.classes)).tolist(),
+        headings=rep(frame.headings),
+        velocities=rep(frame.velocities),
+        lengths=rep(frame.lengths),
+        widths=rep(frame.widths),
+        map=frame.map,
+    )
+
+
+def median_ms(fn: Callable[[], Any], repeat: int, warmup: int = 3) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * statistics.median(times)
+
+
+def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
+    """The training code's model from the bundled checkpoint, eager, with `decode_torch`; None without torch."""
+    try:
+        import torch
+
+        from training.export import checkpoint_temperature, load_checkpoint
+        from training.loss import decode_torch
+        from training.train import INPUTS
+    except ImportError:
+        return None
+    torch.set_num_threads(1)
+    ckpt = ROOT / "training" / "checkpoints" / f"{name}.pt"
+    model, _, anchors, class_of, _ = load_checkpoint(ckpt)
+    temperature = checkpoint_temperature(ckpt)
+    a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
+
+    def run(x: dict[str, np.ndarray]) -> Any:
+        with torch.no_grad():
+            cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
+            return decode_torch(cl, al, off, a, c, torch.from_numpy(x["prior"]), temperature)
+
+    return run
+
+
+def bare_session(path: Path) -> Any:
+    import onnxruntime as ort  # type: ignore[import-untyped]
+
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    opts.inter_op_num_threads = 1
+    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+
+
+def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any]]:
+    predictor = dgan.Predictor(name)
+    spec = predictor.spec
+    frame = scene_for(spec).frame
+    session = bare_session(predictor.path)
+    names = [i.name for i in session.get_inputs()]
+    torch_run = torch_pipeline(name)
+    rows = []
+    for n in agents:
+        f = tiled(frame, n)
+        x = dgan.preprocess(f, spec)
+        feed = {k: x[k] for k in names}
+        row: dict[str, Any] = {"model": name, "N": n, "E": len(x["edge_index"])}
+        row["predict"] = median_ms(partial(predictor.predict, f), repeat)
+        row["preprocess"] = median_ms(partial(dgan.preprocess, f, spec), repeat)
+        row["ort"] = median_ms(partial(session.run, None, feed), repeat)
+        if torch_run is not None:
+            row["torch"] = median_ms(partial(torch_run, x), repeat)
+            row["torch_pipeline"] = row["preprocess"] + row["torch"]
+            row["vs_torch"] = row["torch_pipeline"] / row["predict"]
+        rows.append(row)
+        print(fmt_row(row), flush=True)
+    return rows
+
+
+def fmt_row(r: dict[str, Any]) -> str:
+    cells = [r["model"], str(r["N"]), str(r["E"])]
+    cells += [f"{r[k]:.2f}" for k in ("predict", "preprocess", "ort")]
+    cells += [f"{r[k]:.2f}" if k in r else "-" for k in ("torch", "torch_pipeline")]
+    cells.append(f"{r['vs_torch']:.2f}×" if "vs_torch" in r else "-")
+    return "| " + " | ".join(cells) + " |"
+
+
+def throughput(name: str, n: int, calls: int) -> None:
+    """Predictions per second of one Predictor shared by 1 and 2 threads; and predict_batch against a loop."""
+    predictor = dgan.Predictor(name)
+    frame = tiled(scene_for(predictor.spec).frame, n)
+    predictor.predict(frame)
+
+    def per_second(threads: int) -> float:
+        def work() -> None:
+            for _ in range(calls // threads):
+                predictor.predict(frame)
+
+        ts = [threading.Thread(target=work) for _ in range(threads)]
+        t0 = time.perf_counter()
+        for t in ts:
+            t.start()
+        for t in ts:
+            t.join()
+        return (calls // threads) * threads / (time.perf_counter() - t0)
+
+    one, two = per_second(1), per_second(2)
+    print(f"| {name} | {n} | {one:.0f} | {two:.0f} | {two / one:.2f}× |", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--models", nargs="*", default=list(dgan.models.list()))
+    ap.add_argument("--agents", nargs="*", type=int, default=[8, 32, 128, 256])
+    ap.add_argument("--repeat", type=int, default=30)
+    ap.add_argument("--calls", type=int, default=200, help="predictions per throughput measurement")
+    a = ap.parse_args()
+    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
+    print("\n| model | N | E | predict ms | preprocess ms | bare ORT ms | torch ms | torch pipeline ms | vs torch |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in a.models:
+        bench_model(name, a.agents, a.repeat)
+    print("\n| model | N | 1 thread /s | 2 threads /s | 2 vs 1 |")
+    print("|---|---|---|---|---|")
+    for name in a.models:
+        throughput(name, 32, a.calls)
+    print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+
+
+if __name__ == "__main__":
+    main()
