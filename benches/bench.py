@@ -164,6 +164,28 @@ def throughput(name: str, n: int, calls: int) -> None:
     print(f"| {name} | {n} | {one:.0f} | {two:.0f} | {two / one:.2f}× |", flush=True)
 
 
+def real_frames(predictor: dgan.Predictor, count: int) -> list[dgan.Frame]:
+    """``count`` real frames of the bundled scene at successive times (cycling when the scene is shorter)."""
+    first = scene_for(predictor.spec)
+    frames = []
+    for k in range(count):
+        try:
+            frames.append(scene_for(predictor.spec, first.default_now + k * first.time_step).frame)
+        except dgan.DganError:
+            break
+    return [frames[k % len(frames)] for k in range(count)]
+
+
+def batch_throughput(name: str, count: int, repeat: int) -> None:
+    """`predict_batch` of ``count`` real frames against a loop of `predict` over them."""
+    predictor = dgan.Predictor(name)
+    frames = real_frames(predictor, count)
+    agents = sum(len(f) for f in frames) / len(frames)
+    loop = median_ms(lambda: [predictor.predict(f) for f in frames], repeat)
+    batch = median_ms(partial(predictor.predict_batch, frames), repeat)
+    print(f"| {name} | {count} | {agents:.1f} | {loop:.2f} | {batch:.2f} | {loop / batch:.2f}× |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", nargs="*", default=list(dgan.models.list()))
@@ -180,6 +202,10 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for name in a.models:
         throughput(name, 32, a.calls)
+    print("\n| model | frames | agents per frame | loop of predict ms | predict_batch ms | batch vs loop |")
+    print("|---|---|---|---|---|---|")
+    for name in a.models:
+        batch_throughput(name, 64, max(3, a.repeat // 5))
     print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

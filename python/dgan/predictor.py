@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,8 @@ class Predictor:
         model: path of the ``.onnx`` file, or the name of a bundled model (:func:`dgan.models.list`).
         modes: how many modes :meth:`predict` returns by default (all K = Σ K_c if None).
         threads: threads ONNX Runtime may use inside one operator.
+        sessions: ONNX Runtime sessions of the model: threads sharing this predictor run concurrently, up to this
+            many at a time (default: 2, or 1 on a one-core machine).
         onnxruntime_library: absolute path of ``libonnxruntime``; found in the ``onnxruntime`` wheel if None.
 
     Raises:
@@ -68,12 +71,15 @@ class Predictor:
         *,
         modes: int | None = None,
         threads: int = 1,
+        sessions: int | None = None,
         onnxruntime_library: str | os.PathLike[str] | None = None,
     ) -> None:
         lib = Path(onnxruntime_library) if onnxruntime_library is not None else onnxruntime_library_path()
         if threads < 1:
             raise InvalidSpecError(f"threads must be at least 1, got {threads}")
-        self._predictor = _dgan.Predictor(os.fspath(_resolve(model)), os.fspath(lib), threads)
+        if sessions is None:
+            sessions = min(2, os.cpu_count() or 1)
+        self._predictor = _dgan.Predictor(os.fspath(_resolve(model)), os.fspath(lib), threads, sessions)
         self._contract: dict[str, Any] = json.loads(self._predictor.contract_json)
         self._spec = InputSpec.from_dict(self._contract)
         self._modes = self._check_modes(modes)
@@ -91,6 +97,12 @@ class Predictor:
         """K = Σ K_c, the most modes :meth:`predict` can return."""
         k: int = self._predictor.num_modes
         return k
+
+    @property
+    def sessions(self) -> int:
+        """ONNX Runtime sessions serving concurrent calls from several threads."""
+        n: int = self._predictor.sessions
+        return n
 
     @property
     def spec(self) -> InputSpec:
@@ -129,6 +141,18 @@ class Predictor:
         m = self._modes if modes is None else self._check_modes(modes)
         out = self._predictor.predict(frame._frame, m)
         return Prediction(classes=self.classes, **out)
+
+    def predict_batch(self, frames: Sequence[Frame], *, modes: int | None = None) -> list[Prediction]:
+        """Predicts several frames in one network call (their graphs joined, disjoint; each frame preprocessed in
+        parallel). Equal to :meth:`predict` on each frame, up to float rounding; faster for many small frames.
+        Releases the GIL while the engine runs.
+
+        Raises:
+            InvalidFrameError, UnknownClassError, MapRequiredError: as :meth:`predict`, for any frame.
+        """
+        m = self._modes if modes is None else self._check_modes(modes)
+        outs = self._predictor.predict_batch([f._frame for f in frames], m)
+        return [Prediction(classes=self.classes, **o) for o in outs]
 
     def __repr__(self) -> str:
         return f"Predictor({str(self.path)!r}, classes={self.classes}, modes={self._modes})"

@@ -131,8 +131,11 @@ def test_model_errors_are_builtin_subclasses() -> None:
         dgan.Predictor(FIXTURES / "bad_no_metadata.onnx")
 
 
-def test_threads_share_one_predictor(nomap_model: Path, zara1_frame: dgan.Frame) -> None:
-    predictor = dgan.Predictor(nomap_model)
+@pytest.mark.parametrize("sessions", [1, 3])
+def test_threads_share_one_predictor(nomap_model: Path, zara1_frame: dgan.Frame, sessions: int) -> None:
+    # Eight threads, several sessions: every result bit-identical to the serial one.
+    predictor = dgan.Predictor(nomap_model, sessions=sessions)
+    assert predictor.sessions == sessions
     want = predictor.predict(zara1_frame).trajectories
     results: list[np.ndarray] = []
     errors: list[BaseException] = []
@@ -144,15 +147,21 @@ def test_threads_share_one_predictor(nomap_model: Path, zara1_frame: dgan.Frame)
         except BaseException as e:  # pragma: no cover - reported below
             errors.append(e)
 
-    threads = [threading.Thread(target=work) for _ in range(4)]
+    threads = [threading.Thread(target=work) for _ in range(8)]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
     assert not errors
-    assert len(results) == 80
+    assert len(results) == 160
     for r in results:
         np.testing.assert_array_equal(r, want)
+
+
+def test_session_count_is_checked(nomap_model: Path) -> None:
+    with pytest.raises(exc.InvalidSpecError, match=r"sessions must be in 1\.\.=64"):
+        dgan.Predictor(nomap_model, sessions=0)
+    assert dgan.Predictor(nomap_model).sessions >= 1
 
 
 def test_contract_is_exposed(nomap_model: Path) -> None:
@@ -209,3 +218,24 @@ def test_the_prior_and_temperature_are_declared(zara1_frame: dgan.Frame) -> None
     np.testing.assert_allclose(
         dgan.kinematic_prior(x["trajectory"], x["trajectory_mask"], x["state"], predictor.spec), x["prior"]
     )
+
+
+def test_predict_batch_equals_predict_per_frame() -> None:
+    from dgan.demo import scene_for
+
+    for name in ("zara1", "apolloscape"):
+        predictor = dgan.Predictor(name)
+        first = scene_for(predictor.spec)
+        frames = [scene_for(predictor.spec, first.default_now + k * first.time_step).frame for k in range(5)]
+        frames.insert(2, dgan.Frame(np.zeros((0, predictor.spec.t_obs, 2))))  # an empty frame among them
+        batch = predictor.predict_batch(frames, modes=5)
+        assert len(batch) == len(frames)
+        for frame, got in zip(frames, batch, strict=True):
+            want = predictor.predict(frame, modes=5)
+            assert got.agent_ids.tolist() == want.agent_ids.tolist()
+            np.testing.assert_allclose(got.trajectories, want.trajectories, atol=1e-5)
+            np.testing.assert_allclose(got.probabilities, want.probabilities, atol=1e-5)
+            np.testing.assert_array_equal(got.edges, want.edges)
+    assert dgan.Predictor("zara1").predict_batch([]) == []
+    with pytest.raises(exc.InvalidFrameError):
+        dgan.Predictor("zara1").predict_batch([dgan.Frame(np.zeros((2, 3, 2)))])

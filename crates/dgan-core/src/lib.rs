@@ -9,6 +9,7 @@
 //! - [`raster`]: agent-centric RGB map crops in the paper's colours.
 //! - [`prior`]: the kinematic rollout the network refines.
 //! - [`preprocess`]: frame → network inputs; [`decode`]: p(c) · p(k | c), anchors + offsets → world modes.
+//! - [`batch`]: several frames as one graph, for [`Predictor::predict_batch`].
 //! - [`contract`]: the model contract; [`runtime`]: the ONNX Runtime session and [`Predictor`].
 //!
 //! ```no_run
@@ -26,6 +27,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod batch;
 pub mod class;
 pub mod contract;
 pub mod decode;

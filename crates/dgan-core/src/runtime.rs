@@ -4,6 +4,7 @@
 //! `libonnxruntime.so.*` the `onnxruntime` Python wheel ships in `onnxruntime/capi/`. Pass its absolute path in
 //! [`PredictorOptions::onnxruntime_library`] or set `ORT_DYLIB_PATH`.
 
+use crate::batch::join;
 use crate::contract::{check_tensor, DType, ModelContract, METADATA_KEY};
 use crate::contract::{
     INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_PRESENT, INPUT_STATE, INPUT_TRAJECTORY,
@@ -12,12 +13,14 @@ use crate::contract::{
 use crate::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
-use crate::preprocess::{preprocess, NetworkInputs};
-use ndarray::{Array2, Array4, Ix2, Ix4};
+use crate::preprocess::{preprocess, NetworkInputs, Preprocessed};
+use ndarray::{s, Array2, Array4, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
 use ort::value::{Tensor, TensorElementType, ValueType};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard, TryLockError};
 
 /// The environment variable naming the ONNX Runtime shared library.
 pub const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";
@@ -68,13 +71,19 @@ pub struct PredictorOptions {
     pub onnxruntime_library: Option<PathBuf>,
     /// Threads ONNX Runtime may use inside one operator.
     pub intra_threads: usize,
+    /// ONNX Runtime sessions of the model (at least 1): calls from several threads run concurrently on different
+    /// sessions (a session runs one call at a time). More sessions cost memory and load time, not accuracy.
+    pub sessions: usize,
 }
 
 impl Default for PredictorOptions {
     fn default() -> Self {
-        Self { onnxruntime_library: None, intra_threads: 1 }
+        Self { onnxruntime_library: None, intra_threads: 1, sessions: 1 }
     }
 }
+
+/// Most sessions one predictor may hold.
+pub const MAX_SESSIONS: usize = 64;
 
 /// The prediction for every agent of a frame.
 #[derive(Debug, Clone)]
@@ -96,7 +105,8 @@ pub struct Prediction {
 /// A loaded, contract-checked DGAN model.
 #[derive(Debug)]
 pub struct Predictor {
-    session: Mutex<Session>,
+    sessions: Vec<Mutex<Session>>,
+    next: AtomicUsize,
     contract: ModelContract,
     anchors: Anchors,
     path: PathBuf,
@@ -116,6 +126,27 @@ fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
     }
 }
 
+fn check_modes(modes: usize) -> Result<()> {
+    if modes == 0 {
+        return Err(DganError::InvalidSpec("modes must be at least 1".into()));
+    }
+    Ok(())
+}
+
+fn open_session(path: &Path, options: &PredictorOptions) -> Result<Session> {
+    let load_err = |e: ort::Error| DganError::ModelLoad { path: path.to_path_buf(), reason: e.to_string() };
+    let builder_err = |e: ort::Error<ort::session::builder::SessionBuilder>| {
+        DganError::RuntimeLibrary(format!("cannot configure the session: {e}"))
+    };
+    let mut builder = Session::builder()
+        .map_err(|e| DganError::RuntimeLibrary(e.to_string()))?
+        .with_intra_threads(options.intra_threads.max(1))
+        .map_err(builder_err)?
+        .with_inter_threads(1)
+        .map_err(builder_err)?;
+    builder.commit_from_file(path).map_err(load_err)
+}
+
 impl Predictor {
     /// Loads a model with default options.
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
@@ -128,18 +159,14 @@ impl Predictor {
         if !path.is_file() {
             return Err(DganError::ModelNotFound(path));
         }
+        if !(1..=MAX_SESSIONS).contains(&options.sessions) {
+            return Err(DganError::InvalidSpec(format!(
+                "sessions must be in 1..={MAX_SESSIONS}, got {}",
+                options.sessions
+            )));
+        }
         init_onnxruntime(options.onnxruntime_library.as_deref())?;
-        let load_err = |e: ort::Error| DganError::ModelLoad { path: path.clone(), reason: e.to_string() };
-        let builder_err = |e: ort::Error<ort::session::builder::SessionBuilder>| {
-            DganError::RuntimeLibrary(format!("cannot configure the session: {e}"))
-        };
-        let mut session = Session::builder()
-            .map_err(|e| DganError::RuntimeLibrary(e.to_string()))?
-            .with_intra_threads(options.intra_threads.max(1))
-            .map_err(builder_err)?
-            .with_inter_threads(1)
-            .map_err(builder_err)?;
-        let session = session.commit_from_file(&path).map_err(load_err)?;
+        let session = open_session(&path, options)?;
         let json = session
             .metadata()
             .map_err(|e| DganError::Contract(format!("cannot read metadata: {e}")))?
@@ -180,7 +207,30 @@ impl Predictor {
             let (dtype, shape) = dtype_of(out.dtype());
             check_tensor("output", &want, dtype, &shape)?;
         }
-        Ok(Self { session: Mutex::new(session), contract, anchors, path })
+        let mut sessions = vec![Mutex::new(session)];
+        for _ in 1..options.sessions {
+            sessions.push(Mutex::new(open_session(&path, options)?));
+        }
+        Ok(Self { sessions, next: AtomicUsize::new(0), contract, anchors, path })
+    }
+
+    /// How many ONNX Runtime sessions serve this predictor.
+    pub fn sessions(&self) -> usize {
+        self.sessions.len()
+    }
+
+    /// A free session if there is one (starting from a rotating index), else the next one in turn, waited for.
+    fn session(&self) -> Result<MutexGuard<'_, Session>> {
+        let n = self.sessions.len();
+        let start = self.next.fetch_add(1, Ordering::Relaxed) % n;
+        for k in 0..n {
+            match self.sessions[(start + k) % n].try_lock() {
+                Ok(guard) => return Ok(guard),
+                Err(TryLockError::WouldBlock) => continue,
+                Err(TryLockError::Poisoned(_)) => return Err(DganError::Inference("session lock poisoned".into())),
+            }
+        }
+        self.sessions[start].lock().map_err(|_| DganError::Inference("session lock poisoned".into()))
     }
 
     /// The model's contract (input specification, anchors, provenance).
@@ -205,45 +255,91 @@ impl Predictor {
 
     /// Predicts the `modes` most probable modes (at most K) for every agent.
     pub fn predict_modes(&self, frame: &Frame, modes: usize) -> Result<Prediction> {
-        if modes == 0 {
-            return Err(DganError::InvalidSpec("modes must be at least 1".into()));
+        check_modes(modes)?;
+        let pre = preprocess(frame, &self.contract.input)?;
+        let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes)?;
+        out.pop().ok_or_else(|| DganError::Inference("no prediction for the frame".into()))
+    }
+
+    /// Predicts several frames in one network call: each frame is preprocessed on its own (in parallel), their
+    /// graphs are joined into one (disjoint, so nothing crosses between frames) and the outputs are split again.
+    /// Equal to calling [`Predictor::predict_modes`] on each frame, up to float rounding.
+    pub fn predict_batch(&self, frames: &[Frame], modes: usize) -> Result<Vec<Prediction>> {
+        check_modes(modes)?;
+        if frames.is_empty() {
+            return Ok(vec![]);
         }
         let spec = &self.contract.input;
-        let pre = preprocess(frame, spec)?;
-        let edges = Array2::from_shape_fn((pre.edges.len(), 2), |(e, k)| i64::from(pre.edges[e][k]));
-        let n = frame.len();
+        let pres = frames.par_iter().map(|f| preprocess(f, spec)).collect::<Result<Vec<_>>>()?;
+        self.run_and_decode(frames, pres, modes)
+    }
+
+    fn run_and_decode(&self, frames: &[Frame], pres: Vec<Preprocessed>, modes: usize) -> Result<Vec<Prediction>> {
+        let spec = &self.contract.input;
         let (c, k, t_f) = (spec.classes.len(), self.anchors.total(), spec.t_f);
-        if n == 0 {
-            let m = modes.min(k);
-            return Ok(Prediction {
-                agent_ids: vec![],
-                trajectories: Array4::zeros((0, m, t_f, 2)),
-                probabilities: Array2::zeros((0, m)),
-                class_probabilities: Array2::zeros((0, c)),
-                mode_classes: Array2::zeros((0, m)),
-                edges,
-            });
+        let m = modes.min(k);
+        let mut inputs = Vec::with_capacity(pres.len());
+        let (mut poses, mut priors, mut edges) = (vec![], vec![], vec![]);
+        for p in pres {
+            inputs.push(p.inputs);
+            poses.extend(p.poses);
+            priors.push(p.prior);
+            edges.push(Array2::from_shape_fn((p.edges.len(), 2), |(e, k)| i64::from(p.edges[e][k])));
         }
-        let (class_logits, anchor_logits, offsets) = self.run(pre.inputs)?;
-        let out = NetworkOutputs {
-            class_logits: class_logits.view(),
-            anchor_logits: anchor_logits.view(),
-            offsets: offsets.view(),
+        let (inputs, agent_ptr) = if inputs.len() == 1 {
+            let n = poses.len();
+            (inputs.pop().ok_or_else(|| DganError::Inference("no inputs".into()))?, vec![0, n])
+        } else {
+            let j = join(&inputs)?;
+            (j.inputs, j.agent_ptr)
         };
-        let params = DecodeParams {
-            anchors: &self.anchors,
-            prior: Some(pre.prior.view()),
-            temperature: self.contract.temperature,
+        let n = poses.len();
+        let decoded = if n == 0 {
+            None
+        } else {
+            let (class_logits, anchor_logits, offsets) = self.run(inputs)?;
+            let prior = if priors.len() == 1 {
+                priors.pop().ok_or_else(|| DganError::Inference("no prior".into()))?
+            } else {
+                let views: Vec<_> = priors.iter().map(|p| p.view()).collect();
+                ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?
+            };
+            let out = NetworkOutputs {
+                class_logits: class_logits.view(),
+                anchor_logits: anchor_logits.view(),
+                offsets: offsets.view(),
+            };
+            let params = DecodeParams {
+                anchors: &self.anchors,
+                prior: Some(prior.view()),
+                temperature: self.contract.temperature,
+            };
+            Some(decode(out, params, &poses, modes)?)
         };
-        let d = decode(out, params, &pre.poses, modes)?;
-        Ok(Prediction {
-            agent_ids: frame.ids().to_vec(),
-            trajectories: d.trajectories,
-            probabilities: d.probabilities,
-            class_probabilities: d.class_probabilities,
-            mode_classes: d.mode_classes,
-            edges,
-        })
+        let mut predictions = Vec::with_capacity(frames.len());
+        for (f, (frame, edges)) in frames.iter().zip(edges).enumerate() {
+            let (a, b) = (agent_ptr[f], agent_ptr[f + 1]);
+            let p = match &decoded {
+                Some(d) => Prediction {
+                    agent_ids: frame.ids().to_vec(),
+                    trajectories: d.trajectories.slice(s![a..b, .., .., ..]).to_owned(),
+                    probabilities: d.probabilities.slice(s![a..b, ..]).to_owned(),
+                    class_probabilities: d.class_probabilities.slice(s![a..b, ..]).to_owned(),
+                    mode_classes: d.mode_classes.slice(s![a..b, ..]).to_owned(),
+                    edges,
+                },
+                None => Prediction {
+                    agent_ids: vec![],
+                    trajectories: Array4::zeros((0, m, t_f, 2)),
+                    probabilities: Array2::zeros((0, m)),
+                    class_probabilities: Array2::zeros((0, c)),
+                    mode_classes: Array2::zeros((0, m)),
+                    edges,
+                },
+            };
+            predictions.push(p);
+        }
+        Ok(predictions)
     }
 
     /// Runs the network on preprocessed inputs; returns class logits, anchor logits and offsets.
@@ -262,7 +358,7 @@ impl Predictor {
         if let Some(present) = inputs.map_present {
             feed.push((INPUT_MAP_PRESENT, Tensor::from_array(present).map_err(infer)?.into()));
         }
-        let mut session = self.session.lock().map_err(|_| DganError::Inference("session lock poisoned".into()))?;
+        let mut session = self.session()?;
         let outputs = session.run(feed).map_err(infer)?;
         let get = |name: &str| {
             outputs

@@ -95,3 +95,20 @@ fn bad_frames_are_typed_errors() {
     assert!(matches!(p.predict(&short), Err(DganError::InvalidFrame(_))));
     assert!(matches!(p.predict_modes(&walkers(2), 0), Err(DganError::InvalidSpec(_))));
 }
+
+#[test]
+fn predict_batch_equals_predict_per_frame() {
+    let p = load("contract_nomap.onnx").unwrap();
+    let frames = [walkers(3), Frame::new(Array3::zeros((0, 8, 2)), None, vec![]).unwrap(), walkers(5)];
+    let batch = p.predict_batch(&frames, 4).unwrap();
+    assert_eq!(batch.len(), 3);
+    for (frame, got) in frames.iter().zip(&batch) {
+        let want = p.predict_modes(frame, 4).unwrap();
+        assert_eq!(got.agent_ids, want.agent_ids);
+        assert_eq!(got.edges, want.edges);
+        let worst = got.trajectories.iter().zip(&want.trajectories).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-5, "batch and single predictions differ by {worst}");
+    }
+    assert!(p.predict_batch(&[], 4).unwrap().is_empty());
+    assert!(matches!(p.predict_batch(&frames, 0), Err(DganError::InvalidSpec(_))));
+}

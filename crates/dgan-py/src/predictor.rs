@@ -29,14 +29,15 @@ fn prediction_dict<'py>(py: Python<'py>, p: Prediction) -> PyResult<Bound<'py, P
 #[pymethods]
 impl PyPredictor {
     #[new]
-    #[pyo3(signature = (path, onnxruntime_library, intra_threads = 1))]
+    #[pyo3(signature = (path, onnxruntime_library, intra_threads = 1, sessions = 1))]
     fn new(
         py: Python<'_>,
         path: PathBuf,
         onnxruntime_library: Option<PathBuf>,
         intra_threads: usize,
+        sessions: usize,
     ) -> PyResult<Self> {
-        let options = PredictorOptions { onnxruntime_library, intra_threads };
+        let options = PredictorOptions { onnxruntime_library, intra_threads, sessions };
         let inner = py.detach(|| Predictor::load_with(&path, &options)).py()?;
         Ok(Self { inner })
     }
@@ -53,9 +54,27 @@ impl PyPredictor {
         self.inner.anchors().total()
     }
 
+    /// ONNX Runtime sessions serving concurrent calls.
+    #[getter]
+    fn sessions(&self) -> usize {
+        self.inner.sessions()
+    }
+
     #[getter]
     fn path(&self) -> PathBuf {
         self.inner.path().to_path_buf()
+    }
+
+    /// Predicts several frames in one network call; returns one dict of numpy arrays per frame.
+    fn predict_batch<'py>(
+        &self,
+        py: Python<'py>,
+        frames: Vec<PyRef<'py, PyFrame>>,
+        modes: usize,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let frames: Vec<dgan_core::Frame> = frames.iter().map(|f| f.inner.clone()).collect();
+        let out = py.detach(|| self.inner.predict_batch(&frames, modes)).py()?;
+        out.into_iter().map(|p| prediction_dict(py, p)).collect()
     }
 
     /// Predicts the top `modes` modes of every agent; returns a dict of numpy arrays.
