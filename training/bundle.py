@@ -3,6 +3,7 @@ for the parity test in ``training/checkpoints/<name>.pt``, evaluate it with the 
 
     python -m training.bundle runs/ethucy_zara1 --name zara1 --data-root ../shared/data
     python -m training.bundle runs/sdd --name sdd
+    python -m training.bundle --reexport zara1 sdd      # the kept checkpoints, exported again (a new contract)
 """
 
 from __future__ import annotations
@@ -238,12 +239,28 @@ def bundle(run: Path, name: str, data_root: Path) -> dict[str, Any]:
     return metrics
 
 
+def reexport(name: str) -> Path:
+    """Exports a bundled model again from its kept checkpoint under the current contract, keeping its name and
+    description (its card's metrics hold: the engine–PyTorch parity test checks the new file against the
+    checkpoint)."""
+    old = dgan.Predictor(name).contract
+    ckpt = CHECKPOINTS / f"{name}.pt"
+    return export_checkpoint(ckpt, MODELS / f"{name}.onnx", old.get("name", name), old.get("description", ""))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("run", type=Path)
-    ap.add_argument("--name", required=True)
+    ap.add_argument("run", type=Path, nargs="?")
+    ap.add_argument("--name")
     ap.add_argument("--data-root", type=Path, default=Path("../shared/data"))
+    ap.add_argument("--reexport", nargs="+", metavar="MODEL", help="export bundled models again from their checkpoints")
     a = ap.parse_args()
+    if a.reexport:
+        for name in a.reexport:
+            print(reexport(name))
+        return
+    if a.run is None or a.name is None:
+        ap.error("give a run folder and --name (or --reexport MODEL ...)")
     print(json.dumps(bundle(a.run, a.name, a.data_root.expanduser()), indent=2))
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,17 @@ from training.config import Config
 from training.model import DGAN
 
 OUTPUTS = ["class_logits", "anchor_logits", "offsets"]
+#: The inputs of an exported model (contract 3, the padded neighbour layout), in ``DGAN.forward_padded``'s order.
+INPUTS = (
+    "trajectory",
+    "trajectory_mask",
+    "state",
+    "neighbor_index",
+    "neighbor_mask",
+    "neighbor_features",
+    "map",
+    "map_present",
+)
 
 
 def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
@@ -53,7 +65,7 @@ def contract(
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
-        contract_version=2,
+        contract_version=3,
         units="m",
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
         temperature=round(float(temperature), 6),
@@ -64,14 +76,17 @@ def contract(
 
 
 def example_inputs(spec: dgan.InputSpec, n: int = 3) -> tuple[torch.Tensor, ...]:
+    """Inputs of the padded layout to trace the exported graph with: ``n`` agents, each hearing itself and the next
+    (D = 2, unlike N, so that the tracer cannot mistake one axis for the other)."""
     g = torch.Generator().manual_seed(0)
-    e = torch.tensor([[i, j] for i in range(n) for j in range(n)], dtype=torch.long)
+    rows = torch.arange(n)
     args = [
         torch.randn(n, spec.t_obs, 2, generator=g),
         torch.ones(n, spec.t_obs),
         torch.randn(n, spec.state_dim, generator=g),
-        e,
-        torch.randn(len(e), 6, generator=g),
+        torch.stack([rows, (rows + 1) % n], dim=1),
+        torch.ones(n, 2),
+        torch.randn(n, 2, 6, generator=g),
     ]
     if spec.map is not None:
         args.append(torch.rand(n, 3, spec.map.height_px, spec.map.width_px, generator=g))
@@ -90,9 +105,11 @@ def export_model(
     description: str = "",
     temperature: float = 1.0,
 ) -> Path:
-    """Exports under the contract; anchors must be grouped by class in the spec's class order."""
-    from training.train import INPUTS
+    """Exports under the contract (version 3: the padded neighbour layout, whatever layout the model trained on);
+    anchors must be grouped by class in the spec's class order."""
+    from training.model import PaddedDGAN
 
+    spec = replace(spec, graph="padded")
     if not np.all(np.diff(class_of) >= 0) or (len(class_of) and class_of[-1] >= len(spec.classes)):
         raise ValueError("anchors must be grouped by class, in the order of spec.classes")
     args = example_inputs(spec)
@@ -101,14 +118,15 @@ def export_model(
         "trajectory": {0: "N"},
         "trajectory_mask": {0: "N"},
         "state": {0: "N"},
-        "edge_index": {0: "E"},
-        "edge_features": {0: "E"},
+        "neighbor_index": {0: "N", 1: "D"},
+        "neighbor_mask": {0: "N", 1: "D"},
+        "neighbor_features": {0: "N", 1: "D"},
         "map": {0: "N"},
         "map_present": {0: "N"},
     }
     dynamic_axes = {k: dyn[k] for k in names} | {o: {0: "N"} for o in OUTPUTS}
     torch.onnx.export(
-        model,
+        PaddedDGAN(model).eval(),
         args,
         str(path),
         input_names=names,

@@ -4,7 +4,9 @@ layers masked by the attention-zone graph, and heads for class logits, anchor lo
 
 Node features are agent-centric, so neighbour geometry travels on the edges: each edge carries the sender's position,
 velocity and heading in the receiver's frame (``edge_features``), which enters both the attention score and the
-message. Graph softmax uses scatter-add only (exported as ONNX ScatterElements), with scores clamped to ±20.
+message. Scores are clamped to ±20. Training runs the graph attention over the edge list (scatter-add); the exported
+model (contract 3, :class:`PaddedDGAN`) runs the same attention, with the same weights, over each agent's padded
+list of senders, which needs only gathers and dense reductions and which ONNX Runtime runs several times faster.
 """
 
 from __future__ import annotations
@@ -105,6 +107,18 @@ class GATLayer(nn.Module):
         out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
         return out
 
+    def forward_padded(self, h: Tensor, index: Tensor, mask: Tensor, features: Tensor) -> Tensor:
+        """The same attention over padded senders ``index (N, D)`` with ``mask (N, D)`` and ``features (N, D, 6)``."""
+        n, d = index.shape
+        wh = self.w(h).view(n, self.heads, self.dh)
+        msg = wh[index] + self.we(features).view(n, d, self.heads, self.dh)  # (N, D, H, dh)
+        score = (wh.unsqueeze(1) * self.a_recv).sum(-1) + (msg * self.a_send).sum(-1)
+        weight = torch.exp(torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0)) * mask.unsqueeze(-1)
+        alpha = weight / (weight.sum(dim=1, keepdim=True) + 1e-9)
+        agg = (alpha.unsqueeze(-1) * msg).sum(dim=1)
+        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
+        return out
+
 
 class DGAN(nn.Module):
     """Inputs and outputs follow the dgan model contract (``docs/model-contract.md``)."""
@@ -148,16 +162,10 @@ class DGAN(nn.Module):
         self.anchor_head = nn.Linear(cfg.head_dim, num_anchors)
         self.offset_head = nn.Linear(cfg.head_dim, num_anchors * t_f * 2)
 
-    def forward(
-        self,
-        trajectory: Tensor,
-        trajectory_mask: Tensor,
-        state: Tensor,
-        edge_index: Tensor,
-        edge_features: Tensor,
-        map: Tensor | None = None,
-        map_present: Tensor | None = None,
-    ) -> tuple[Tensor, Tensor, Tensor]:
+    def encode(
+        self, trajectory: Tensor, trajectory_mask: Tensor, state: Tensor, map: Tensor | None, map_present: Tensor | None
+    ) -> Tensor:
+        """Node features: the trajectory LSTM, the traffic-state MLP and the map CNN, concatenated and projected."""
         x = torch.cat([trajectory, trajectory_mask.unsqueeze(-1)], dim=-1)
         _, (h_n, _) = self.lstm(self.embed(x))
         parts = [h_n[-1], self.state_mlp(state)]
@@ -170,17 +178,65 @@ class DGAN(nn.Module):
                 parts += [features * present, present]
             else:
                 parts.append(features)
-        v = self.node(torch.cat(parts, dim=-1))
+        out: Tensor = self.node(torch.cat(parts, dim=-1))
+        return out
+
+    def heads(self, p: Tensor, v: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        z = self.trunk(torch.cat([p, v], dim=-1)) if self.cfg.use_gat else self.trunk(v + p)
+        offsets = self.offset_head(z).view(-1, self.k, self.t_f, 2)
+        return self.class_head(z), self.anchor_head(z), offsets
+
+    def forward(
+        self,
+        trajectory: Tensor,
+        trajectory_mask: Tensor,
+        state: Tensor,
+        edge_index: Tensor,
+        edge_features: Tensor,
+        map: Tensor | None = None,
+        map_present: Tensor | None = None,
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        v = self.encode(trajectory, trajectory_mask, state, map, map_present)
         if not self.cfg.use_edge_features:
             edge_features = edge_features * 0.0
         p = v
         for layer in self.gat:
             p = layer(p, edge_index, edge_features)
-        if self.cfg.use_gat:
-            z = self.trunk(torch.cat([p, v], dim=-1))
-        else:
+        if not self.cfg.use_gat:
             # The contract's edge inputs stay in the exported graph (an exporter drops unused inputs).
-            unused = (edge_features.sum() + edge_index.sum().to(v.dtype)) * 0.0
-            z = self.trunk(v + unused)
-        offsets = self.offset_head(z).view(-1, self.k, self.t_f, 2)
-        return self.class_head(z), self.anchor_head(z), offsets
+            p = (edge_features.sum() + edge_index.sum().to(v.dtype)) * 0.0
+        return self.heads(p, v)
+
+    def forward_padded(
+        self,
+        trajectory: Tensor,
+        trajectory_mask: Tensor,
+        state: Tensor,
+        neighbor_index: Tensor,
+        neighbor_mask: Tensor,
+        neighbor_features: Tensor,
+        map: Tensor | None = None,
+        map_present: Tensor | None = None,
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        """:meth:`forward` on the padded neighbour layout (contract 3): the same outputs for the same graph."""
+        v = self.encode(trajectory, trajectory_mask, state, map, map_present)
+        if not self.cfg.use_edge_features:
+            neighbor_features = neighbor_features * 0.0
+        p = v
+        for layer in self.gat:
+            p = layer.forward_padded(p, neighbor_index, neighbor_mask, neighbor_features)
+        if not self.cfg.use_gat:
+            unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
+            p = unused * 0.0
+        return self.heads(p, v)
+
+
+class PaddedDGAN(nn.Module):
+    """A trained :class:`DGAN` whose ``forward`` takes the padded neighbour layout: what the exporter traces."""
+
+    def __init__(self, model: DGAN) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, *inputs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        return self.model.forward_padded(*inputs)

@@ -56,6 +56,9 @@ class InputSpec:
     attention_lambda: float = 0.5
     map: MapSpec | None = field(default=None)
     prior: PriorSpec = field(default_factory=PriorSpec)
+    #: How the attention graph reaches the network: ``"edge_list"`` (``edge_index``, ``edge_features``; contracts 1
+    #: and 2) or ``"padded"`` (``neighbor_index``, ``neighbor_mask``, ``neighbor_features``; contract 3).
+    graph: str = "edge_list"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "classes", tuple(self.classes))
@@ -77,6 +80,7 @@ class InputSpec:
             attention_lambda=float(d["attention_lambda"]),
             map=None if m is None else MapSpec(**m),
             prior=PriorSpec(**d.get("prior", {})),
+            graph=str(d.get("graph", "edge_list")),
         )
 
     @property
@@ -89,7 +93,8 @@ def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:
     """The network inputs of ``frame`` (see ``docs/model-contract.md``) plus its geometry.
 
     Returns ``trajectory (N, T_obs, 2)``, ``trajectory_mask (N, T_obs)``, ``state (N, 7 + C)``,
-    ``edge_index (E, 2)``, ``edge_features (E, 6)``, ``map (N, 3, H, W)`` for map models, ``map_present (N,)`` for
+    ``edge_index (E, 2)``, ``edge_features (E, 6)`` (and for the padded layout ``neighbor_index (N, D)``,
+    ``neighbor_mask (N, D)``, ``neighbor_features (N, D, 6)``), ``map (N, 3, H, W)`` for map models, ``map_present (N,)`` for
     models whose map is optional, the kinematic ``prior (N, T_f, 2)`` in each agent's frame, and ``origin (N, 2)``,
     ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and undirected ``edges``.
     """

@@ -206,7 +206,8 @@ def test_bundled_map_models_also_serve_frames_without_a_map(zara1_frame: dgan.Fr
 def test_the_prior_and_temperature_are_declared(zara1_frame: dgan.Frame) -> None:
     predictor = dgan.Predictor("zara1")
     c = predictor.contract
-    assert c["contract_version"] == 2
+    assert c["contract_version"] == 3
+    assert c["graph"] == "padded"
     assert c["prior"]["kind"] == "constant_velocity"
     assert 0.001 <= c["temperature"] <= 1000
     # The engine's prior is constant velocity along the direction of motion: v · t · dt in the agent frame.

@@ -3,7 +3,7 @@
 //! the same outputs as it would in its own frame, in one call.
 
 use crate::error::{DganError, Result};
-use crate::preprocess::NetworkInputs;
+use crate::preprocess::{Neighbors, NetworkInputs};
 use ndarray::{concatenate, Array2, ArrayView, Axis, Dimension, RemoveAxis};
 
 /// Joined inputs and where each frame's agents are: frame `f` holds rows `agent_ptr[f]..agent_ptr[f + 1]`.
@@ -54,6 +54,26 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
     ) -> Vec<ArrayView<'a, A, D>> {
         parts.iter().map(|p| f(p).view()).collect()
     }
+    let neighbors = if same_presence(parts, |p| p.neighbors.as_ref(), "neighbors")? {
+        let d = parts.iter().filter_map(|p| p.neighbors.as_ref()).map(|nb| nb.index.ncols()).max().unwrap_or(1);
+        let n = agent_ptr.last().copied().unwrap_or(0);
+        let f = parts.iter().filter_map(|p| p.neighbors.as_ref()).map(|nb| nb.features.dim().2).max().unwrap_or(0);
+        let mut index = Array2::from_shape_fn((n, d), |(i, _)| i as i64);
+        let mut mask = Array2::<f32>::zeros((n, d));
+        let mut features = ndarray::Array3::<f32>::zeros((n, d, f));
+        for (p, &offset) in parts.iter().zip(&agent_ptr) {
+            if let Some(nb) = &p.neighbors {
+                let (rows, cols) = nb.index.dim();
+                let r = ndarray::s![offset..offset + rows, ..cols];
+                index.slice_mut(r).assign(&nb.index.mapv(|v| v + offset as i64));
+                mask.slice_mut(r).assign(&nb.mask);
+                features.slice_mut(ndarray::s![offset..offset + rows, ..cols, ..]).assign(&nb.features);
+            }
+        }
+        Some(Neighbors { index, mask, features })
+    } else {
+        None
+    };
     let inputs = NetworkInputs {
         trajectory: stack("trajectory", views(parts, |p| &p.trajectory))?,
         trajectory_mask: stack("trajectory_mask", views(parts, |p| &p.trajectory_mask))?,
@@ -62,6 +82,7 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
         edge_features: stack("edge_features", views(parts, |p| &p.edge_features))?,
         map,
         map_present,
+        neighbors,
     };
     Ok(Joined { inputs, agent_ptr })
 }
@@ -81,6 +102,7 @@ mod tests {
             edge_features: Array2::zeros((e, 6)),
             map: map.then(|| Array4::zeros((n, 3, 2, 2))),
             map_present: map.then(|| Array1::ones(n)),
+            neighbors: None,
         }
     }
 
@@ -94,6 +116,22 @@ mod tests {
         assert_eq!(j.inputs.trajectory[[2, 0, 0]], 1.0);
         assert_eq!(j.inputs.map.unwrap().dim().0, 3);
         assert_eq!(j.inputs.map_present.unwrap().len(), 3);
+    }
+
+    #[test]
+    fn joins_padded_neighbours_of_different_degrees() {
+        let with = |n: usize, edges: Array2<i64>| {
+            let mut x = inputs(n, edges.clone(), false);
+            x.neighbors = Some(Neighbors::from_edges(n, &edges, &x.edge_features).unwrap());
+            x
+        };
+        let a = with(2, array![[0, 0], [0, 1], [1, 0], [1, 1]]);
+        let b = with(1, array![[0, 0]]);
+        let nb = join(&[a, b]).unwrap().inputs.neighbors.unwrap();
+        assert_eq!(nb.index.dim(), (3, 2));
+        assert_eq!(nb.index.row(2).to_vec(), vec![2, 2]);
+        assert_eq!(nb.mask.row(2).to_vec(), vec![1.0, 0.0]);
+        assert_eq!(nb.index.row(1).to_vec(), vec![0, 1]);
     }
 
     #[test]

@@ -5,17 +5,17 @@ use crate::class::AgentClass;
 use crate::decode::Anchors;
 use crate::error::{DganError, Result};
 use crate::prior::PriorSpec;
-use crate::spec::{InputSpec, EDGE_FEATURES};
+use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES};
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// The contract version the exporter writes. Version 2 adds the kinematic prior, optional maps (`map_present`)
-/// and the temperature of the anchor logits.
-pub const CONTRACT_VERSION: u32 = 2;
+/// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph.
+pub const CONTRACT_VERSION: u32 = 3;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
-/// without.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 2] = [1, 2];
+/// without; versions 1 and 2 take the graph as an edge list.
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 3] = [1, 2, 3];
 /// The ONNX `metadata_props` key holding the contract as JSON.
 pub const METADATA_KEY: &str = "dgan_contract";
 
@@ -31,6 +31,12 @@ pub const INPUT_EDGE_INDEX: &str = "edge_index";
 pub const INPUT_EDGE_FEATURES: &str = "edge_features";
 /// Input (map models only): agent-centric RGB crops `(N, 3, H, W)` f32 in [0, 1].
 pub const INPUT_MAP: &str = "map";
+/// Input (padded layout): `(N, D)` i64, each agent's senders, itself included, padded with its own row.
+pub const INPUT_NEIGHBOR_INDEX: &str = "neighbor_index";
+/// Input (padded layout): `(N, D)` f32, 1 for a real sender, 0 for padding.
+pub const INPUT_NEIGHBOR_MASK: &str = "neighbor_mask";
+/// Input (padded layout): `(N, D, 6)` f32, each sender seen from the agent (the columns of `edge_features`).
+pub const INPUT_NEIGHBOR_FEATURES: &str = "neighbor_features";
 /// Input (models with an optional map only): `(N,)` f32, 1 where the agent's crop holds a map, 0 where it is blank.
 pub const INPUT_MAP_PRESENT: &str = "map_present";
 /// Output: class logits `(N, C)` f32.
@@ -56,6 +62,8 @@ pub enum Dim {
     Agents,
     /// The dynamic directed-edge count E.
     Edges,
+    /// The dynamic largest degree D of the padded layout.
+    Degree,
     /// A fixed size.
     Fixed(usize),
 }
@@ -129,6 +137,11 @@ impl ModelContract {
                         .into(),
                 ));
             }
+        }
+        if self.contract_version < 3 && self.input.graph != GraphLayout::EdgeList {
+            return Err(DganError::Contract(
+                "graph = \"padded\" is a contract-3 key; versions 1 and 2 take an edge list".into(),
+            ));
         }
         if !(self.temperature.is_finite() && (1e-3..=1e3).contains(&self.temperature)) {
             return Err(DganError::Contract(format!(
@@ -204,13 +217,27 @@ pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
         },
         TensorSpec { name: INPUT_TRAJECTORY_MASK, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(spec.t_obs)] },
         TensorSpec { name: INPUT_STATE, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(spec.state_dim())] },
-        TensorSpec { name: INPUT_EDGE_INDEX, dtype: DType::I64, dims: vec![Dim::Edges, Dim::Fixed(2)] },
-        TensorSpec {
-            name: INPUT_EDGE_FEATURES,
-            dtype: DType::F32,
-            dims: vec![Dim::Edges, Dim::Fixed(EDGE_FEATURES.len())],
-        },
     ];
+    match spec.graph {
+        GraphLayout::EdgeList => {
+            v.push(TensorSpec { name: INPUT_EDGE_INDEX, dtype: DType::I64, dims: vec![Dim::Edges, Dim::Fixed(2)] });
+            v.push(TensorSpec {
+                name: INPUT_EDGE_FEATURES,
+                dtype: DType::F32,
+                dims: vec![Dim::Edges, Dim::Fixed(EDGE_FEATURES.len())],
+            });
+        }
+        GraphLayout::Padded => {
+            let nd = vec![Dim::Agents, Dim::Degree];
+            v.push(TensorSpec { name: INPUT_NEIGHBOR_INDEX, dtype: DType::I64, dims: nd.clone() });
+            v.push(TensorSpec { name: INPUT_NEIGHBOR_MASK, dtype: DType::F32, dims: nd });
+            v.push(TensorSpec {
+                name: INPUT_NEIGHBOR_FEATURES,
+                dtype: DType::F32,
+                dims: vec![Dim::Agents, Dim::Degree, Dim::Fixed(EDGE_FEATURES.len())],
+            });
+        }
+    }
     if let Some(m) = &spec.map {
         v.push(TensorSpec {
             name: INPUT_MAP,
@@ -235,11 +262,15 @@ pub fn check_tensor(kind: &str, want: &TensorSpec, dtype: Option<DType>, shape: 
     }
     for (axis, (got, dim)) in shape.iter().zip(&want.dims).enumerate() {
         match dim {
-            Dim::Agents | Dim::Edges if *got >= 0 => {
+            Dim::Agents | Dim::Edges | Dim::Degree if *got >= 0 => {
+                let what = match dim {
+                    Dim::Agents => "the agent count N",
+                    Dim::Edges => "the edge count E",
+                    _ => "the largest degree D",
+                };
                 return fail(format!(
-                    "axis {axis} is fixed to {got}; it must be dynamic ({}) - export with a dynamic axis",
-                    if *dim == Dim::Agents { "the agent count N" } else { "the edge count E" }
-                ))
+                    "axis {axis} is fixed to {got}; it must be dynamic ({what}) - export with a dynamic axis"
+                ));
             }
             Dim::Fixed(n) if *got >= 0 && *got as usize != *n => {
                 return fail(format!("axis {axis} is {got}, the contract says {n} (shape {shape:?})"))
@@ -287,6 +318,12 @@ mod tests {
         assert_eq!(c.input.prior.kind, crate::prior::PriorKind::ConstantVelocity);
         let names: Vec<_> = c.expected_inputs().iter().map(|t| t.name).collect();
         assert_eq!(names.last(), Some(&INPUT_MAP_PRESENT));
+        // Version 3 takes the padded layout.
+        let v3 = v2
+            .replace("\"contract_version\": 2", "\"contract_version\": 3")
+            .replace("\"temperature\"", "\"graph\": \"padded\", \"temperature\"");
+        let names: Vec<_> = ModelContract::from_json(&v3).unwrap().expected_inputs().iter().map(|t| t.name).collect();
+        assert_eq!(&names[3..6], &[INPUT_NEIGHBOR_INDEX, INPUT_NEIGHBOR_MASK, INPUT_NEIGHBOR_FEATURES]);
         // Version 1: no prior, temperature 1.
         let v1 = ModelContract::from_json(&json()).unwrap();
         assert_eq!((v1.input.prior, v1.temperature), (PriorSpec::NONE, 1.0));
@@ -295,7 +332,8 @@ mod tests {
     #[test]
     fn rejects_broken_contracts() {
         let cases = [
-            json().replace("\"contract_version\": 1", "\"contract_version\": 3"),
+            json().replace("\"contract_version\": 1", "\"contract_version\": 4"),
+            json().replace("\"map\": null", "\"map\": null, \"graph\": \"padded\""),
             json().replace("\"map\": null", "\"map\": null, \"temperature\": 2.0"),
             json()
                 .replace("\"contract_version\": 1", "\"contract_version\": 2")

@@ -50,4 +50,4 @@ pub use frame::Frame;
 pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
 pub use prior::{PriorKind, PriorSpec};
 pub use runtime::{init_onnxruntime, Prediction, Predictor, PredictorOptions};
-pub use spec::{InputSpec, MapSpec};
+pub use spec::{GraphLayout, InputSpec, MapSpec};

@@ -5,7 +5,7 @@ use crate::error::{invalid_frame, DganError, Result};
 use crate::frame::Frame;
 use crate::graph::{attention_radius, attention_zone_edges};
 use crate::raster::rasterize;
-use crate::spec::{InputSpec, EDGE_FEATURES, STATE_FEATURES};
+use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
 use crate::state::{traffic_states, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
 use ndarray::{Array1, Array2, Array3, Array4};
@@ -28,6 +28,45 @@ pub struct NetworkInputs {
     pub map: Option<Array4<f32>>,
     /// `(N,)` 1 where the crop holds a map, 0 where the frame has none: for models whose map is optional.
     pub map_present: Option<Array1<f32>>,
+    /// The same graph as each agent's padded list of senders, for models of the padded layout (contract 3).
+    pub neighbors: Option<Neighbors>,
+}
+
+/// Each agent's senders (itself included, ascending), padded to the frame's largest degree D.
+#[derive(Debug, Clone)]
+pub struct Neighbors {
+    /// `(N, D)` sender rows; padding repeats the agent's own row.
+    pub index: Array2<i64>,
+    /// `(N, D)` 1 for a real sender, 0 for padding.
+    pub mask: Array2<f32>,
+    /// `(N, D, 6)` the sender seen from the agent (as `edge_features`); 0 on padding.
+    pub features: Array3<f32>,
+}
+
+impl Neighbors {
+    /// The padded layout of a directed edge list sorted by receiver (`edge_index (E, 2)`, `edge_features (E, F)`)
+    /// over `n` agents.
+    pub fn from_edges(n: usize, edge_index: &Array2<i64>, edge_features: &Array2<f32>) -> Result<Self> {
+        let mut degree = vec![0usize; n];
+        for r in edge_index.column(0) {
+            let r = usize::try_from(*r).ok().filter(|r| *r < n).ok_or_else(|| invalid_frame("edge out of range"))?;
+            degree[r] += 1;
+        }
+        let d = degree.iter().copied().max().unwrap_or(0).max(1);
+        let f = edge_features.ncols();
+        let mut index = Array2::from_shape_fn((n, d), |(i, _)| i as i64);
+        let mut mask = Array2::<f32>::zeros((n, d));
+        let mut features = Array3::<f32>::zeros((n, d, f));
+        let mut slot = vec![0usize; n];
+        for (e, row) in edge_index.rows().into_iter().enumerate() {
+            let (r, k) = (row[0] as usize, slot[row[0] as usize]);
+            index[[r, k]] = row[1];
+            mask[[r, k]] = 1.0;
+            features.slice_mut(ndarray::s![r, k, ..]).assign(&edge_features.row(e));
+            slot[r] += 1;
+        }
+        Ok(Self { index, mask, features })
+    }
 }
 
 /// A preprocessed frame: network inputs plus the geometry needed to decode and inspect the outputs.
@@ -135,8 +174,21 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
             ))
         }
     };
+    let neighbors = match spec.graph {
+        GraphLayout::EdgeList => None,
+        GraphLayout::Padded => Some(Neighbors::from_edges(n, &edge_index, &edge_features)?),
+    };
     Ok(Preprocessed {
-        inputs: NetworkInputs { trajectory, trajectory_mask, state, edge_index, edge_features, map, map_present },
+        inputs: NetworkInputs {
+            trajectory,
+            trajectory_mask,
+            state,
+            edge_index,
+            edge_features,
+            map,
+            map_present,
+            neighbors,
+        },
         prior,
         poses,
         states,
@@ -174,6 +226,7 @@ mod tests {
                 optional,
             }),
             prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.0 },
+            graph: GraphLayout::Padded,
         }
     }
 
@@ -207,6 +260,12 @@ mod tests {
         assert_eq!(pre.prior[[0, 3, 0]], 2.0);
         assert_eq!(pre.prior[[1, 3, 0]], 0.0);
         assert!(preprocess(&f, &spec(false)).unwrap().inputs.map.is_none());
+        // The padded layout: agent 0 hears itself and agent 1, agent 2 only itself (D = 2).
+        let nb = x.neighbors.as_ref().unwrap();
+        assert_eq!(nb.index.row(0).to_vec(), vec![0, 1]);
+        assert_eq!(nb.index.row(2).to_vec(), vec![2, 2]);
+        assert_eq!(nb.mask.row(2).to_vec(), vec![1.0, 0.0]);
+        assert_eq!(nb.features.slice(ndarray::s![0, 1, ..]).to_vec(), x.edge_features.row(1).to_vec());
         // A map that is not optional is required.
         assert!(matches!(preprocess(&f, &spec(true)), Err(DganError::MapRequired(_))));
     }

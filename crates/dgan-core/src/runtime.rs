@@ -7,8 +7,9 @@
 use crate::batch::join;
 use crate::contract::{check_tensor, DType, ModelContract, METADATA_KEY};
 use crate::contract::{
-    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_PRESENT, INPUT_STATE, INPUT_TRAJECTORY,
-    INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS, OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
+    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_PRESENT, INPUT_NEIGHBOR_FEATURES, INPUT_NEIGHBOR_INDEX,
+    INPUT_NEIGHBOR_MASK, INPUT_STATE, INPUT_TRAJECTORY, INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS,
+    OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
 };
 use crate::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
 use crate::error::{DganError, Result};
@@ -349,9 +350,18 @@ impl Predictor {
             (INPUT_TRAJECTORY, Tensor::from_array(inputs.trajectory).map_err(infer)?.into()),
             (INPUT_TRAJECTORY_MASK, Tensor::from_array(inputs.trajectory_mask).map_err(infer)?.into()),
             (INPUT_STATE, Tensor::from_array(inputs.state).map_err(infer)?.into()),
-            (INPUT_EDGE_INDEX, Tensor::from_array(inputs.edge_index).map_err(infer)?.into()),
-            (INPUT_EDGE_FEATURES, Tensor::from_array(inputs.edge_features).map_err(infer)?.into()),
         ];
+        match inputs.neighbors {
+            Some(nb) => {
+                feed.push((INPUT_NEIGHBOR_INDEX, Tensor::from_array(nb.index).map_err(infer)?.into()));
+                feed.push((INPUT_NEIGHBOR_MASK, Tensor::from_array(nb.mask).map_err(infer)?.into()));
+                feed.push((INPUT_NEIGHBOR_FEATURES, Tensor::from_array(nb.features).map_err(infer)?.into()));
+            }
+            None => {
+                feed.push((INPUT_EDGE_INDEX, Tensor::from_array(inputs.edge_index).map_err(infer)?.into()));
+                feed.push((INPUT_EDGE_FEATURES, Tensor::from_array(inputs.edge_features).map_err(infer)?.into()));
+            }
+        }
         if let Some(map) = inputs.map {
             feed.push((INPUT_MAP, Tensor::from_array(map).map_err(infer)?.into()));
         }

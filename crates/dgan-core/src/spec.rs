@@ -91,6 +91,22 @@ pub struct InputSpec {
     /// The kinematic prior the network's outputs are relative to (contract 2; none before).
     #[serde(default)]
     pub prior: PriorSpec,
+    /// How the attention graph reaches the network (contract 3 adds the padded layout).
+    #[serde(default)]
+    pub graph: GraphLayout,
+}
+
+/// How the attention-zone graph is given to the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GraphLayout {
+    /// `edge_index (E, 2)` and `edge_features (E, 6)`: directed edges sorted by receiver (contracts 1 and 2).
+    #[default]
+    EdgeList,
+    /// `neighbor_index (N, D)`, `neighbor_mask (N, D)` and `neighbor_features (N, D, 6)`: each agent's senders
+    /// (itself included) in ascending order, padded to the largest degree D of the frame (contract 3). The network
+    /// then needs only gathers and dense reductions, which ONNX Runtime runs far faster than scatters.
+    Padded,
 }
 
 impl InputSpec {
@@ -169,6 +185,7 @@ mod tests {
                 optional: false,
             }),
             prior: PriorSpec::NONE,
+            graph: GraphLayout::EdgeList,
         }
     }
 

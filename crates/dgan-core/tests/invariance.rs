@@ -3,7 +3,8 @@
 
 use dgan_core::preprocess::preprocess;
 use dgan_core::{
-    AgentClass, Frame, InputSpec, MapElement, MapElementKind, MapSpec, PriorKind, PriorSpec, SceneMap, VectorMap,
+    AgentClass, Frame, GraphLayout, InputSpec, MapElement, MapElementKind, MapSpec, PriorKind, PriorSpec, SceneMap,
+    VectorMap,
 };
 use ndarray::{Array2, Array3};
 use rand::{Rng, SeedableRng};
@@ -92,6 +93,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
             optional: false,
         }),
         prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.8 },
+        graph: GraphLayout::Padded,
     };
     let base = preprocess(&frame(0.0, [0.0, 0.0]), &spec).unwrap();
     for (angle, shift) in [(1.0, [100.0, -50.0]), (-2.5, [3000.0, 4000.0]), (std::f64::consts::PI, [0.0, 0.0])] {
@@ -103,6 +105,9 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
         assert_eq!(a.edge_index, b.edge_index, "edges");
         close(a.edge_features.as_slice().unwrap(), b.edge_features.as_slice().unwrap(), 1e-3, "edge features");
         close(base.prior.as_slice().unwrap(), moved.prior.as_slice().unwrap(), 1e-3, "kinematic prior");
+        let (na, nb) = (a.neighbors.as_ref().unwrap(), b.neighbors.as_ref().unwrap());
+        assert_eq!(na.index, nb.index, "padded neighbours");
+        close(na.features.as_slice().unwrap(), nb.features.as_slice().unwrap(), 1e-3, "neighbour features");
         // Anti-aliased drawing of the same geometry differs only by rounding at a few edge pixels.
         let (ma, mb) = (a.map.as_ref().unwrap(), b.map.as_ref().unwrap());
         let diff: Vec<f32> = ma.iter().zip(mb.iter()).map(|(x, y)| (x - y).abs()).collect();

@@ -43,6 +43,11 @@ pub fn preprocess<'py>(py: Python<'py>, frame: &PyFrame, spec_json: &str) -> PyR
     if let Some(m) = x.map_present {
         d.set_item("map_present", m.into_pyarray(py))?;
     }
+    if let Some(nb) = x.neighbors {
+        d.set_item("neighbor_index", nb.index.into_pyarray(py))?;
+        d.set_item("neighbor_mask", nb.mask.into_pyarray(py))?;
+        d.set_item("neighbor_features", nb.features.into_pyarray(py))?;
+    }
     d.set_item("prior", pre.prior.into_pyarray(py))?;
     let n = pre.poses.len();
     d.set_item("origin", Array2::from_shape_fn((n, 2), |(i, k)| pre.poses[i].origin()[k]).into_pyarray(py))?;
