@@ -224,6 +224,7 @@ class DGAN(nn.Module):
             neighbor_features = neighbor_features * 0.0
         p = v
         for layer in self.gat:
+            assert isinstance(layer, GATLayer)
             p = layer.forward_padded(p, neighbor_index, neighbor_mask, neighbor_features)
         if not self.cfg.use_gat:
             unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
