@@ -96,7 +96,8 @@ def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:
     ``edge_index (E, 2)``, ``edge_features (E, 6)`` (and for the padded layout ``neighbor_index (N, D)``,
     ``neighbor_mask (N, D)``, ``neighbor_features (N, D, 6)``), ``map (N, 3, H, W)`` for map models,
     ``map_present (N,)`` for models whose map is optional, the kinematic ``prior (N, T_f, 2)`` in each agent's
-    frame, and ``origin (N, 2)``, ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and undirected ``edges``.
+    frame, and ``origin (N, 2)``, ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and
+    undirected ``edges``.
     """
     out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, spec.to_json())
     return out
