@@ -13,6 +13,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use dgan_core::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
 use dgan_core::graph::{attention_zone_edges, attention_zone_edges_brute_force};
+use dgan_core::preprocess::preprocess;
 use dgan_core::raster::rasterize;
 use dgan_core::state::traffic_states;
 use dgan_core::transform::AgentPose;
@@ -179,6 +180,15 @@ fn bench_hdmap(c: &mut Criterion) {
     let mut g = c.benchmark_group("hdmap_waymo");
     g.bench_function("raster", |b| b.iter(|| rasterize(black_box(&frame), &states, &map_spec)));
     g.bench_function("predict", |b| b.iter(|| predictor.predict(black_box(&frame))));
+    // predict split into its three parts: preprocessing, the network, decoding.
+    g.bench_function("preprocess", |b| b.iter(|| preprocess(black_box(&frame), &spec)));
+    let pre = preprocess(&frame, &spec).expect("the frame preprocesses");
+    g.bench_function("network", |b| b.iter(|| predictor.run(black_box(pre.inputs.clone()))));
+    let (cl, al, off) = predictor.run(pre.inputs.clone()).expect("the network runs");
+    let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
+    let anchors = predictor.anchors();
+    let params = DecodeParams { anchors, prior: Some(pre.prior.view()), temperature: predictor.contract().temperature };
+    g.bench_function("decode", |b| b.iter(|| decode(out, params, &pre.poses, anchors.total())));
     g.finish();
 }
 
