@@ -128,6 +128,7 @@ def evaluate(
     everyone = np.ones(len(label), dtype=bool)
     out: dict[str, Any] = summarise(flat, everyone)
     out["windows"] = windows
+    out["num_modes"] = predictor.num_modes
     out["with_map"] = use_map
     out["dataset"] = dataset
     out["unit"] = info.unit

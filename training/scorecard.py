@@ -81,7 +81,8 @@ def _pair(r: dict[str, Any], a: str, b: str) -> str:
 
 def table(tests: list[TestSet]) -> str:
     head = (
-        "| test set | class | targets | top-1 ADE/FDE | min5 | min20 | Brier-minFDE | constant velocity | "
+        "| test set | class | targets | top-1 ADE/FDE | min5 | min20 (min K if K < 20) | Brier-minFDE | "
+        "constant velocity | "
         "top-1 below CV (ADE, FDE) | without the map: top-1 | no map vs map |"
     )
     lines = [head, "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -89,7 +90,7 @@ def table(tests: list[TestSet]) -> str:
         for row in rows(ts):
             r = row["r"]
             brier = r.get("brier_min_fde20", r.get("brier_min_fde5", float("nan")))
-            k = 20 if "brier_min_fde20" in r else 5
+            k = min(20, int(ts.res.get("num_modes", 20))) if "brier_min_fde20" in r else 5
             nm = row.get("nomap")
             cells = [
                 ts.name,

@@ -27,18 +27,18 @@ def test_five_leave_one_out_models_are_bundled() -> None:
 
 
 @pytest.mark.parametrize(
-    ("name", "dt", "t_obs", "t_f", "has_map"),
-    [("sdd", 1 / 3, 8, 12, True), ("apolloscape", 0.5, 6, 6, False), ("hdmap", 0.2, 10, 15, True)],
+    ("name", "dt", "t_obs", "t_f", "has_map", "k_c"),
+    [("sdd", 1 / 3, 8, 12, True, 20), ("apolloscape", 0.5, 6, 6, False, 20), ("hdmap", 0.2, 10, 15, True, 10)],
 )
-def test_multiclass_models_are_bundled(name: str, dt: float, t_obs: int, t_f: int, has_map: bool) -> None:
+def test_multiclass_models_are_bundled(name: str, dt: float, t_obs: int, t_f: int, has_map: bool, k_c: int) -> None:
     p = dgan.Predictor(name)
     assert p.classes == ("vehicle", "cyclist", "pedestrian")
     assert p.spec.dt_s == pytest.approx(dt)
     assert (p.spec.t_obs, p.spec.t_f) == (t_obs, t_f)
     assert (p.spec.map is not None) == has_map
     for cls in p.classes:
-        assert p.anchors[cls].shape == (20, t_f, 2)
-    assert p.num_modes == 60
+        assert p.anchors[cls].shape == (k_c, t_f, 2)
+    assert p.num_modes == 3 * k_c
     card = dgan.models.card(name)
     assert "one model for vehicles, cyclists and pedestrians" in card
     assert "non-commercial" in card
