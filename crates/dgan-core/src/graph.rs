@@ -49,23 +49,30 @@ pub fn attention_zone_edges(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[
         })
         .collect();
     let tree = RTree::bulk_load(boxes);
-    let per_agent: Vec<Vec<[u32; 2]>> = (0..centres.len())
-        .into_par_iter()
-        .map(|i| {
-            let (c, r) = (centres[i], radii[i]);
-            let envelope = AABB::from_corners([c[0] - r, c[1] - r], [c[0] + r, c[1] + r]);
-            let mut out: Vec<[u32; 2]> = tree
-                .locate_in_envelope_intersecting(&envelope)
-                .map(|g| g.data)
-                .filter(|&j| (j as usize) > i && intersects(c, r, centres[j as usize], radii[j as usize]))
-                .map(|j| [i as u32, j])
-                .collect();
-            out.sort_unstable();
-            out
-        })
-        .collect();
+    let edges_of = |i: usize| {
+        let (c, r) = (centres[i], radii[i]);
+        let envelope = AABB::from_corners([c[0] - r, c[1] - r], [c[0] + r, c[1] + r]);
+        let mut out: Vec<[u32; 2]> = tree
+            .locate_in_envelope_intersecting(&envelope)
+            .map(|g| g.data)
+            .filter(|&j| (j as usize) > i && intersects(c, r, centres[j as usize], radii[j as usize]))
+            .map(|j| [i as u32, j])
+            .collect();
+        out.sort_unstable();
+        out
+    };
+    // Below a few thousand agents the queries take well under a millisecond: a sequential loop leaves no idle pool
+    // workers spinning on the cores that ONNX Runtime uses next.
+    let per_agent: Vec<Vec<[u32; 2]>> = if centres.len() < PARALLEL_FROM_AGENTS {
+        (0..centres.len()).map(edges_of).collect()
+    } else {
+        (0..centres.len()).into_par_iter().map(edges_of).collect()
+    };
     Ok(per_agent.concat())
 }
+
+/// From this many agents on, the attention graph's queries run on rayon's pool.
+pub const PARALLEL_FROM_AGENTS: usize = 2000;
 
 /// The O(N²) definition, for tests and benchmarks.
 pub fn attention_zone_edges_brute_force(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[u32; 2]>> {
