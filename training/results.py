@@ -362,8 +362,7 @@ that probability was the best of the K modes (smallest ADE), and the small numbe
 - *Stanford Drone.* The single model is ahead of constant velocity for every class on top-1 (the scorecard above)
   and far ahead on best-of-K; against Multiclass-SGCN's published best-of-20, on the very same windows (our constant
   velocity from the last two steps reproduces their published figure), see the table above. The per-class
-  Stanford Drone baselines are still the previous release's models (contract 1, absolute anchors, no prior): they
-  were not retrained with the prior in this round, so that comparison mixes model generations.
+  baselines are the same code and settings (prior, map dropout, 15 epochs) trained on one class at a time.
 - *ApolloScape.* Single and per-class models (all retrained with the prior) are compared on the same targets.
   **The single model's top-1 stays behind constant velocity** for vehicles and cyclists (scorecard), even though
   it refines a constant-velocity rollout: at 2 Hz over 3 s with no map, 2,590 training windows from eight
