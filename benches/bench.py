@@ -80,15 +80,14 @@ def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
     try:
         import torch
 
-        from training.export import checkpoint_temperature, load_checkpoint
+        from training.export import load_checkpoint
         from training.loss import decode_torch
         from training.train import INPUTS
     except ImportError:
         return None
     torch.set_num_threads(1)
     ckpt = ROOT / "training" / "checkpoints" / f"{name}.pt"
-    model, _, anchors, class_of, _ = load_checkpoint(ckpt)
-    temperature = checkpoint_temperature(ckpt)
+    model, _, anchors, class_of, _, temperature = load_checkpoint(ckpt)
     a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
 
     def run(x: dict[str, np.ndarray]) -> Any:

@@ -30,9 +30,9 @@ INPUTS = (
 )
 
 
-def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
-    """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor and the config.
-    The fitted temperature is :func:`checkpoint_temperature`."""
+def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config, float]:
+    """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor, the config and the
+    temperature fitted on validation after training (1 for a checkpoint without one)."""
     from training.train import build_model, input_spec
 
     ckpt = torch.load(path, weights_only=False)
@@ -46,12 +46,7 @@ def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.nd
     anchors = np.asarray(ckpt["anchors"])
     # Checkpoints from before multi-class training have one class and no class_of.
     class_of = np.asarray(ckpt.get("class_of", np.zeros(len(anchors), np.int64)))
-    return model, spec, anchors, class_of, cfg
-
-
-def checkpoint_temperature(path: Path) -> float:
-    """The temperature fitted on validation after training (1 for a checkpoint without one)."""
-    return float(torch.load(path, weights_only=False).get("temperature", 1.0))
+    return model, spec, anchors, class_of, cfg, float(ckpt.get("temperature", 1.0))
 
 
 def contract(
@@ -144,8 +139,8 @@ def export_model(
 
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
-    model, spec, anchors, class_of, _ = load_checkpoint(ckpt)
-    return export_model(model, spec, anchors, class_of, path, name, description, checkpoint_temperature(ckpt))
+    model, spec, anchors, class_of, _, temperature = load_checkpoint(ckpt)
+    return export_model(model, spec, anchors, class_of, path, name, description, temperature)
 
 
 def main() -> None:

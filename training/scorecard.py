@@ -112,7 +112,8 @@ def table(tests: list[TestSet]) -> str:
 def findings(tests: list[TestSet]) -> dict[str, Any]:
     """The issue's checks, computed: classes of ≥ MIN_TARGETS targets whose top-1 is above constant velocity; the
     mean gain over the test sets; map models without their map against constant velocity and against the map."""
-    all_rows = [row for ts in tests for row in rows(ts)]
+    per_test = {ts.name: rows(ts) for ts in tests}
+    all_rows = [row for ts_rows in per_test.values() for row in ts_rows]
     counted = [row for row in all_rows if row["n"] >= MIN_TARGETS]
     behind = [
         f"{row['test']} {row['class']} (ADE {row['gain_ade']:+.1f}%, FDE {row['gain_fde']:+.1f}%)"
@@ -123,7 +124,8 @@ def findings(tests: list[TestSet]) -> dict[str, Any]:
     # count through that average only.
     averaged = {ts.name.removesuffix(" average") for ts in tests if ts.name.endswith(" average")}
     sets = [ts for ts in tests if not any(ts.name.startswith(a + " ") and ts.name != a + " average" for a in averaged)]
-    overall = [next(r for r in rows(ts) if r["class"] == "all" or len(rows(ts)) == 1) for ts in sets]
+    # rows() ends with the 'all' row, or has a single class row.
+    overall = [per_test[ts.name][-1] for ts in sets]
     mean_ade = float(np.mean([row["gain_ade"] for row in overall]))
     mean_fde = float(np.mean([row["gain_fde"] for row in overall]))
     nomap = [row for row in counted if "nomap" in row]
@@ -143,10 +145,6 @@ def findings(tests: list[TestSet]) -> dict[str, Any]:
         "nomap_behind_cv": nomap_behind_cv,
         "nomap_more_than_10pct_worse": nomap_far,
     }
-
-
-def rows_of(tests: list[TestSet], name: str) -> list[dict[str, Any]]:
-    return [row for ts in tests if ts.name == name for row in rows(ts)]
 
 
 def summary(tests: list[TestSet]) -> str:

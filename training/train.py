@@ -105,16 +105,24 @@ def forward_inputs(b: dict[str, Any]) -> list[Any]:
 
 
 def prepared_batch(
-    w: Windows, idx: np.ndarray, spec: dgan.InputSpec, flip: np.ndarray | None = None, drop: float = 0.0
+    w: Windows,
+    idx: np.ndarray,
+    spec: dgan.InputSpec,
+    flip: np.ndarray | None = None,
+    drop: float = 0.0,
+    rng: np.random.Generator | None = None,
 ) -> dict[str, torch.Tensor]:
     """Windows ``idx`` as one graph with the engine's kinematic prior (``prior``, after mirroring) and, for a model
-    whose map is optional, ``map_present``: 1, or 0 for the share ``drop`` of agents whose crop is blanked."""
+    whose map is optional, ``map_present``: 1, or 0 for the share ``drop`` of agents whose crop is blanked (drawn
+    from ``rng``, the trainer's seeded generator)."""
     b = w.batch(idx, flip)
     b["prior"] = dgan.kinematic_prior(b["trajectory"], b["trajectory_mask"], b["state"], spec)
     if spec.map is not None and spec.map.optional:
         present = np.ones(len(b["state"]), dtype=np.float32)
         if drop > 0:
-            gone = np.random.default_rng().random(len(present)) < drop
+            if rng is None:
+                raise ValueError("map dropout needs the trainer's random generator (rng)")
+            gone = rng.random(len(present)) < drop
             present[gone] = 0.0
             b["map"][gone] = 0.0
         b["map_present"] = present
@@ -300,7 +308,7 @@ def main(argv: list[str] | None = None) -> Path:
         bar = tqdm(batches, desc=f"epoch {epoch + 1}/{cfg.train.epochs}", disable=not bars, leave=False)
         for idx in bar:
             flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
-            b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout)
+            b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout, rng)
             loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg)
             opt.zero_grad()
             loss.backward()  # type: ignore[no-untyped-call]

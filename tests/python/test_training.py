@@ -16,7 +16,7 @@ from conftest import shared_data
 
 import dgan
 from training.config import Config
-from training.export import checkpoint_temperature, export_model, load_checkpoint
+from training.export import export_model, load_checkpoint
 from training.loss import closest_anchor, decode_torch, dgan_loss
 from training.train import INPUTS, build_model, input_spec
 
@@ -101,8 +101,7 @@ def assert_parity(
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in CHECKPOINTS.glob("*.pt")))
 def test_bundled_models_match_pytorch(name: str) -> None:
-    model, spec, anchors, class_of, _ = load_checkpoint(CHECKPOINTS / f"{name}.pt")
-    temperature = checkpoint_temperature(CHECKPOINTS / f"{name}.pt")
+    model, spec, anchors, class_of, _, temperature = load_checkpoint(CHECKPOINTS / f"{name}.pt")
     assert_parity(model, spec, anchors, class_of, dgan.models.path(name), temperature)
 
 

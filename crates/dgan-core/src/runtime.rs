@@ -317,6 +317,21 @@ impl Predictor {
             };
             Some(decode(out, params, &poses, modes)?)
         };
+        let decoded = match (frames, decoded) {
+            // One frame: its prediction is the whole decode, moved rather than sliced and copied.
+            ([frame], Some(d)) => {
+                let edges = edges.pop().ok_or_else(|| DganError::Inference("no edges for the frame".into()))?;
+                return Ok(vec![Prediction {
+                    agent_ids: frame.ids().to_vec(),
+                    trajectories: d.trajectories,
+                    probabilities: d.probabilities,
+                    class_probabilities: d.class_probabilities,
+                    mode_classes: d.mode_classes,
+                    edges,
+                }]);
+            }
+            (_, decoded) => decoded,
+        };
         let mut predictions = Vec::with_capacity(frames.len());
         for (f, (frame, edges)) in frames.iter().zip(edges).enumerate() {
             let (a, b) = (agent_ptr[f], agent_ptr[f + 1]);
