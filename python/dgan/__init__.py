@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-from dgan import demo, exceptions, models, scenes
+from dgan import demo, exceptions, io, metrics, models, scenes
 from dgan._dgan import __version__
 from dgan.exceptions import DganError
 from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
@@ -23,6 +23,8 @@ from dgan.spec import (
     to_agent_frame,
     to_world_frame,
 )
+from dgan.tracker import Tracker
+from dgan.viz import plot
 
 __all__ = [
     "CLASSES",
@@ -35,13 +37,17 @@ __all__ = [
     "Predictor",
     "PriorSpec",
     "RasterMap",
+    "Tracker",
     "VectorMap",
     "__version__",
     "attention_graph",
     "demo",
     "exceptions",
+    "io",
     "kinematic_prior",
+    "metrics",
     "models",
+    "plot",
     "preprocess",
     "scene_map",
     "scenes",

@@ -1,11 +1,13 @@
 """The ``dgan`` command line (also ``python -m dgan``).
 
-- ``dgan info MODEL``: the model's contract: classes, time base, anchors, map crop.
-- ``dgan demo [--model zara1|sdd|apolloscape]``: a bundled real scene and model, printed and drawn
-  (``dgan_demo.png``).
-- ``dgan predict MODEL SCENE --time T``: predict every agent seen at time T of a scene file, either the
-  Social-GAN layout (``frame agent_id x y``, whitespace-separated) or a CSV with a header
-  (``agent_id,time,x,y[,class,heading,length,width,vx,vy]``).
+- ``dgan models``: every bundled model with its time base, horizon, classes, map kind and licence.
+- ``dgan info MODEL``: the model's contract: classes, time base, anchors, map crop, prior.
+- ``dgan demo [--model zara1|sdd|apolloscape|hdmap]``: a bundled real scene and model, printed and drawn
+  (``dgan_demo.png``; the picture needs matplotlib, ``pip install dgan[plot]``).
+- ``dgan predict MODEL SCENE [--time T] [--map MAP] [--json | --out FILE]``: predict every agent seen at time T of a
+  scene file, resampled to the model's time base: the Social-GAN layout (``frame agent_id x y``, whitespace-separated,
+  one annotation every 0.4 s), a CSV with a header (``agent_id,time,x,y[,class,heading,length,width,vx,vy]``, time
+  in seconds unless ``--time-unit`` says otherwise), or a parquet / feather table with those columns.
 """
 
 from __future__ import annotations
@@ -22,33 +24,81 @@ from typing import Any
 import numpy as np
 
 import dgan
-from dgan.exceptions import DganError, InvalidFrameError
+from dgan.exceptions import DganError, InvalidFrameError, InvalidMapError
+
+#: Seconds between the annotations of a Social-GAN layout file (ETH/UCY), whatever its frame numbering.
+SOCIAL_GAN_DT_S = 0.4
 
 
-def read_scene(path: Path) -> dict[str, Any]:
-    """A scene file as columns."""
+def read_scene(path: Path) -> tuple[dict[str, Any], float | None]:
+    """A scene file as columns, and the seconds per unit of its time column when the format fixes it."""
+    if path.suffix in (".parquet", ".feather", ".arrow"):
+        try:
+            import pyarrow.feather as feather
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise InvalidFrameError(f"reading {path.suffix} files needs pyarrow: pip install pyarrow") from None
+        try:
+            table = pq.read_table(path) if path.suffix == ".parquet" else feather.read_table(path)
+        except (OSError, ValueError) as e:
+            raise InvalidFrameError(f"cannot read {path}: {e}") from None
+        return dgan.io.columns(table), None
     try:
         text = path.read_text()
-    except OSError as e:
+    except (OSError, UnicodeDecodeError) as e:
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]
     if "," in first and any(c.isalpha() for c in first):
         rows = list(csv.DictReader(text.splitlines()))
         if not rows:
-            return {"agent_id": np.zeros(0, np.int64), "time": np.zeros(0), "x": np.zeros(0), "y": np.zeros(0)}
+            raise InvalidFrameError(f"{path} has a header but no rows")
         cols: dict[str, Any] = {k: [r[k] for r in rows] for k in rows[0]}
         for k in list(cols):
-            if k != "class":
+            if k in ("class", "agent_id"):
+                cols[k] = np.asarray(cols[k], dtype=object)
+                continue
+            try:
                 cols[k] = np.asarray(cols[k], dtype=np.float64)
-        cols["agent_id"] = cols["agent_id"].astype(np.int64)
-        return cols
+            except ValueError as e:
+                raise InvalidFrameError(f"{path}: column {k!r} is not numeric: {e}") from None
+        ids = cols.get("agent_id")
+        if ids is not None and all(str(v).lstrip("-").isdigit() for v in ids):
+            cols["agent_id"] = ids.astype(np.int64)
+        return cols, None
     try:
         data = np.loadtxt(path, ndmin=2)
     except ValueError as e:
         raise InvalidFrameError(f"{path} is neither a CSV with a header nor `frame id x y` rows: {e}") from None
-    if data.shape[1] < 4:
-        raise InvalidFrameError(f"{path}: expected 4 columns (frame id x y), found {data.shape[1]}")
-    return {"time": data[:, 0], "agent_id": data[:, 1].astype(np.int64), "x": data[:, 2], "y": data[:, 3]}
+    if data.shape[1] < 4 or data.shape[0] == 0:
+        raise InvalidFrameError(f"{path}: expected rows of 4 columns (frame id x y), found shape {data.shape}")
+    steps = np.diff(np.unique(data[:, 0]))
+    unit = SOCIAL_GAN_DT_S / float(steps.min()) if steps.size else 1.0
+    return {"time": data[:, 0], "agent_id": data[:, 1].astype(np.int64), "x": data[:, 2], "y": data[:, 3]}, unit
+
+
+def read_map(spec: str, pixel_to_world: str | None) -> dgan.RasterMap | dgan.VectorMap:
+    """``--map``: a bundled ETH/UCY scene name, an image with ``--pixel-to-world``, or a vector map JSON (dgan's own
+    or an Argoverse 2 map archive)."""
+    if spec in dgan.scenes.ETH_UCY_SCENES:
+        return dgan.scene_map(spec)
+    path = Path(spec)
+    if not path.is_file():
+        raise InvalidMapError(
+            f"--map {spec!r} is neither a bundled scene ({', '.join(dgan.scenes.ETH_UCY_SCENES)}) nor a file"
+        )
+    if path.suffix.lower() in (".png", ".jpg", ".jpeg"):
+        if pixel_to_world is None:
+            raise InvalidMapError("an image map needs --pixel-to-world H.txt (its 3×3 pixel → world homography)")
+        return dgan.RasterMap.from_pixel_to_world(path, np.loadtxt(pixel_to_world))
+    try:
+        return dgan.VectorMap.from_json(path)
+    except InvalidMapError as own:
+        from dgan.datasets.hdmaps import av2_map
+
+        try:
+            return dgan.VectorMap(av2_map(path))
+        except InvalidMapError:
+            raise own from None
 
 
 def _info(args: argparse.Namespace) -> int:
@@ -62,6 +112,7 @@ def _info(args: argparse.Namespace) -> int:
     )
     print(f"classes    {', '.join(f'{k} ({len(v)} anchors)' for k, v in p.anchors.items())}")
     print(f"attention  r = speed * {spec.t_f * spec.dt_s:g} s + {spec.attention_lambda} * length")
+    kind = dgan.models.map_kind(args.model, c) if args.model in dgan.models.list() else None
     if spec.map is None:
         print("map        none (no map branch)")
     else:
@@ -69,6 +120,7 @@ def _info(args: argparse.Namespace) -> int:
         where = f"agent at pixel ({m.agent_row}, {m.agent_col})"
         needed = "optional (runs without a map too)" if m.optional else "required"
         print(f"map        {m.height_px}x{m.width_px} px at {m.resolution_m} m/px, {where}; {needed}")
+        print(f"map kind   {kind or 'a raster image or a vector map (--map of dgan predict)'}")
     prior = spec.prior
     if prior.kind == "none":
         print("prior      none (absolute anchors, contract 1)")
@@ -81,30 +133,104 @@ def _info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _models(args: argparse.Namespace) -> int:
+    rows = [dgan.models.info(name) for name in dgan.models.list()]
+    if args.json:
+        json.dump([r.__dict__ for r in rows], sys.stdout, indent=1)
+        print()
+        return 0
+    print(f"{'model':<12} {'dt':>6} {'T_obs':>5} {'T_f':>4} {'horizon':>7}  {'classes':<29} {'map':<30} licence")
+    for r in rows:
+        print(
+            f"{r.name:<12} {r.dt_s:>5.3g}s {r.t_obs:>5} {r.t_f:>4} {r.t_f * r.dt_s:>6.3g}s  {', '.join(r.classes):<29} "
+            f"{r.map_kind:<30} {r.licence}"
+        )
+    return 0
+
+
+def _prediction_json(pred: dgan.Prediction, frame: dgan.Frame, model: str, now: float) -> dict[str, Any]:
+    return {
+        "model": model,
+        "current_time": now,
+        "dt_s": pred.dt_s,
+        "times_s": pred.times_s.tolist(),
+        "classes": list(pred.classes),
+        "agents": [
+            {
+                "id": pred.agent_ids[i].item() if hasattr(pred.agent_ids[i], "item") else pred.agent_ids[i],
+                "class": frame.classes[i],
+                "class_probabilities": dict(zip(pred.classes, pred.class_probabilities[i].tolist(), strict=True)),
+                "modes": [
+                    {
+                        "probability": float(pred.probabilities[i, m]),
+                        "class": pred.classes[pred.mode_classes[i, m]],
+                        "trajectory": pred.trajectories[i, m].tolist(),
+                    }
+                    for m in range(pred.trajectories.shape[1])
+                ],
+            }
+            for i in range(len(pred))
+        ],
+    }
+
+
+def write_table(pred: dgan.Prediction, out: Path) -> None:
+    """``--out``: the long table of :meth:`Prediction.to_records` as CSV, parquet or JSON lines, by extension."""
+    suffix = out.suffix.lower()
+    if suffix == ".parquet":
+        pred.to_parquet(out)
+        return
+    cols = pred.to_records()
+    names = list(cols)
+    rows = zip(*(cols[k].tolist() for k in names), strict=True)
+    if suffix in (".jsonl", ".ndjson"):
+        with out.open("w") as f:
+            for row in rows:
+                f.write(json.dumps(dict(zip(names, row, strict=True))) + "\n")
+        return
+    if suffix != ".csv":
+        raise InvalidFrameError(f"--out must end in .csv, .parquet or .jsonl, got {out.name}")
+    with out.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(names)
+        w.writerows(rows)
+
+
 def _predict(args: argparse.Namespace) -> int:
     p = dgan.Predictor(args.model, modes=args.modes)
-    cols = read_scene(Path(args.scene))
-    frame = dgan.Frame.from_records(cols, t_obs=p.spec.t_obs, dt=args.dt, current_time=args.time)
+    cols, unit = read_scene(Path(args.scene))
+    time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
+    scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
+    frame = dgan.Frame.from_records(cols, spec=p, time_unit=time_unit, current_time=args.time, map=scene_map)
+    if p.spec.map is not None and scene_map is None and p.spec.map.optional:
+        print(
+            f"dgan: note: no --map given; {args.model} runs without a map (its map is optional; "
+            "see `dgan info` for the map it was trained with)",
+            file=sys.stderr,
+        )
     started = time.perf_counter()
     pred = p.predict(frame)
     ms = (time.perf_counter() - started) * 1e3
+    now = float(args.time) if args.time is not None else float(np.max(cols["time"]))
+    if args.out is not None:
+        write_table(pred, Path(args.out))
+        print(f"wrote {len(pred)} agents × {pred.trajectories.shape[1]} modes to {args.out}", file=sys.stderr)
     if args.json:
-        out = {
-            "agent_ids": pred.agent_ids.tolist(),
-            "trajectories": pred.trajectories.tolist(),
-            "probabilities": pred.probabilities.tolist(),
-            "classes": list(pred.classes),
-        }
-        json.dump(out, sys.stdout)
+        json.dump(_prediction_json(pred, frame, args.model, now), sys.stdout)
         print()
         return 0
-    print(f"{len(frame)} agents, {len(pred.edges)} attention edges, predicted in {ms:.1f} ms")
+    if args.out is not None:
+        return 0
+    print(
+        f"{len(frame)} agents at time {now:g}, {len(pred.edges)} attention edges, predicted in {ms:.1f} ms "
+        f"(steps of {p.spec.dt_s:g} s, horizon {p.spec.t_f * p.spec.dt_s:g} s)"
+    )
     for i, agent in enumerate(pred.agent_ids):
         ends = pred.trajectories[i, :, -1]
         modes = "  ".join(
             f"p={pred.probabilities[i, m]:.2f} -> ({ends[m, 0]:.2f}, {ends[m, 1]:.2f})" for m in range(len(ends))
         )
-        print(f"agent {agent:>5}  {modes}")
+        print(f"agent {agent!s:>5}  {modes}")
     return 0
 
 
@@ -118,18 +244,33 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dgan", description="DGAN multi-modal trajectory prediction")
     parser.add_argument("--version", action="version", version=f"dgan {dgan.__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
+    models = sub.add_parser("models", help="list the bundled models")
+    models.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    models.set_defaults(func=_models)
     info = sub.add_parser("info", help="show a model's contract")
     info.add_argument("model")
     info.set_defaults(func=_info)
     pred = sub.add_parser("predict", help="predict the agents of a scene file at one time")
     pred.add_argument("model")
-    pred.add_argument("scene", help="Social-GAN txt (frame id x y) or CSV with agent_id,time,x,y[,...]")
-    pred.add_argument("--time", type=float, default=None, help="current time t_obs (default: the last in the file)")
     pred.add_argument(
-        "--dt", type=float, default=None, help="time between steps in the file's unit (default: inferred)"
+        "scene", help="Social-GAN txt (frame id x y), CSV with agent_id,time,x,y[,...], or parquet/feather"
     )
+    pred.add_argument(
+        "--time", type=float, default=None, help="current time t_obs in the file's unit (default: the last)"
+    )
+    pred.add_argument(
+        "--time-unit",
+        type=float,
+        default=None,
+        help="seconds per unit of the file's time column (default: 1 for tables; Social-GAN files 0.4 s a step)",
+    )
+    pred.add_argument(
+        "--map", default=None, help="a bundled scene (eth hotel univ zara1 zara2), an image, or a vector map JSON"
+    )
+    pred.add_argument("--pixel-to-world", default=None, help="the 3×3 homography file of an image --map")
     pred.add_argument("--modes", type=int, default=3, help="modes per agent (default 3)")
-    pred.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    pred.add_argument("--json", action="store_true", help="print JSON (times, classes, probabilities) to stdout")
+    pred.add_argument("--out", default=None, help="write the long table of modes: .csv, .parquet or .jsonl")
     pred.set_defaults(func=_predict)
     demo = sub.add_parser("demo", help="predict a bundled real scene with a bundled model and draw it")
     demo.add_argument(
@@ -139,7 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--time",
         type=float,
         default=None,
-        help="t_obs step of the bundled excerpt: zara1 5500..5510, sdd 831..841, apolloscape 15..19",
+        help="t_obs of the bundled excerpt, in its time unit: zara1 frames 5430..5620 every 10 (default 5500), "
+        "sdd steps 824..853 (841), apolloscape 10..25 (17), hdmap 14..88 (40)",
     )
     demo.add_argument("--modes", type=int, default=3)
     demo.add_argument("--out", default="dgan_demo.png", help="where to write the picture")

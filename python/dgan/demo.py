@@ -30,6 +30,8 @@ SDD_IMAGE = DATA / "sdd" / "hyang_0" / "reference.jpg"
 SDD_SCALE = 0.034749693
 APOLLO_FILE = DATA / "apolloscape" / "result_9048_1_frames_10_25.txt"
 WAYMO_FILE = DATA / "waymo" / "tfrecord-00005-of-00150_2bd577a009790706.json.gz"
+#: ETH/UCY frame numbers are video frames at 25 fps; the annotations come every 10 frames (0.4 s).
+ZARA1_SECONDS_PER_FRAME = 0.04
 #: The Waymo scene's 10 Hz steps per model step (the hdmap model runs at 5 Hz).
 WAYMO_EVERY = 2
 #: Colour of each class in the pictures.
@@ -53,30 +55,34 @@ class DemoScene:
     time_step: float = 1.0  # time between steps in the file's unit
 
 
-def _futures(times: Arr, ids: Arr, xy: Arr, frame: Frame, now: float) -> dict[int, Arr]:
+def _futures(times: Arr, ids: Arr, xy: Arr, frame: Frame, now: float, t_f: int) -> dict[int, Arr]:
+    """Each agent's true positions after ``now``, at most ``t_f`` steps (the predicted horizon; the file's rows are
+    at the model's rate)."""
     out = {}
     for pid in frame.ids:
         sel = (ids == pid) & (times > now)
-        out[int(pid)] = xy[sel][np.argsort(times[sel])]
+        out[int(pid)] = xy[sel][np.argsort(times[sel])][:t_f]
     return out
 
 
-def zara1_scene(t_obs: int, now: float | None) -> DemoScene:
+def zara1_scene(t_obs: int, t_f: int, now: float | None) -> DemoScene:
     """The bundled zara1 excerpt (frame ids step by 10; ``now`` in 5500..5510)."""
     now = 5500.0 if now is None else now
     rows = np.loadtxt(SCENE_FILE)
     ids = rows[:, 1].astype(np.int64)
     cols = {"time": rows[:, 0], "agent_id": ids, "x": rows[:, 2], "y": rows[:, 3]}
-    frame = Frame.from_records(cols, t_obs=t_obs, dt=10.0, current_time=now, map=scene_map("zara1"))
+    frame = Frame.from_records(
+        cols, t_obs=t_obs, dt=0.4, time_unit=ZARA1_SECONDS_PER_FRAME, current_time=now, map=scene_map("zara1")
+    )
     img = scene_image("zara1")
     if img is None:
         raise DganError("the zara1 scene image is not bundled")
     labels = {int(i): "pedestrian" for i in frame.ids}
-    futures = _futures(rows[:, 0], ids, rows[:, 2:4], frame, now)
+    futures = _futures(rows[:, 0], ids, rows[:, 2:4], frame, now, t_f)
     return DemoScene("zara1", frame, futures, labels, *img, 5500.0, time_step=10.0)
 
 
-def sdd_scene(t_obs: int, now: float | None) -> DemoScene:
+def sdd_scene(t_obs: int, t_f: int, now: float | None) -> DemoScene:
     """The bundled Stanford Drone excerpt (hyang video0, test split, steps 824..853; ``now`` in 831..841)."""
     now = 841.0 if now is None else now
     raw = np.loadtxt(SDD_FILE, dtype=str)
@@ -90,15 +96,15 @@ def sdd_scene(t_obs: int, now: float | None) -> DemoScene:
         "class": np.array([SDD_LABEL_CLASS[s] for s in raw[:, 4]], dtype=object),
     }
     smap = sdd_raster_map(SDD_IMAGE, SDD_SCALE)
-    frame = Frame.from_records(cols, t_obs=t_obs, dt=1.0, current_time=now, map=smap)
+    frame = Frame.from_records(cols, t_obs=t_obs, dt=1 / 3, time_unit=1 / 3, current_time=now, map=smap)
     labels = {int(i): str(raw[ids == i, 4][-1]) for i in frame.ids}
     image = RasterMap.from_file(SDD_IMAGE, np.eye(3)).image
     w2p = np.diag([1 / SDD_SCALE, 1 / SDD_SCALE, 1.0])
-    futures = _futures(times, ids, xy, frame, now)
+    futures = _futures(times, ids, xy, frame, now, t_f)
     return DemoScene("Stanford Drone hyang video0", frame, futures, labels, image, w2p, 841.0)
 
 
-def apollo_scene(t_obs: int, now: float | None) -> DemoScene:
+def apollo_scene(t_obs: int, t_f: int, now: float | None) -> DemoScene:
     """The bundled ApolloScape excerpt (recording 9048 file 1, frames 10..25; ``now`` in 15..19)."""
     now = 17.0 if now is None else now
     rows = np.loadtxt(APOLLO_FILE)
@@ -114,15 +120,17 @@ def apollo_scene(t_obs: int, now: float | None) -> DemoScene:
         "width": rows[:, 7],
         "heading": rows[:, 9],
     }
-    frame = Frame.from_records(cols, t_obs=t_obs, dt=1.0, current_time=now)
+    frame = Frame.from_records(cols, t_obs=t_obs, dt=0.5, time_unit=0.5, current_time=now)
     labels = {int(i): APOLLO_TYPES[int(types[ids == i][-1])][0] for i in frame.ids}
-    futures = _futures(rows[:, 0], ids, rows[:, 3:5], frame, now)
+    futures = _futures(rows[:, 0], ids, rows[:, 3:5], frame, now, t_f)
     at_now = rows[:, 0] == now
     headings = {int(i): float(hd) for i, hd in zip(ids[at_now], rows[at_now, 9], strict=True)}
     return DemoScene("ApolloScape recording 9048", frame, futures, labels, None, None, 17.0, headings)
 
 
-def waymo_scene(t_obs: int, now: float | None, extent_m: float = 110.0, resolution_m: float = 0.2) -> DemoScene:
+def waymo_scene(
+    t_obs: int, t_f: int, now: float | None, extent_m: float = 110.0, resolution_m: float = 0.2
+) -> DemoScene:
     """The bundled Waymo scenario (10 Hz steps 0..90, sampled every second step; ``now`` in 18..60), over the
     engine's north-up rendering of its vector map."""
     from dgan.datasets.hdmaps import bird_eye, read_waymo_json
@@ -146,7 +154,7 @@ def waymo_scene(t_obs: int, now: float | None, extent_m: float = 110.0, resoluti
             [0, 0, 1],
         ]
     )
-    fut = np.arange(step + WAYMO_EVERY, sc.num_steps, WAYMO_EVERY)
+    fut = np.arange(step + WAYMO_EVERY, sc.num_steps, WAYMO_EVERY)[:t_f]
     futures = {int(sc.ids[r]): sc.positions[r, fut][sc.valid[r, fut]] for r in rows}
     labels = {int(sc.ids[r]): sc.labels[r] for r in rows}
     headings = {int(sc.ids[r]): float(sc.heading[r, step]) for r in rows}
@@ -156,13 +164,13 @@ def waymo_scene(t_obs: int, now: float | None, extent_m: float = 110.0, resoluti
 def scene_for(spec: InputSpec, now: float | None = None) -> DemoScene:
     """The bundled scene that matches a model's time base, at step ``now`` (the scene's default if None)."""
     if abs(spec.dt_s - 0.4) < 1e-6:
-        return zara1_scene(spec.t_obs, now)
+        return zara1_scene(spec.t_obs, spec.t_f, now)
     if abs(spec.dt_s - 1 / 3) < 1e-6:
-        return sdd_scene(spec.t_obs, now)
+        return sdd_scene(spec.t_obs, spec.t_f, now)
     if abs(spec.dt_s - 0.5) < 1e-6:
-        return apollo_scene(spec.t_obs, now)
+        return apollo_scene(spec.t_obs, spec.t_f, now)
     if abs(spec.dt_s - 0.2) < 1e-6:
-        return waymo_scene(spec.t_obs, now)
+        return waymo_scene(spec.t_obs, spec.t_f, now)
     raise DganError(
         f"no bundled demo scene has steps of {spec.dt_s} s (ETH/UCY 0.4 s, SDD 1/3 s, ApolloScape 0.5 s, Waymo 0.2 s)"
     )
@@ -327,16 +335,26 @@ def run(model: str = "zara1", now: float | None = None, modes: int = 3, out: Pat
     card = predictor.contract.get("name", model)
     horizon = predictor.spec.t_f * predictor.spec.dt_s
     print(f"model {card}: {len(frame)} agents of {scene.name} at step {t:g}, {len(pred.edges)} attention edges")
-    print(f"agent  label          top modes: probability -> position in {horizon:.1f} s (world metres)      actual")
+    print(f"agent  label          top modes: probability -> position in {horizon:.1f} s (world metres)      true")
     for i, pid in enumerate(pred.agent_ids):
         end = pred.trajectories[i, :, -1]
         ends = "  ".join(
             f"{pred.probabilities[i, m]:.2f} -> ({end[m, 0]:6.2f}, {end[m, 1]:6.2f})" for m in range(len(end))
         )
         fut = scene.futures.get(int(pid))
-        full = fut is not None and len(fut) == predictor.spec.t_f
-        actual = f"({fut[-1, 0]:6.2f}, {fut[-1, 1]:6.2f})" if full and fut is not None else "   (left the scene)"
+        seen = 0 if fut is None else len(fut)
+        if seen == predictor.spec.t_f and fut is not None:
+            actual = f"({fut[-1, 0]:6.2f}, {fut[-1, 1]:6.2f})"
+        elif seen and fut is not None:  # the excerpt or the track ends before the horizon
+            actual = f"({fut[-1, 0]:6.2f}, {fut[-1, 1]:6.2f}) last seen {seen * predictor.spec.dt_s:.1f} s ahead"
+        else:
+            actual = "   (not seen after now)"
         print(f"{pid:>5}  {scene.labels[int(pid)]:<13}  {ends}   {actual}")
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        print("(no picture: the demo draws with matplotlib; pip install 'dgan[plot]')")
+        return 0
     path = draw(scene, pred, out, f"DGAN ({card}) on {scene.name}, step {t:g}: top {modes} modes")
     print(f"wrote {path}")
     if predictor.spec.map is not None:

@@ -35,6 +35,11 @@ class MapRequiredError(InvalidFrameError):
     optional maps (``spec.map.optional``), which serves frames without a map."""
 
 
+class TimeBaseError(InvalidFrameError):
+    """The frame's time base differs from the model's, or the data cannot be resampled to it (too sparse,
+    unordered times)."""
+
+
 class UnknownClassError(DganError, ValueError):
     """A class name or code that dgan or the model does not know."""
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any, Final
 
 import numpy as np
@@ -111,6 +111,45 @@ class VectorMap:
         """The elements, in drawing order."""
         return self._map.elements()
 
+    def to_json(self, path: str | os.PathLike[str]) -> None:
+        """Writes the map as dgan's vector-map JSON (``{"format": "dgan.vector_map", "version": 1, "elements":
+        [{"kind": ..., "points": [[x, y], ...]}, ...]}``), what :meth:`from_json` and ``dgan predict --map`` read."""
+        import json
+
+        doc = {
+            "format": "dgan.vector_map",
+            "version": 1,
+            "elements": [{"kind": k, "points": p.tolist()} for k, p in self.elements()],
+        }
+        with open(path, "w") as f:
+            json.dump(doc, f)
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike[str]) -> VectorMap:
+        """Reads dgan's vector-map JSON (see :meth:`to_json`).
+
+        Raises:
+            InvalidMapError: not readable, not that format, or bad elements.
+        """
+        import json
+
+        try:
+            with open(path) as f:
+                doc = json.load(f)
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise InvalidMapError(f"cannot read vector map {path}: {e}") from None
+        if not isinstance(doc, dict) or doc.get("format") != "dgan.vector_map":
+            raise InvalidMapError(f"{path} is not a dgan vector map (format 'dgan.vector_map')")
+        if doc.get("version") != 1:
+            raise InvalidMapError(f"{path}: unsupported dgan vector map version {doc.get('version')!r} (this dgan: 1)")
+        elements = doc.get("elements")
+        if not isinstance(elements, list):
+            raise InvalidMapError(f"{path}: 'elements' must be a list")
+        try:
+            return cls((e["kind"], e["points"]) for e in elements)
+        except (KeyError, TypeError):
+            raise InvalidMapError(f"{path}: each element needs 'kind' and 'points'") from None
+
     def __len__(self) -> int:
         return len(self._map)
 
@@ -126,6 +165,27 @@ def _classes(classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int) -> lis
     return np.asarray(classes).tolist() if isinstance(classes, np.ndarray) else list(classes)  # type: ignore[arg-type]
 
 
+def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[Any] | None]:
+    """Integer ids as they are; other ids (strings, say) as codes 0..N with the labels kept."""
+    if ids is None:
+        return None, None
+    arr = np.asarray(ids)
+    if arr.dtype.kind in "iu":
+        return _array("ids", arr, np.int64), None
+    if arr.dtype.kind == "f":
+        if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
+            raise InvalidFrameError("float ids must be whole finite numbers (NaN or fractional ids are ambiguous)")
+        return _array("ids", arr, np.int64), None
+    if arr.dtype.kind not in "OUS" or arr.ndim != 1:
+        raise InvalidFrameError(f"ids must be a 1-D array of integers or strings, got {arr.dtype} {arr.shape}")
+    labels = np.asarray(arr, dtype=object)
+    if any(v is None or (isinstance(v, float) and not np.isfinite(v)) for v in labels):
+        raise InvalidFrameError("ids hold None or NaN")
+    if len({*labels.tolist()}) != labels.size:
+        raise InvalidFrameError("ids repeat")
+    return np.arange(labels.size, dtype=np.int64), labels
+
+
 class Frame:
     """The scene at the current time t_obs.
 
@@ -135,18 +195,21 @@ class Frame:
             ignored, whatever they hold (NaN is fine there).
         classes: one class per agent, names (``"vehicle"``, ``"cyclist"``, ``"pedestrian"``) or codes 0, 1, 2;
             all pedestrians if None.
-        ids: ``(N,)`` unique integer ids (``0..N`` if None).
+        ids: ``(N,)`` unique ids, integers or strings (``0..N`` if None); returned in ``Prediction.agent_ids``.
         headings: ``(N,)`` world headings in radians; NaN where unknown (then the direction of motion).
         velocities: ``(N, 2)`` world velocities in m/s; NaN rows where unknown (then from the history).
         lengths, widths: ``(N,)`` metres; NaN keeps the class default.
         map: a :class:`RasterMap` or :class:`VectorMap` of the scene.
+        dt: seconds between the steps. A model refuses a frame whose ``dt`` differs from its own
+            (:class:`~dgan.exceptions.TimeBaseError`); None takes the steps as the model's.
 
     Raises:
         InvalidFrameError: wrong shapes, non-finite valid positions, an agent without a valid step.
         UnknownClassError: a class dgan does not know.
+        TimeBaseError: a ``dt`` that is not a positive number of seconds.
     """
 
-    __slots__ = ("_frame", "_map")
+    __slots__ = ("_frame", "_labels", "_map")
 
     def __init__(
         self,
@@ -159,32 +222,44 @@ class Frame:
         lengths: npt.ArrayLike | None = None,
         widths: npt.ArrayLike | None = None,
         map: RasterMap | VectorMap | None = None,
+        dt: float | None = None,
     ) -> None:
         pos = _array("positions", positions, np.float64)
         if map is not None and not isinstance(map, (RasterMap, VectorMap)):
             raise InvalidMapError(f"map must be a dgan.RasterMap or dgan.VectorMap, got {type(map).__name__}")
         n = pos.shape[0] if pos.ndim >= 1 else 0
+        codes, self._labels = _ids(ids, n)
         self._map = map
         self._frame = _dgan.Frame(
             pos,
             _array("mask", mask, np.bool_),
             _classes(classes, n),
-            _array("ids", ids, np.int64),
+            codes,
             _array("headings", headings, np.float64),
             _array("velocities", velocities, np.float64),
             _array("lengths", lengths, np.float64),
             _array("widths", widths, np.float64),
             None if map is None else map._map,
+            None if dt is None else float(dt),
         )
+
+    @classmethod
+    def _wrap(cls, native: _dgan.Frame, labels: npt.NDArray[Any] | None, map: RasterMap | VectorMap | None) -> Frame:
+        out = cls.__new__(cls)
+        out._frame, out._labels, out._map = native, labels, map
+        return out
 
     @classmethod
     def from_records(
         cls,
-        records: Mapping[str, Any] | np.ndarray,
+        records: Any,
         *,
-        t_obs: int,
+        t_obs: int | None = None,
         dt: float | None = None,
+        spec: Any = None,
+        time_unit: float = 1.0,
         current_time: float | None = None,
+        max_gap: float | None = None,
         agent_id: str = "agent_id",
         time: str = "time",
         x: str = "x",
@@ -197,78 +272,113 @@ class Frame:
         default_class: ClassLike = "pedestrian",
         map: RasterMap | VectorMap | None = None,
     ) -> Frame:
-        """A frame from a long table, one row per agent and time.
+        """A frame from a long table, one row per agent and time, resampled to a model's time base.
 
-        ``records`` is a mapping of column name → array (a dict of numpy arrays or a pandas DataFrame) or a numpy
-        structured array. The frame ends at ``current_time`` (the latest time if None) and spans ``t_obs`` steps of
-        ``dt`` (inferred as the smallest gap between distinct times if None). Agents observed at ``current_time``
-        are included; optional columns (class, heading, length, width, velocity) are read at each agent's latest
-        row and may be absent.
+        Args:
+            records: any table: a dict of arrays, a sequence of records (dicts), a numpy structured array, a pandas
+                or polars DataFrame, a pyarrow Table, or anything with the Arrow stream or dataframe interchange
+                interface (:func:`dgan.io.columns`). Ids may be integers or strings.
+            t_obs, dt: the frame's steps and the seconds between them; both from ``spec`` (an
+                :class:`~dgan.InputSpec` or a :class:`~dgan.Predictor`) if given. ``dt`` None: the data's own
+                spacing (the smallest gap between distinct times).
+            time_unit: seconds per unit of the time column (0.04 for video frames at 25 fps, 1e-9 for nanoseconds).
+            current_time: the frame's current time t_obs, in the time column's unit (the latest time if None); it
+                must be a time of the table.
+            max_gap: the longest gap in seconds between two rows of an agent that is interpolated (1.5 · dt if None).
+
+        Data denser than ``dt`` or irregular are interpolated linearly at the grid times; steps an agent was not seen
+        are masked out; data sparser than ``dt`` are refused. Agents with a row at ``current_time`` are the frame's
+        agents; optional columns (class, heading, length, width, velocity) are read at that row and may be absent.
+
+        Raises:
+            InvalidFrameError: a missing column, a current time with no row, two rows of one agent at one time.
+            TimeBaseError: data sparser than ``dt``, a non-positive ``dt`` or ``time_unit``.
         """
-        names = records.dtype.names if isinstance(records, np.ndarray) else tuple(records.keys())
-        if names is None:
-            raise InvalidFrameError("records must be a mapping of columns or a structured numpy array")
+        from dgan.exceptions import TimeBaseError
+        from dgan.io import columns
 
-        def col(name: str, dtype: npt.DTypeLike) -> Any:
-            if name not in names:
-                return None
-            return _array(f"column {name!r}", records[name], dtype)
-
+        if spec is not None:
+            spec = getattr(spec, "spec", spec)
+            t_obs = spec.t_obs if t_obs is None else t_obs
+            dt = spec.dt_s if dt is None else dt
+        if t_obs is None:
+            raise InvalidFrameError("from_records needs t_obs (or spec=, a model's InputSpec or Predictor)")
+        if isinstance(t_obs, bool) or not isinstance(t_obs, (int, np.integer)) or not 1 <= t_obs <= 1000:
+            raise InvalidFrameError(f"t_obs must be an integer in 1..=1000, got {t_obs!r}")
+        if not (isinstance(time_unit, (int, float)) and np.isfinite(time_unit) and time_unit > 0):
+            raise TimeBaseError(f"time_unit must be a positive number of seconds per unit, got {time_unit!r}")
+        cols = columns(records)
         for required in (agent_id, time, x, y):
-            if required not in names:
-                raise InvalidFrameError(f"records lack the column {required!r}; they have {list(names)}")
-        ids, times = col(agent_id, np.int64), col(time, np.float64)
-        xs, ys = col(x, np.float64), col(y, np.float64)
-        if t_obs < 1:
-            raise InvalidFrameError(f"t_obs must be at least 1, got {t_obs}")
+            if required not in cols:
+                raise InvalidFrameError(f"records lack the column {required!r}; they have {list(cols)}")
+
+        def num(name: str) -> npt.NDArray[np.float64] | None:
+            if name not in cols:
+                return None
+            c = cols[name]
+            if c.dtype.kind not in "biuf":
+                raise InvalidFrameError(f"column {name!r} must be numeric, got {c.dtype}")
+            return np.ascontiguousarray(c, dtype=np.float64)
+
+        times, xs, ys = num(time), num(x), num(y)
+        assert times is not None
+        assert xs is not None
+        assert ys is not None
         if not np.all(np.isfinite(times)):
             raise InvalidFrameError("the time column holds NaN or infinite values")
-        uniq = np.unique(times)
-        if uniq.size == 0:
-            return cls(np.zeros((0, t_obs, 2)), map=map)
+        raw_ids = cols[agent_id]
+        if raw_ids.dtype.kind in "iu":
+            codes, labels = np.ascontiguousarray(raw_ids, dtype=np.int64), None
+        else:
+            if raw_ids.dtype.kind == "f" and not np.all(np.isfinite(raw_ids)):
+                raise InvalidFrameError(f"the id column {agent_id!r} holds NaN or infinite values")
+            if any(v is None for v in raw_ids.tolist()):
+                raise InvalidFrameError(f"the id column {agent_id!r} holds None")
+            try:
+                uniq, inverse = np.unique(raw_ids, return_inverse=True)
+            except TypeError:
+                raise InvalidFrameError(f"the id column {agent_id!r} mixes types that cannot be ordered") from None
+            codes, labels = np.ascontiguousarray(inverse.ravel(), dtype=np.int64), uniq.astype(object)
+            if raw_ids.dtype.kind == "f" and np.all(uniq == np.round(uniq)):
+                labels = uniq.astype(np.int64)
+        uniq_t = np.unique(times)
+        if uniq_t.size == 0:
+            return cls(np.zeros((0, t_obs, 2)), map=map, dt=dt)
         if dt is None:
-            gaps = np.diff(uniq)
-            dt = float(gaps.min()) if gaps.size else 1.0
-        if not dt > 0:
-            raise InvalidFrameError(f"dt must be positive, got {dt}")
-        now = float(uniq.max()) if current_time is None else float(current_time)
-        step = np.rint((times - now) / dt).astype(np.int64) + (t_obs - 1)
-        on_grid = np.abs((times - now) / dt - np.rint((times - now) / dt)) < 1e-6
-        keep = on_grid & (step >= 0) & (step < t_obs)
-        current = np.unique(ids[keep & (step == t_obs - 1)])
-        rows = keep & np.isin(ids, current)
-        order = np.lexsort((step[rows], ids[rows]))
-        r_ids, r_step = ids[rows][order], step[rows][order]
-        index = np.searchsorted(current, r_ids)
-        n = current.size
-        positions = np.full((n, t_obs, 2), np.nan)
-        mask = np.zeros((n, t_obs), dtype=bool)
-        positions[index, r_step, 0] = xs[rows][order]
-        positions[index, r_step, 1] = ys[rows][order]
-        mask[index, r_step] = True
-        # The latest row of each agent (rows are sorted by id, then step).
-        last = np.r_[np.flatnonzero(np.diff(r_ids)), r_ids.size - 1] if n else np.zeros(0, dtype=np.int64)
-
-        def latest(name: str, dtype: npt.DTypeLike) -> Any:
-            c = col(name, dtype)
-            return None if c is None else c[rows][order][last]
-
-        klass = col(cls_column, object) if cls_column in names else None
-        classes = [default_class] * n if klass is None else list(klass[rows][order][last])
-        vel = None
-        if velocity[0] in names and velocity[1] in names:
-            vel = np.stack([latest(velocity[0], np.float64), latest(velocity[1], np.float64)], axis=1)
-        return cls(
-            positions,
-            mask=mask,
-            classes=classes,
-            ids=current,
-            headings=latest(heading, np.float64),
-            velocities=vel,
-            lengths=latest(length, np.float64),
-            widths=latest(width, np.float64),
-            map=map,
+            gaps = np.diff(uniq_t)
+            dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
+        now = float(uniq_t.max()) if current_time is None else float(current_time)
+        tol = 1e-6 * dt / time_unit
+        if not np.any(np.abs(uniq_t - now) <= tol):
+            raise InvalidFrameError(
+                f"no row at current_time {now:g}; the table spans {uniq_t[0]:g}..{uniq_t[-1]:g} "
+                f"({uniq_t.size} distinct times)"
+            )
+        now = float(uniq_t[np.argmin(np.abs(uniq_t - now))])
+        klass = cols.get(cls_column)
+        rows = {
+            "ids": codes,
+            "times": np.ascontiguousarray(times * time_unit),
+            "xs": xs,
+            "ys": ys,
+            "classes": None if klass is None else klass.tolist(),
+            "headings": num(heading),
+            "lengths": num(length),
+            "widths": num(width),
+            "vxs": num(velocity[0]) if velocity[1] in cols else None,
+            "vys": num(velocity[1]) if velocity[0] in cols else None,
+        }
+        native = _dgan.frame_from_rows(
+            rows,
+            now * time_unit,
+            int(t_obs),
+            float(dt),
+            max_gap,
+            default_class,
         )
+        frame_labels = None if labels is None else labels[native.ids]
+        out = cls._wrap(native, frame_labels, None)
+        return out if map is None else out.with_map(map)
 
     def __len__(self) -> int:
         return len(self._frame)
@@ -285,8 +395,18 @@ class Frame:
 
     @property
     def ids(self) -> npt.NDArray[np.int64]:
-        """``(N,)`` agent ids."""
+        """``(N,)`` the engine's integer agent ids (codes 0..N where the ids given were strings)."""
         return self._frame.ids
+
+    @property
+    def agent_ids(self) -> npt.NDArray[Any]:
+        """``(N,)`` the ids as given: integers, or the strings (an object array)."""
+        return self._frame.ids if self._labels is None else self._labels
+
+    @property
+    def dt(self) -> float | None:
+        """Seconds between steps, None where the frame does not know its time base."""
+        return self._frame.dt
 
     @property
     def classes(self) -> list[str]:
@@ -321,10 +441,15 @@ class Frame:
     def without_map(self) -> Frame:
         """The same agents, histories and states without a map: how a model with an optional map is run on a scene
         whose map is unknown (a model whose map is required raises :class:`~dgan.exceptions.MapRequiredError`)."""
-        out = Frame.__new__(Frame)
-        out._map = None
-        out._frame = self._frame.without_map()
-        return out
+        return Frame._wrap(self._frame.without_map(), self._labels, None)
+
+    def with_map(self, map: RasterMap | VectorMap | None) -> Frame:
+        """The same agents with ``map`` (None: :meth:`without_map`)."""
+        if map is None:
+            return self.without_map()
+        if not isinstance(map, (RasterMap, VectorMap)):
+            raise InvalidMapError(f"map must be a dgan.RasterMap or dgan.VectorMap, got {type(map).__name__}")
+        return Frame._wrap(self._frame.with_map(map._map), self._labels, map)
 
     def __repr__(self) -> str:
-        return f"Frame(agents={len(self)}, steps={self.positions.shape[1]}, map={self._map!r})"
+        return f"Frame(agents={len(self)}, steps={self.positions.shape[1]}, dt={self.dt}, map={self._map!r})"

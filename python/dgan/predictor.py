@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._runtime import onnxruntime_library as onnxruntime_library_path
-from dgan.exceptions import InvalidSpecError
+from dgan.exceptions import InvalidFrameError, InvalidSpecError
 from dgan.frame import Frame
 from dgan.spec import InputSpec
 
@@ -24,25 +24,64 @@ class Prediction:
     """Every agent's modes, most probable first. Positions are world metres.
 
     Attributes:
-        agent_ids: ``(N,)`` the frame's ids, in row order.
+        agent_ids: ``(N,)`` the frame's ids as given (integers, or strings in an object array), in row order.
         trajectories: ``(N, M, T_f, 2)`` future positions of each mode.
         probabilities: ``(N, M)`` p(c) · p(k | c) of each mode.
         class_probabilities: ``(N, C)`` p(c), columns in ``classes`` order.
         mode_classes: ``(N, M)`` index into ``classes`` of each mode's anchor class.
         edges: ``(E, 2)`` undirected attention-zone edges between frame rows ``i < j``.
         classes: the model's class names.
+        dt_s: seconds between predicted steps (the model's time base); step ``s`` is ``(s + 1) · dt_s`` after now.
     """
 
-    agent_ids: npt.NDArray[np.int64]
+    agent_ids: npt.NDArray[Any]
     trajectories: npt.NDArray[np.float64]
     probabilities: npt.NDArray[np.float64]
     class_probabilities: npt.NDArray[np.float64]
     mode_classes: npt.NDArray[np.int64]
     edges: npt.NDArray[np.int64]
     classes: tuple[str, ...]
+    dt_s: float = float("nan")
 
     def __len__(self) -> int:
         return int(self.agent_ids.shape[0])
+
+    @property
+    def times_s(self) -> npt.NDArray[np.float64]:
+        """``(T_f,)`` seconds after the current time of each predicted step."""
+        return np.round(np.arange(1, self.trajectories.shape[2] + 1) * self.dt_s, 9)
+
+    def to_records(self) -> dict[str, npt.NDArray[Any]]:
+        """The prediction as a long table of numpy columns, one row per agent, mode and step: ``agent_id``,
+        ``mode`` (0 = most probable), ``probability``, ``class`` (the mode's anchor class), ``class_probability``,
+        ``step`` (1..T_f), ``time_offset_s``, ``x``, ``y`` (world metres)."""
+        from dgan.io import prediction_columns
+
+        return prediction_columns(self)
+
+    def to_pandas(self) -> Any:
+        """:meth:`to_records` as a pandas DataFrame (needs pandas)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.to_records())
+
+    def to_arrow(self) -> Any:
+        """:meth:`to_records` as a pyarrow Table (needs pyarrow); its schema metadata holds ``dt_s`` and the
+        classes."""
+        import pyarrow as pa
+
+        cols = self.to_records()
+        ids = cols["agent_id"]
+        arrays = {k: pa.array(v.tolist() if v.dtype == object else v) for k, v in cols.items() if k != "agent_id"}
+        table = pa.table({"agent_id": pa.array(ids.tolist() if ids.dtype == object else ids), **arrays})
+        meta = {b"dgan.dt_s": str(self.dt_s).encode(), b"dgan.classes": ",".join(self.classes).encode()}
+        return table.replace_schema_metadata(meta)
+
+    def to_parquet(self, path: str | os.PathLike[str]) -> None:
+        """Writes :meth:`to_arrow` to a parquet file (needs pyarrow)."""
+        import pyarrow.parquet as pq
+
+        pq.write_table(self.to_arrow(), os.fspath(path))
 
     @property
     def most_likely(self) -> npt.NDArray[np.float64]:
@@ -139,8 +178,12 @@ class Predictor:
             InferenceError: ONNX Runtime failed.
         """
         m = self._modes if modes is None else self._check_modes(modes)
-        out = self._predictor.predict(frame._frame, m)
-        return Prediction(classes=self.classes, **out)
+        out = self._predictor.predict(_native(frame), m)
+        return self._prediction(out, frame)
+
+    def _prediction(self, out: dict[str, Any], frame: Frame) -> Prediction:
+        out["agent_ids"] = frame.agent_ids
+        return Prediction(classes=self.classes, dt_s=self._spec.dt_s, **out)
 
     def predict_batch(self, frames: Sequence[Frame], *, modes: int | None = None) -> list[Prediction]:
         """Predicts several frames in one network call (their graphs joined, disjoint; each frame preprocessed in
@@ -151,11 +194,19 @@ class Predictor:
             InvalidFrameError, UnknownClassError, MapRequiredError: as :meth:`predict`, for any frame.
         """
         m = self._modes if modes is None else self._check_modes(modes)
-        outs = self._predictor.predict_batch([f._frame for f in frames], m)
-        return [Prediction(classes=self.classes, **o) for o in outs]
+        if isinstance(frames, Frame) or not isinstance(frames, Sequence):
+            raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {type(frames).__name__}")
+        outs = self._predictor.predict_batch([_native(f) for f in frames], m)
+        return [self._prediction(o, f) for o, f in zip(outs, frames, strict=True)]
 
     def __repr__(self) -> str:
         return f"Predictor({str(self.path)!r}, classes={self.classes}, modes={self._modes})"
+
+
+def _native(frame: Any) -> _dgan.Frame:
+    if not isinstance(frame, Frame):
+        raise InvalidFrameError(f"expected a dgan.Frame, got {type(frame).__name__}")
+    return frame._frame
 
 
 def _resolve(model: str | os.PathLike[str]) -> Path:

@@ -49,4 +49,4 @@ def zara1_raster_map() -> dgan.RasterMap:
 @pytest.fixture
 def zara1_frame() -> dgan.Frame:
     """Every pedestrian seen at frame 5500 of zara1, 8 steps of 0.4 s (frame ids step by 10)."""
-    return dgan.Frame.from_records(zara1_records(), t_obs=8, dt=10.0, current_time=5500.0)
+    return dgan.Frame.from_records(zara1_records(), t_obs=8, dt=0.4, time_unit=0.04, current_time=5500.0)

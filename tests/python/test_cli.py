@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-from conftest import DATA
+from conftest import DATA, ROOT
 
 import dgan
 from dgan.cli import main
@@ -25,20 +25,76 @@ def test_info(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
 def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["predict", str(nomap_model), str(SCENE), "--time", "5500", "--modes", "2"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("18 agents")
+    assert out.startswith("18 agents at time 5500")
+    assert "(steps of 0.4 s, horizon 4.8 s)" in out
     assert len(out.strip().splitlines()) == 19
 
 
 def test_predict_json_and_csv(nomap_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     csv = tmp_path / "scene.csv"
     rows = ["agent_id,time,x,y,class"] + [
-        f"{a},{t * 0.4:.1f},{t * 0.5 + a},{a},cyclist" for a in range(3) for t in range(8)
+        f"car-{a},{t * 0.4:.1f},{t * 0.5 + a},{a},pedestrian" for a in range(3) for t in range(8)
     ]
     csv.write_text("\n".join(rows) + "\n")
     assert main(["predict", str(nomap_model), str(csv), "--json", "--modes", "1"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["agent_ids"] == [0, 1, 2]
-    assert len(out["trajectories"][0][0]) == 12
+    assert [a["id"] for a in out["agents"]] == ["car-0", "car-1", "car-2"]
+    assert out["dt_s"] == 0.4
+    assert out["times_s"] == pytest.approx([0.4 * (s + 1) for s in range(12)])
+    assert out["current_time"] == pytest.approx(2.8)
+    agent = out["agents"][0]
+    assert agent["class"] == "pedestrian"
+    assert set(agent["class_probabilities"]) == {"vehicle", "cyclist", "pedestrian"}  # the fixture's classes
+    assert sum(agent["class_probabilities"].values()) == pytest.approx(1.0)
+    assert len(agent["modes"]) == 1
+    assert len(agent["modes"][0]["trajectory"]) == 12
+    assert agent["modes"][0]["class"] in agent["class_probabilities"]
+
+
+def test_predict_with_a_map_and_a_table_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "modes.csv"
+    assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--map", "zara1", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "no --map given" not in err
+    lines = out.read_text().splitlines()
+    assert lines[0] == "agent_id,mode,probability,class,class_probability,step,time_offset_s,x,y"
+    assert len(lines) == 1 + 18 * 3 * 12
+    assert lines[1].startswith("76,0,")
+    # The same scene without --map: a note that the model runs without its map, and other predictions.
+    assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--out", str(tmp_path / "nomap.parquet")]) == 0
+    assert "no --map given; zara1 runs without a map" in capsys.readouterr().err
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(tmp_path / "nomap.parquet")
+    assert table.num_rows == 18 * 3 * 12
+    assert table.column("x").to_pylist()[0] != float(lines[1].split(",")[7])
+    # An image map with its homography, and a vector map file.
+    scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
+    args = ["predict", "zara1", str(SCENE), "--time", "5500", "--json", "--modes", "1"]
+    assert main([*args, "--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(scene / "H.txt")]) == 0
+    assert len(json.loads(capsys.readouterr().out)["agents"]) == 18
+    vmap = tmp_path / "map.json"
+    dgan.VectorMap([("road_edge", [[0.0, 0.0], [20.0, 0.0]])]).to_json(vmap)
+    assert main(["predict", "hdmap", str(tmp_path / "scene.csv"), "--map", str(vmap)]) == 2  # no such scene
+    assert "cannot read scene" in capsys.readouterr().err
+
+
+def test_models_lists_every_bundled_model(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["models"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:4] == ["model", "dt", "T_obs", "T_f"]
+    by_name = {line.split()[0]: line for line in lines[1:]}
+    assert set(by_name) == set(dgan.models.list())
+    assert "0.5s" in by_name["apolloscape"]
+    assert "none" in by_name["apolloscape"]
+    assert "vector: HD map" in by_name["hdmap"]
+    assert "raster: ETH/UCY scene mask" in by_name["zara1"]
+    assert all("non-commercial" in line for line in lines[1:])
+    assert main(["models", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {r["name"]: r["t_f"] for r in rows}["hdmap"] == 15
+    assert main(["info", "hdmap"]) == 0
+    assert "map kind   vector: HD map" in capsys.readouterr().out
 
 
 def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -47,7 +103,38 @@ def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys:
     bad = tmp_path / "bad.txt"
     bad.write_text("1 2\n3 4\n")
     assert main(["predict", str(nomap_model), str(bad)]) == 2
-    assert "expected 4 columns" in capsys.readouterr().err
+    assert "expected rows of 4 columns" in capsys.readouterr().err
+    # A time that is not in the file: an error naming the span, never "0 agents" and exit 0.
+    assert main(["predict", str(nomap_model), str(SCENE), "--time", "5505"]) == 2
+    assert "no row at current_time 5505; the table spans 5430..5620" in capsys.readouterr().err
+    # A map file that is not a map, an image without its homography.
+    junk = tmp_path / "junk.json"
+    junk.write_text("{}")
+    assert main(["predict", "zara1", str(SCENE), "--map", str(junk)]) == 2
+    assert "not a dgan vector map" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(SCENE), "--map", "nowhere"]) == 2
+    assert "neither a bundled scene" in capsys.readouterr().err
+    scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
+    assert main(["predict", "zara1", str(SCENE), "--map", str(scene / "rgb.jpg")]) == 2
+    assert "--pixel-to-world" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(SCENE), "--out", str(tmp_path / "x.xlsx")]) == 2
+    assert "--out must end in" in capsys.readouterr().err
+
+
+def test_demo_faults_fixed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A --time between the excerpt's annotations: a typed error, not an IndexError.
+    assert main(["demo", "--time", "5505", "--out", str(tmp_path / "d.png")]) == 2
+    assert "no row at current_time 5505" in capsys.readouterr().err
+    # At 5510 the excerpt ends 4.4 s later: the true position is the last seen one, said so, not "left the scene".
+    assert main(["demo", "--time", "5510", "--out", str(tmp_path / "d.png")]) == 0
+    text = capsys.readouterr().out
+    assert "left the scene" not in text
+    assert "last seen 4.4 s ahead" in text
+    # The truth is drawn up to the predicted horizon only.
+    from dgan.demo import zara1_scene
+
+    scene = zara1_scene(8, 12, 5430.0 + 70)
+    assert max(len(f) for f in scene.futures.values()) == 12
 
 
 @pytest.mark.parametrize(

@@ -88,7 +88,7 @@ def test_empty_frame() -> None:
 
 def test_from_records_reads_a_real_long_table() -> None:
     rec = zara1_records()
-    f = dgan.Frame.from_records(rec, t_obs=8, dt=10.0, current_time=5500.0)
+    f = dgan.Frame.from_records(rec, t_obs=8, dt=0.4, time_unit=0.04, current_time=5500.0)
     # Agents seen at frame 5500, their histories from frames 5430..5500.
     at_now = np.unique(rec["agent_id"][rec["time"] == 5500.0])
     np.testing.assert_array_equal(f.ids, at_now)

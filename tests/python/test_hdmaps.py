@@ -146,7 +146,7 @@ def test_bad_files_are_clear_errors(tmp_path: Path) -> None:
 
 def test_the_waymo_demo_scene_needs_a_full_history() -> None:
     with pytest.raises(dgan.DganError, match=r"needs --time in 18\.\.88, got 5"):
-        dgan.demo.waymo_scene(10, 5)
+        dgan.demo.waymo_scene(10, 15, 5)
 
 
 def test_readers_sit_behind_a_registry_outside_the_runtime_import() -> None:

@@ -1,11 +1,12 @@
-"""training.metrics against hand-computed cases."""
+"""dgan.metrics (also training.metrics) against hand-computed cases."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from training import metrics
+from dgan import exceptions as exc
+from dgan import metrics
 
 
 def test_top1_and_min_over_k() -> None:
@@ -75,3 +76,33 @@ def test_untempered_probabilities_invert_the_temperature() -> None:
         np.arange(3), np.zeros((3, 5, 1, 2)), probs(2.0), pc, np.tile(classes, (3, 1)), np.zeros((0, 2), np.int64), ()
     )
     np.testing.assert_allclose(untempered(pred, 2.0), probs(1.0), rtol=1e-9)
+
+
+def test_miss_rate_and_summary() -> None:
+    gt = np.array([[[0.0, 0.0], [0.0, 4.0]], [[0.0, 0.0], [0.0, 1.0]]])
+    pred = np.array(
+        [
+            [[[0.0, 0.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 3.0]]],  # ends 3 m and 1 m off
+            [[[0.0, 0.0], [3.0, 1.0]], [[0.0, 0.0], [0.0, 4.5]]],  # ends 3 m and 3.5 m off
+        ]
+    )
+    prob = np.array([[0.6, 0.4], [0.5, 0.5]])
+    assert metrics.miss_rate(pred, gt, k=2).tolist() == [0.0, 1.0]
+    assert metrics.miss_rate(pred, gt, k=1).tolist() == [1.0, 1.0]
+    s = metrics.summary(pred, gt, prob, ks=(1, 2))
+    assert s["ade"] == pytest.approx((1.5 + 1.5) / 2)
+    assert s["fde"] == pytest.approx(3.0)
+    assert s["min_fde_2"] == pytest.approx((1.0 + 3.0) / 2)
+    assert s["miss_rate_2"] == pytest.approx(0.5)
+    assert s["brier_min_fde_2"] == pytest.approx((1.0 + 0.6**2 + 3.0 + 0.5**2) / 2)
+
+
+def test_metrics_refuse_bad_shapes() -> None:
+    with pytest.raises(exc.InvalidFrameError, match=r"\(N, M, T, 2\)"):
+        metrics.ade(np.zeros((2, 12, 2)), np.zeros((2, 12, 2)))
+    with pytest.raises(exc.InvalidFrameError, match="ground truth"):
+        metrics.ade(np.zeros((2, 3, 12, 2)), np.zeros((2, 8, 2)))
+    with pytest.raises(exc.InvalidFrameError, match="k must be"):
+        metrics.min_ade(np.zeros((2, 3, 12, 2)), np.zeros((2, 12, 2)), k=0)
+    with pytest.raises(exc.InvalidFrameError, match="probabilities"):
+        metrics.brier_min_fde(np.zeros((2, 3, 12, 2)), np.zeros((2, 12, 2)), np.zeros((2, 2)), k=3)

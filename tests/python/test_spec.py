@@ -18,8 +18,11 @@ def test_spec_validation() -> None:
     assert dgan.InputSpec.from_dict(json_round_trip(SPEC)) == SPEC
     with pytest.raises(exc.InvalidSpecError, match="dt_s"):
         dgan.InputSpec(dt_s=-1.0, t_obs=8, t_f=12)
-    with pytest.raises(exc.InvalidSpecError, match="t_obs and t_f"):
+    with pytest.raises(exc.InvalidSpecError, match=r"t_obs must be in 1..=1000 steps, got 0"):
         dgan.InputSpec(dt_s=0.4, t_obs=0, t_f=12)
+    # Bounds before any allocation: a spec (or a model's metadata) claiming 10^9 future steps is refused.
+    with pytest.raises(exc.InvalidSpecError, match=r"t_f must be in 1..=1000 steps, got 1000000000"):
+        dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=10**9)
     with pytest.raises(exc.InvalidSpecError, match="repeat"):
         dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("vehicle", "vehicle"))
     with pytest.raises(exc.InvalidSpecError, match="outside"):

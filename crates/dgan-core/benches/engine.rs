@@ -9,6 +9,9 @@
 //! - `hdmap_waymo/raster` and `hdmap_waymo/predict`: a real Waymo Open Motion frame (45 agents, its whole vector map
 //!   of 148 elements; `tests/fixtures/waymo_frame.json`) with the bundled `hdmap` model: the rasterisation of every
 //!   agent's crop at the model's map spec, and the whole predict it is part of; needs `ORT_DYLIB_PATH`.
+//! - `tracker/zara1_excerpt` and `tracker/crowd_10hz/200`: the streaming tracker's cost per tick (update plus the
+//!   frame at the tick; throughput in ticks): the bundled real zara1 excerpt replayed tick by tick (20 ticks, up to
+//!   22 pedestrians), and 200 agents at 10 Hz resampled to a 0.4 s model (100 ticks).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use dgan_core::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
@@ -17,7 +20,10 @@ use dgan_core::preprocess::preprocess;
 use dgan_core::raster::rasterize;
 use dgan_core::state::traffic_states;
 use dgan_core::transform::AgentPose;
-use dgan_core::{AgentClass, Frame, MapElement, MapElementKind, MapSpec, Predictor, RasterMap, SceneMap, VectorMap};
+use dgan_core::{
+    AgentClass, Detection, Frame, MapElement, MapElementKind, MapSpec, Predictor, RasterMap, SceneMap, TimeBase,
+    Tracker, VectorMap,
+};
 use ndarray::{Array2, Array3, Array4};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -192,5 +198,49 @@ fn bench_hdmap(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_graph, bench_raster, bench_decode, bench_predict, bench_hdmap);
+fn replay(base: TimeBase, ticks: &[(f64, Vec<(i64, Detection)>)]) -> usize {
+    let mut tracker = Tracker::new(base, AgentClass::Pedestrian);
+    let mut agents = 0;
+    for (t, dets) in ticks {
+        tracker.update(*t, dets.clone()).expect("valid tick");
+        agents += tracker.frame().expect("frame").len();
+    }
+    agents
+}
+
+fn bench_tracker(c: &mut Criterion) {
+    let mut g = c.benchmark_group("tracker");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../python/dgan/data/zara1/frames_5430_5620.txt");
+    let text = std::fs::read_to_string(path).expect("the bundled zara1 excerpt");
+    let mut by_tick: std::collections::BTreeMap<i64, Vec<(i64, Detection)>> = Default::default();
+    for line in text.lines() {
+        let v: Vec<f64> = line.split_whitespace().map(|x| x.parse().expect("number")).collect();
+        by_tick.entry(v[0] as i64).or_default().push((v[1] as i64, Detection::at(v[0] * 0.04, v[2], v[3])));
+    }
+    let ticks: Vec<(f64, Vec<(i64, Detection)>)> = by_tick.into_iter().map(|(f, d)| (f as f64 * 0.04, d)).collect();
+    let base = TimeBase::new(8, 0.4).expect("time base");
+    g.throughput(criterion::Throughput::Elements(ticks.len() as u64));
+    g.bench_function("zara1_excerpt", |b| b.iter(|| replay(base, black_box(&ticks))));
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let n = 200;
+    let start: Vec<[f64; 4]> = (0..n)
+        .map(|_| {
+            let (x, y) = (rng.random_range(0.0..100.0), rng.random_range(0.0..100.0));
+            [x, y, rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0)]
+        })
+        .collect();
+    let crowd: Vec<(f64, Vec<(i64, Detection)>)> = (0..100)
+        .map(|k| {
+            let t = f64::from(k) * 0.1;
+            let d =
+                start.iter().enumerate().map(|(i, s)| (i as i64, Detection::at(t, s[0] + s[2] * t, s[1] + s[3] * t)));
+            (t, d.collect())
+        })
+        .collect();
+    g.throughput(criterion::Throughput::Elements(crowd.len() as u64));
+    g.bench_with_input(BenchmarkId::new("crowd_10hz", n), &n, |b, _| b.iter(|| replay(base, black_box(&crowd))));
+    g.finish();
+}
+
+criterion_group!(benches, bench_graph, bench_raster, bench_decode, bench_predict, bench_hdmap, bench_tracker);
 criterion_main!(benches);

@@ -22,6 +22,7 @@ pub struct Frame {
     lengths: Vec<f64>,
     widths: Vec<f64>,
     map: Option<Arc<SceneMap>>,
+    dt_s: Option<f64>,
 }
 
 impl Frame {
@@ -79,6 +80,7 @@ impl Frame {
             lengths,
             widths,
             map: None,
+            dt_s: None,
         })
     }
 
@@ -135,6 +137,16 @@ impl Frame {
     pub fn with_widths(mut self, widths: &[f64]) -> Result<Self> {
         self.check_len("widths", widths.len())?;
         Self::merge_sizes("width", &mut self.widths, widths)?;
+        Ok(self)
+    }
+
+    /// Sets the time base: the seconds between the frame's steps. A model refuses a frame whose time base differs
+    /// from its own ([`DganError::TimeBase`](crate::DganError::TimeBase)); a frame without one is taken as given.
+    pub fn with_dt(mut self, dt_s: f64) -> Result<Self> {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(crate::DganError::TimeBase(format!("dt must be a positive number of seconds, got {dt_s}")));
+        }
+        self.dt_s = Some(dt_s);
         Ok(self)
     }
 
@@ -222,6 +234,25 @@ impl Frame {
     /// Widths in metres (given or class default).
     pub fn widths(&self) -> &[f64] {
         &self.widths
+    }
+
+    /// Seconds between steps, if the frame knows its time base.
+    pub fn dt_s(&self) -> Option<f64> {
+        self.dt_s
+    }
+
+    /// Checks the frame's time base against a model's `dt_s` (relative tolerance 1e-6).
+    pub fn check_dt(&self, model_dt_s: f64) -> Result<()> {
+        match self.dt_s {
+            Some(dt) if (dt - model_dt_s).abs() > model_dt_s * crate::history::TIME_TOLERANCE => {
+                let dt = (dt * 1e9).round() / 1e9;
+                Err(crate::DganError::TimeBase(format!(
+                    "the frame's steps are {dt} s apart but the model's are {model_dt_s} s; resample the data to the \
+                     model's time base (dgan.Frame.from_records(..., dt={model_dt_s}) interpolates denser data)"
+                )))
+            }
+            _ => Ok(()),
+        }
     }
 
     /// The scene's map, if any.

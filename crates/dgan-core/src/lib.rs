@@ -9,6 +9,7 @@
 //! - [`raster`]: agent-centric RGB map crops in the paper's colours.
 //! - [`prior`]: the kinematic rollout the network refines.
 //! - [`preprocess`]: frame → network inputs; [`decode`]: p(c) · p(k | c), anchors + offsets → world modes.
+//! - [`history`]: detections at any times → frames on the model's time grid; the streaming [`history::Tracker`].
 //! - [`batch`]: several frames as one graph, for [`Predictor::predict_batch`].
 //! - [`contract`]: the model contract; [`runtime`]: the ONNX Runtime session and [`Predictor`].
 //!
@@ -34,6 +35,7 @@ pub mod decode;
 pub mod error;
 pub mod frame;
 pub mod graph;
+pub mod history;
 pub mod map;
 pub mod preprocess;
 pub mod prior;
@@ -47,6 +49,7 @@ pub use class::AgentClass;
 pub use contract::ModelContract;
 pub use error::{DganError, Result};
 pub use frame::Frame;
+pub use history::{frame_at, tracks_from_rows, Detection, TimeBase, Tracker};
 pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
 pub use prior::{PriorKind, PriorSpec};
 pub use runtime::{init_onnxruntime, Prediction, Predictor, PredictorOptions};

@@ -89,6 +89,7 @@ pub struct Preprocessed {
 /// Builds the network inputs of a frame.
 pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
     spec.validate()?;
+    frame.check_dt(spec.dt_s)?;
     let n = frame.len();
     if n > 0 && frame.steps() != spec.t_obs {
         return Err(invalid_frame(format!(

@@ -73,6 +73,10 @@ impl MapSpec {
     }
 }
 
+/// The most steps a model may observe or predict (T_obs, T_f): a bound checked before anything is allocated, so
+/// a model file claiming `t_f = 10⁹` is refused instead of exhausting memory.
+pub const MAX_STEPS: usize = 1000;
+
 /// Everything preprocessing needs to build the network's inputs from a frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InputSpec {
@@ -116,8 +120,10 @@ impl InputSpec {
         if !(self.dt_s.is_finite() && self.dt_s > 0.0) {
             return bad(format!("dt_s must be a positive number of seconds, got {}", self.dt_s));
         }
-        if self.t_obs == 0 || self.t_f == 0 {
-            return bad(format!("t_obs and t_f must be at least 1, got {} and {}", self.t_obs, self.t_f));
+        for (key, v) in [("t_obs", self.t_obs), ("t_f", self.t_f)] {
+            if !(1..=MAX_STEPS).contains(&v) {
+                return bad(format!("{key} must be in 1..={MAX_STEPS} steps, got {v}"));
+            }
         }
         if self.classes.is_empty() {
             return bad("a model needs at least one class".into());

@@ -11,6 +11,7 @@ fn class_name(err: &DganError) -> &'static str {
         DganError::InvalidFrame(_) => "InvalidFrameError",
         DganError::UnknownClass(_) => "UnknownClassError",
         DganError::MapRequired(_) => "MapRequiredError",
+        DganError::TimeBase(_) => "TimeBaseError",
         DganError::InvalidMap(_) => "InvalidMapError",
         DganError::InvalidSpec(_) => "InvalidSpecError",
         DganError::ModelNotFound(_) => "ModelNotFoundError",

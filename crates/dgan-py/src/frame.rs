@@ -21,7 +21,7 @@ fn dims<T: numpy::Element + Clone, D: ndarray::Dimension>(
 }
 
 /// Classes given as names or canonical integer codes.
-fn parse_classes(classes: &Bound<'_, PyAny>) -> PyResult<Vec<AgentClass>> {
+pub(crate) fn parse_classes(classes: &Bound<'_, PyAny>) -> PyResult<Vec<AgentClass>> {
     let list = classes.cast::<PyList>().map_err(|_| invalid_frame("classes must be a list of names or integers"))?;
     list.iter()
         .map(|item| {
@@ -36,6 +36,16 @@ fn parse_classes(classes: &Bound<'_, PyAny>) -> PyResult<Vec<AgentClass>> {
         .collect()
 }
 
+fn scene_map(map: &Bound<'_, PyAny>) -> PyResult<Arc<SceneMap>> {
+    if let Ok(r) = map.cast::<PyRasterMap>() {
+        Ok(r.get().inner.clone())
+    } else if let Ok(v) = map.cast::<PyVectorMap>() {
+        Ok(v.get().inner.clone())
+    } else {
+        Err(to_py(DganError::InvalidMap("map must be a dgan.RasterMap or dgan.VectorMap".into())))
+    }
+}
+
 /// A validated scene at t_obs (see `dgan.Frame`).
 #[derive(Debug)]
 #[pyclass(name = "Frame", module = "dgan._dgan", frozen)]
@@ -46,7 +56,7 @@ pub struct PyFrame {
 #[pymethods]
 impl PyFrame {
     #[new]
-    #[pyo3(signature = (positions, mask, classes, ids, headings, velocities, lengths, widths, map))]
+    #[pyo3(signature = (positions, mask, classes, ids, headings, velocities, lengths, widths, map, dt = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         positions: PyReadonlyArrayDyn<'_, f64>,
@@ -58,6 +68,7 @@ impl PyFrame {
         lengths: Option<PyReadonlyArrayDyn<'_, f64>>,
         widths: Option<PyReadonlyArrayDyn<'_, f64>>,
         map: Option<&Bound<'_, PyAny>>,
+        dt: Option<f64>,
     ) -> PyResult<Self> {
         let positions: Array3<f64> = dims::<f64, Ix3>("positions", "(N, T, 2)", &positions)?;
         let mask: Option<Array2<bool>> = mask.map(|m| dims::<bool, Ix2>("mask", "(N, T)", &m)).transpose()?;
@@ -82,14 +93,10 @@ impl PyFrame {
             frame = frame.with_widths(&w).py()?;
         }
         if let Some(map) = map {
-            let scene = if let Ok(r) = map.cast::<PyRasterMap>() {
-                r.get().inner.clone()
-            } else if let Ok(v) = map.cast::<PyVectorMap>() {
-                v.get().inner.clone()
-            } else {
-                return Err(to_py(DganError::InvalidMap("map must be a dgan.RasterMap or dgan.VectorMap".into())));
-            };
-            frame = frame.with_map(scene);
+            frame = frame.with_map(scene_map(map)?);
+        }
+        if let Some(dt) = dt {
+            frame = frame.with_dt(dt).py()?;
         }
         Ok(Self { inner: frame })
     }
@@ -101,6 +108,11 @@ impl PyFrame {
     /// The same agents without a map.
     fn without_map(&self) -> Self {
         Self { inner: self.inner.without_map() }
+    }
+
+    /// The same agents with another map.
+    fn with_map(&self, map: &Bound<'_, PyAny>) -> PyResult<Self> {
+        Ok(Self { inner: self.inner.clone().with_map(scene_map(map)?) })
     }
 
     #[getter]
@@ -144,6 +156,12 @@ impl PyFrame {
     fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         let v = self.inner.velocities();
         ndarray::Array2::from_shape_fn((v.len(), 2), |(i, k)| v[i].map_or(f64::NAN, |x| x[k])).into_pyarray(py)
+    }
+
+    /// Seconds between steps, if known.
+    #[getter]
+    fn dt(&self) -> Option<f64> {
+        self.inner.dt_s()
     }
 
     #[getter]

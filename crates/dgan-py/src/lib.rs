@@ -4,6 +4,7 @@
 mod error;
 mod frame;
 mod geometry;
+mod history;
 mod predictor;
 mod preprocess;
 
@@ -23,6 +24,8 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<frame::PyRasterMap>()?;
     m.add_class::<frame::PyVectorMap>()?;
     m.add_class::<predictor::PyPredictor>()?;
+    m.add_class::<history::PyTracker>()?;
+    m.add_function(wrap_pyfunction!(history::frame_from_rows, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::preprocess, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::validate_spec, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::kinematic_prior, m)?)?;

@@ -1,0 +1,397 @@
+//! Time bases: detections at any times → a [`Frame`] on the model's grid, and the streaming [`Tracker`].
+//!
+//! A model observes `t_obs` steps `dt_s` apart ending at the current time. Users' data come at their own rate:
+//! 10 Hz logs for a 0.4 s model, jittered timestamps, agents that vanish and return. [`frame_at`] builds the frame
+//! at a time from per-agent detections, the one implementation behind `dgan.Frame.from_records` and the tracker:
+//!
+//! - an agent is in the frame when it has a detection at the current time;
+//! - a grid time that matches a detection takes it; one between two detections at most `max_gap_s` apart is
+//!   interpolated linearly; anything else is masked out (the agent was not seen then);
+//! - data sparser than the grid (median spacing more than 5% above `dt_s`) cannot be resampled and are refused with
+//!   [`DganError::TimeBase`], never silently stretched.
+
+use crate::class::AgentClass;
+use crate::error::{DganError, Result};
+use crate::frame::Frame;
+use ndarray::{Array2, Array3};
+use std::collections::{BTreeMap, HashSet};
+
+/// Relative tolerance for "the same time": a detection within `dt_s · TIME_TOLERANCE` of a grid time is on it.
+pub const TIME_TOLERANCE: f64 = 1e-6;
+
+/// How much sparser than the grid the data may be (median spacing ≤ `dt_s · (1 + SPARSE_SLACK)`).
+pub const SPARSE_SLACK: f64 = 0.05;
+
+/// One agent seen at one time: where, and whatever state the source gives.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Detection {
+    /// Seconds, on any clock shared by the detections.
+    pub time_s: f64,
+    /// World position in metres.
+    pub position: [f64; 2],
+    /// The class, `None` for the frame's default.
+    pub class: Option<AgentClass>,
+    /// World heading in radians, NaN if unknown.
+    pub heading: f64,
+    /// Length in metres, NaN for the class default.
+    pub length: f64,
+    /// Width in metres, NaN for the class default.
+    pub width: f64,
+    /// World velocity in m/s, NaN if unknown.
+    pub velocity: [f64; 2],
+}
+
+impl Detection {
+    /// A detection with a position only.
+    pub fn at(time_s: f64, x: f64, y: f64) -> Self {
+        Self {
+            time_s,
+            position: [x, y],
+            class: None,
+            heading: f64::NAN,
+            length: f64::NAN,
+            width: f64::NAN,
+            velocity: [f64::NAN; 2],
+        }
+    }
+}
+
+/// The time grid of a model: `t_obs` steps `dt_s` apart; interpolation across gaps up to `max_gap_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeBase {
+    /// Steps observed.
+    pub t_obs: usize,
+    /// Seconds between steps.
+    pub dt_s: f64,
+    /// The longest gap between two detections of an agent that is interpolated (default 1.5 · `dt_s`).
+    pub max_gap_s: f64,
+}
+
+impl TimeBase {
+    /// The grid with the default gap (1.5 · `dt_s`: one missing step of data at the model's rate is not bridged).
+    pub fn new(t_obs: usize, dt_s: f64) -> Result<Self> {
+        Self::with_max_gap(t_obs, dt_s, 1.5 * dt_s)
+    }
+
+    /// The grid with an explicit gap.
+    pub fn with_max_gap(t_obs: usize, dt_s: f64, max_gap_s: f64) -> Result<Self> {
+        if t_obs == 0 || t_obs > crate::spec::MAX_STEPS {
+            return Err(DganError::InvalidSpec(format!(
+                "t_obs must be in 1..={}, got {t_obs}",
+                crate::spec::MAX_STEPS
+            )));
+        }
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(DganError::TimeBase(format!("dt must be a positive number of seconds, got {dt_s}")));
+        }
+        if !(max_gap_s.is_finite() && max_gap_s >= 0.0) {
+            return Err(DganError::TimeBase(format!(
+                "max_gap must be a non-negative number of seconds, got {max_gap_s}"
+            )));
+        }
+        Ok(Self { t_obs, dt_s, max_gap_s })
+    }
+
+    /// The grid time of step `k` (0 = oldest) for the current time `now_s`.
+    fn time_of(&self, now_s: f64, k: usize) -> f64 {
+        now_s - (self.t_obs - 1 - k) as f64 * self.dt_s
+    }
+
+    fn eps(&self) -> f64 {
+        self.dt_s * TIME_TOLERANCE
+    }
+}
+
+/// The position of a track (sorted by time) at `t`, if seen then or interpolable.
+fn sample(track: &[Detection], t: f64, base: &TimeBase) -> Option<[f64; 2]> {
+    let eps = base.eps();
+    let j = track.partition_point(|d| d.time_s < t - eps);
+    let next = track.get(j)?;
+    if (next.time_s - t).abs() <= eps {
+        return Some(next.position);
+    }
+    let prev = track.get(j.checked_sub(1)?)?;
+    let gap = next.time_s - prev.time_s;
+    if gap > base.max_gap_s + eps || gap <= 0.0 {
+        return None;
+    }
+    let w = (t - prev.time_s) / gap;
+    Some([
+        prev.position[0] + w * (next.position[0] - prev.position[0]),
+        prev.position[1] + w * (next.position[1] - prev.position[1]),
+    ])
+}
+
+/// The median spacing of the detections within the window of every agent, if any agent has two.
+fn median_spacing(tracks: &[(i64, &[Detection])]) -> Option<f64> {
+    let mut gaps: Vec<f64> =
+        tracks.iter().flat_map(|(_, tr)| tr.windows(2).map(|w| w[1].time_s - w[0].time_s)).collect();
+    if gaps.is_empty() {
+        return None;
+    }
+    let mid = gaps.len() / 2;
+    let (_, m, _) = gaps.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(*m)
+}
+
+/// The frame at `now_s` from each agent's detections, sorted by time (checked), one track per id.
+///
+/// Agents without a detection at `now_s` are left out; ids keep the order given. `default_class` is used where a
+/// detection carries no class. The frame's time base is `base.dt_s`.
+pub fn frame_at(
+    tracks: &[(i64, &[Detection])],
+    now_s: f64,
+    base: &TimeBase,
+    default_class: AgentClass,
+) -> Result<Frame> {
+    if !now_s.is_finite() {
+        return Err(DganError::TimeBase(format!("the current time must be finite, got {now_s}")));
+    }
+    let eps = base.eps();
+    let window_start = base.time_of(now_s, 0) - base.max_gap_s - eps;
+    let mut windows: Vec<(i64, &[Detection])> = Vec::with_capacity(tracks.len());
+    for (id, track) in tracks {
+        if let Some(w) =
+            track.windows(2).find(|w| w[0].time_s.partial_cmp(&w[1].time_s) != Some(std::cmp::Ordering::Less))
+        {
+            return Err(DganError::TimeBase(format!(
+                "agent {id}: detections must have increasing, distinct times; got {} then {}",
+                w[0].time_s, w[1].time_s
+            )));
+        }
+        let lo = track.partition_point(|d| d.time_s < window_start);
+        let hi = track.partition_point(|d| d.time_s <= now_s + eps);
+        windows.push((*id, &track[lo..hi]));
+    }
+    if let Some(spacing) = median_spacing(&windows) {
+        if spacing > base.dt_s * (1.0 + SPARSE_SLACK) {
+            return Err(DganError::TimeBase(format!(
+                "the data are sampled every {spacing:.4} s (median), sparser than the model's dt = {} s; they cannot \
+                 be resampled to its time base without inventing motion (use a model of a coarser time base)",
+                base.dt_s
+            )));
+        }
+    }
+    let current: Vec<(i64, &[Detection])> =
+        windows.into_iter().filter(|(_, w)| w.last().is_some_and(|d| (d.time_s - now_s).abs() <= eps)).collect();
+    let (n, t) = (current.len(), base.t_obs);
+    let mut positions = Array3::<f64>::from_elem((n, t, 2), f64::NAN);
+    let mut mask = Array2::<bool>::from_elem((n, t), false);
+    let mut classes = Vec::with_capacity(n);
+    let (mut ids, mut headings, mut lengths, mut widths) =
+        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut velocities = Array2::<f64>::from_elem((n, 2), f64::NAN);
+    for (i, (id, track)) in current.iter().enumerate() {
+        for k in 0..t {
+            if let Some(p) = sample(track, base.time_of(now_s, k), base) {
+                positions[[i, k, 0]] = p[0];
+                positions[[i, k, 1]] = p[1];
+                mask[[i, k]] = true;
+            }
+        }
+        let last = track.last().ok_or_else(|| DganError::TimeBase("empty track".into()))?;
+        ids.push(*id);
+        classes.push(last.class.unwrap_or(default_class));
+        headings.push(last.heading);
+        lengths.push(last.length);
+        widths.push(last.width);
+        velocities[[i, 0]] = last.velocity[0];
+        velocities[[i, 1]] = last.velocity[1];
+    }
+    Frame::new(positions, Some(mask), classes)?
+        .with_ids(ids)?
+        .with_headings(&headings)?
+        .with_velocities(velocities.view())?
+        .with_lengths(&lengths)?
+        .with_widths(&widths)?
+        .with_dt(base.dt_s)
+}
+
+/// Rows of a long table (one per agent and time, any order) grouped into tracks sorted by id, then time.
+///
+/// Two rows of one agent at the same time are refused, even when equal: the table is ambiguous.
+pub fn tracks_from_rows(rows: Vec<(i64, Detection)>) -> Result<Vec<(i64, Vec<Detection>)>> {
+    let mut by_id: BTreeMap<i64, Vec<Detection>> = BTreeMap::new();
+    for (id, d) in rows {
+        if !d.time_s.is_finite() {
+            return Err(DganError::InvalidFrame(format!("agent {id} has a row at a non-finite time {}", d.time_s)));
+        }
+        by_id.entry(id).or_default().push(d);
+    }
+    let mut out = Vec::with_capacity(by_id.len());
+    for (id, mut track) in by_id {
+        track.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
+        if let Some(w) = track.windows(2).find(|w| w[0].time_s == w[1].time_s) {
+            return Err(DganError::InvalidFrame(format!(
+                "agent {id} has two rows at time {} s; keep one row per agent and time",
+                w[0].time_s
+            )));
+        }
+        out.push((id, track));
+    }
+    Ok(out)
+}
+
+/// Streams of detections, one tick at a time, kept at a model's time base: agents appear, vanish and return; the
+/// frame at any tick equals [`frame_at`] on the same detections given at once (agents by increasing id).
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    base: TimeBase,
+    default_class: AgentClass,
+    tracks: BTreeMap<i64, Vec<Detection>>,
+    now_s: Option<f64>,
+}
+
+impl Tracker {
+    /// An empty tracker on `base`; detections without a class get `default_class`.
+    pub fn new(base: TimeBase, default_class: AgentClass) -> Self {
+        Self { base, default_class, tracks: BTreeMap::new(), now_s: None }
+    }
+
+    /// The time base.
+    pub fn time_base(&self) -> &TimeBase {
+        &self.base
+    }
+
+    /// The latest tick's time, if any.
+    pub fn now_s(&self) -> Option<f64> {
+        self.now_s
+    }
+
+    /// Agents remembered (seen within the history window of the latest tick).
+    pub fn len(&self) -> usize {
+        self.tracks.len()
+    }
+
+    /// Whether no agent is remembered.
+    pub fn is_empty(&self) -> bool {
+        self.tracks.is_empty()
+    }
+
+    /// Adds one tick: every agent detected at `time_s` (unique ids). Ticks must come in increasing time order.
+    /// Detections older than the history window are forgotten, so memory stays bounded.
+    pub fn update(&mut self, time_s: f64, detections: Vec<(i64, Detection)>) -> Result<()> {
+        if !time_s.is_finite() {
+            return Err(DganError::TimeBase(format!("tick time must be finite, got {time_s}")));
+        }
+        if let Some(now) = self.now_s {
+            if time_s <= now {
+                return Err(DganError::TimeBase(format!(
+                    "ticks must come in increasing time order: {time_s} s after {now} s"
+                )));
+            }
+        }
+        let mut seen = HashSet::with_capacity(detections.len());
+        for (id, d) in &detections {
+            if !seen.insert(*id) {
+                return Err(DganError::InvalidFrame(format!("agent id {id} appears twice in one tick")));
+            }
+            if !(d.position[0].is_finite() && d.position[1].is_finite()) {
+                return Err(DganError::InvalidFrame(format!("agent {id} has a non-finite position {:?}", d.position)));
+            }
+        }
+        for (id, mut d) in detections {
+            d.time_s = time_s;
+            self.tracks.entry(id).or_default().push(d);
+        }
+        self.now_s = Some(time_s);
+        self.forget(time_s);
+        Ok(())
+    }
+
+    /// Drops what no later frame can use: detections before the window (keeping one before it for interpolation),
+    /// and agents with nothing left.
+    fn forget(&mut self, now_s: f64) {
+        let start = self.base.time_of(now_s, 0) - self.base.max_gap_s - self.base.eps();
+        self.tracks.retain(|_, track| {
+            let lo = track.partition_point(|d| d.time_s < start);
+            track.drain(..lo);
+            !track.is_empty()
+        });
+    }
+
+    /// The frame at the latest tick: the agents detected then, by increasing id.
+    pub fn frame(&self) -> Result<Frame> {
+        let now = self.now_s.ok_or_else(|| DganError::TimeBase("the tracker has had no tick yet".into()))?;
+        let tracks: Vec<(i64, &[Detection])> = self.tracks.iter().map(|(id, t)| (*id, t.as_slice())).collect();
+        frame_at(&tracks, now, &self.base, self.default_class)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(id: i64, times: &[f64], speed: f64) -> (i64, Vec<Detection>) {
+        (id, times.iter().map(|&t| Detection::at(t, speed * t, 1.0)).collect())
+    }
+
+    #[test]
+    fn dense_data_resample_to_the_grid_exactly_on_a_line() {
+        let times: Vec<f64> = (0..=40).map(|i| f64::from(i) * 0.1).collect();
+        let (id, tr) = line(7, &times, 2.0);
+        let base = TimeBase::new(8, 0.4).unwrap();
+        let f = frame_at(&[(id, &tr)], 4.0, &base, AgentClass::Pedestrian).unwrap();
+        assert_eq!(f.ids(), &[7]);
+        assert_eq!(f.dt_s(), Some(0.4));
+        for k in 0..8 {
+            let t = 4.0 - (7 - k) as f64 * 0.4;
+            assert!((f.positions()[[0, k, 0]] - 2.0 * t).abs() < 1e-9);
+            assert!(f.mask()[[0, k]]);
+        }
+    }
+
+    #[test]
+    fn gaps_are_masked_and_absent_agents_left_out() {
+        let base = TimeBase::new(4, 1.0).unwrap();
+        let (a, ta) = line(1, &[0.0, 1.0, 3.0], 1.0); // step 2 missing
+        let (b, tb) = line(2, &[0.0, 1.0, 2.0], 1.0); // not seen now
+        let f = frame_at(&[(a, &ta), (b, &tb)], 3.0, &base, AgentClass::Vehicle).unwrap();
+        assert_eq!(f.ids(), &[1]);
+        assert_eq!(f.mask().row(0).to_vec(), vec![true, true, false, true]);
+        assert_eq!(f.classes(), &[AgentClass::Vehicle]);
+    }
+
+    #[test]
+    fn sparse_data_and_bad_times_are_refused() {
+        let base = TimeBase::new(4, 0.4).unwrap();
+        let (a, ta) = line(1, &[0.0, 0.5, 1.0, 1.5], 1.0);
+        let err = frame_at(&[(a, &ta)], 1.5, &base, AgentClass::Pedestrian).unwrap_err();
+        assert!(matches!(err, DganError::TimeBase(_)), "{err}");
+        let (b, tb) = line(1, &[0.0, 0.4, 0.4], 1.0);
+        assert!(matches!(frame_at(&[(b, &tb)], 0.4, &base, AgentClass::Pedestrian), Err(DganError::TimeBase(_))));
+        assert!(TimeBase::new(4, 0.0).is_err());
+        assert!(TimeBase::new(0, 0.4).is_err());
+    }
+
+    #[test]
+    fn the_tracker_equals_the_frame_built_at_once() {
+        let base = TimeBase::new(3, 0.4).unwrap();
+        let mut tracker = Tracker::new(base, AgentClass::Pedestrian);
+        let mut all: BTreeMap<i64, Vec<Detection>> = BTreeMap::new();
+        for tick in 0..30 {
+            let t = f64::from(tick) * 0.4;
+            // agent 1 always; agent 2 vanishes for ticks 10..15; agent 3 appears at 20
+            let mut dets = vec![(1, Detection::at(t, t, 0.0))];
+            if !(10..15).contains(&tick) {
+                dets.push((2, Detection::at(t, -t, 2.0)));
+            }
+            if tick >= 20 {
+                dets.push((3, Detection::at(t, 0.0, t)));
+            }
+            for (id, d) in &dets {
+                all.entry(*id).or_default().push(d.clone());
+            }
+            tracker.update(t, dets).unwrap();
+            let streamed = tracker.frame().unwrap();
+            let tracks: Vec<(i64, &[Detection])> = all.iter().map(|(i, v)| (*i, v.as_slice())).collect();
+            let once = frame_at(&tracks, t, &base, AgentClass::Pedestrian).unwrap();
+            assert_eq!(streamed.ids(), once.ids());
+            assert_eq!(streamed.mask(), once.mask());
+            let same = |a: f64, b: f64| a == b || (a.is_nan() && b.is_nan());
+            assert!(streamed.positions().iter().zip(once.positions()).all(|(a, b)| same(*a, *b)));
+        }
+        assert!(tracker.len() <= 3);
+        assert!(tracker.update(1.0, vec![]).is_err());
+    }
+}

@@ -1,0 +1,185 @@
+//! Time bases: `frame_from_rows` (behind `dgan.Frame.from_records`) and the streaming `Tracker`.
+
+use crate::error::{invalid_frame, IntoPyResult};
+use crate::frame::{parse_classes, PyFrame};
+use dgan_core::{frame_at, tracks_from_rows, AgentClass, Detection, TimeBase, Tracker};
+use numpy::PyReadonlyArray1;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Per-row columns as given from Python: a dict with `ids` (int64), `xs`, `ys` (float64) and optionally `classes`
+/// (a list), `headings`, `lengths`, `widths`, `vxs`, `vys` (float64, may be missing or None).
+struct Columns<'py> {
+    ids: PyReadonlyArray1<'py, i64>,
+    xs: PyReadonlyArray1<'py, f64>,
+    ys: PyReadonlyArray1<'py, f64>,
+    classes: Option<Bound<'py, PyAny>>,
+    headings: Option<PyReadonlyArray1<'py, f64>>,
+    lengths: Option<PyReadonlyArray1<'py, f64>>,
+    widths: Option<PyReadonlyArray1<'py, f64>>,
+    vxs: Option<PyReadonlyArray1<'py, f64>>,
+    vys: Option<PyReadonlyArray1<'py, f64>>,
+}
+
+impl<'py> Columns<'py> {
+    fn from_dict(d: &Bound<'py, PyDict>) -> PyResult<Self> {
+        let get = |k: &str| -> PyResult<Option<Bound<'py, PyAny>>> { Ok(d.get_item(k)?.filter(|v| !v.is_none())) };
+        let required = |k: &str| -> PyResult<Bound<'py, PyAny>> {
+            get(k)?.ok_or_else(|| invalid_frame(format!("the column {k} is required")))
+        };
+        let floats = |k: &str| -> PyResult<Option<PyReadonlyArray1<'py, f64>>> {
+            get(k)?
+                .map(|v| v.extract().map_err(|_| invalid_frame(format!("{k} must be a 1-D float64 array"))))
+                .transpose()
+        };
+        let need = |k: &str| -> PyResult<PyReadonlyArray1<'py, f64>> {
+            floats(k)?.ok_or_else(|| invalid_frame(format!("the column {k} is required")))
+        };
+        Ok(Self {
+            ids: required("ids")?.extract().map_err(|_| invalid_frame("ids must be a 1-D int64 array"))?,
+            xs: need("xs")?,
+            ys: need("ys")?,
+            classes: get("classes")?,
+            headings: floats("headings")?,
+            lengths: floats("lengths")?,
+            widths: floats("widths")?,
+            vxs: floats("vxs")?,
+            vys: floats("vys")?,
+        })
+    }
+}
+
+impl Columns<'_> {
+    /// One detection per row, at `times` (seconds).
+    fn detections(&self, times: &[f64]) -> PyResult<Vec<(i64, Detection)>> {
+        let ids = self.ids.as_slice()?;
+        let n = ids.len();
+        let column = |name: &str, a: &Option<PyReadonlyArray1<'_, f64>>| -> PyResult<Vec<f64>> {
+            match a {
+                Some(a) => {
+                    let v = a.as_slice()?.to_vec();
+                    if v.len() != n {
+                        return Err(invalid_frame(format!("column {name} has {} rows, the ids {n}", v.len())));
+                    }
+                    Ok(v)
+                }
+                None => Ok(vec![f64::NAN; n]),
+            }
+        };
+        let (xs, ys) = (column("x", &Some(self.xs.clone()))?, column("y", &Some(self.ys.clone()))?);
+        let (hs, ls, ws) =
+            (column("heading", &self.headings)?, column("length", &self.lengths)?, column("width", &self.widths)?);
+        let (vx, vy) = (column("vx", &self.vxs)?, column("vy", &self.vys)?);
+        if times.len() != n {
+            return Err(invalid_frame(format!("{} times given for {n} rows", times.len())));
+        }
+        let classes: Vec<Option<AgentClass>> = match &self.classes {
+            Some(c) => {
+                let parsed = parse_classes(c)?;
+                if parsed.len() != n {
+                    return Err(invalid_frame(format!("{} classes given for {n} rows", parsed.len())));
+                }
+                parsed.into_iter().map(Some).collect()
+            }
+            None => vec![None; n],
+        };
+        Ok((0..n)
+            .map(|i| {
+                let d = Detection {
+                    time_s: times[i],
+                    position: [xs[i], ys[i]],
+                    class: classes[i],
+                    heading: hs[i],
+                    length: ls[i],
+                    width: ws[i],
+                    velocity: [vx[i], vy[i]],
+                };
+                (ids[i], d)
+            })
+            .collect())
+    }
+}
+
+fn parse_default_class(class: &Bound<'_, PyAny>) -> PyResult<AgentClass> {
+    let list = pyo3::types::PyList::new(class.py(), [class])?;
+    Ok(parse_classes(list.as_any())?[0])
+}
+
+/// The frame at `now` (seconds) of a long table's rows (`columns` as [`Columns`], plus `times`, float64 seconds):
+/// grouped by id, resampled to `t_obs` steps `dt` apart.
+#[pyfunction]
+#[pyo3(signature = (columns, now, t_obs, dt, max_gap, default_class))]
+pub fn frame_from_rows<'py>(
+    py: Python<'py>,
+    columns: &Bound<'py, PyDict>,
+    now: f64,
+    t_obs: usize,
+    dt: f64,
+    max_gap: Option<f64>,
+    default_class: Bound<'py, PyAny>,
+) -> PyResult<PyFrame> {
+    let default_class = parse_default_class(&default_class)?;
+    let base = time_base(t_obs, dt, max_gap)?;
+    let times: PyReadonlyArray1<'py, f64> = columns
+        .get_item("times")?
+        .ok_or_else(|| invalid_frame("the column times is required"))?
+        .extract()
+        .map_err(|_| invalid_frame("times must be a 1-D float64 array"))?;
+    let rows = Columns::from_dict(columns)?.detections(times.as_slice()?)?;
+    let frame = py
+        .detach(|| {
+            let tracks = tracks_from_rows(rows)?;
+            let views: Vec<(i64, &[Detection])> = tracks.iter().map(|(i, t)| (*i, t.as_slice())).collect();
+            frame_at(&views, now, &base, default_class)
+        })
+        .py()?;
+    Ok(PyFrame { inner: frame })
+}
+
+fn time_base(t_obs: usize, dt: f64, max_gap: Option<f64>) -> PyResult<TimeBase> {
+    match max_gap {
+        Some(g) => TimeBase::with_max_gap(t_obs, dt, g),
+        None => TimeBase::new(t_obs, dt),
+    }
+    .py()
+}
+
+/// A streaming tracker (see `dgan.Tracker`).
+#[derive(Debug)]
+#[pyclass(name = "Tracker", module = "dgan._dgan")]
+pub struct PyTracker {
+    inner: Tracker,
+}
+
+#[pymethods]
+impl PyTracker {
+    #[new]
+    #[pyo3(signature = (t_obs, dt, max_gap, default_class))]
+    fn new(t_obs: usize, dt: f64, max_gap: Option<f64>, default_class: Bound<'_, PyAny>) -> PyResult<Self> {
+        Ok(Self { inner: Tracker::new(time_base(t_obs, dt, max_gap)?, parse_default_class(&default_class)?) })
+    }
+
+    /// Adds the detections of one tick at `time` seconds (`columns` as [`Columns`]).
+    fn update(&mut self, time: f64, columns: &Bound<'_, PyDict>) -> PyResult<()> {
+        let cols = Columns::from_dict(columns)?;
+        let n = cols.ids.len()?;
+        let rows = cols.detections(&vec![time; n])?;
+        self.inner.update(time, rows).py()
+    }
+
+    /// The frame at the latest tick.
+    fn frame(&self) -> PyResult<PyFrame> {
+        Ok(PyFrame { inner: self.inner.frame().py()? })
+    }
+
+    /// The latest tick's time, if any.
+    #[getter]
+    fn now(&self) -> Option<f64> {
+        self.inner.now_s()
+    }
+
+    /// Agents remembered.
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+}

@@ -1,0 +1,156 @@
+"""A streaming :class:`Tracker`: detections in, one tick at a time; predictions at any tick."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan import _dgan
+from dgan.exceptions import InvalidFrameError
+from dgan.frame import ClassLike, Frame, RasterMap, VectorMap
+from dgan.predictor import Prediction, Predictor
+
+
+def _column(name: str, values: npt.ArrayLike | None, n: int) -> npt.NDArray[np.float64] | None:
+    if values is None:
+        return None
+    try:
+        out = np.ascontiguousarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InvalidFrameError(f"{name} must be numbers: {e}") from None
+    if out.shape != (n,):
+        raise InvalidFrameError(f"{name} must have shape ({n},), got {out.shape}")
+    return out
+
+
+class Tracker:
+    """Keeps every agent's history at a model's time base from detections fed one tick at a time (the core is the
+    engine's, shared with :meth:`Frame.from_records`): agents appear, vanish and return; ticks may come at any rate
+    at least as dense as the model's (denser or jittered ticks are interpolated). The frame at a tick equals
+    ``Frame.from_records`` of the same detections given at once.
+
+    Args:
+        predictor: the model whose time base (``dt``, ``T_obs``) the history follows.
+        map: the scene's map, attached to every frame.
+        max_gap: the longest gap in seconds between two detections of an agent that is interpolated (1.5 · dt).
+        default_class: the class of detections that give none.
+
+    >>> tracker = dgan.Tracker(dgan.Predictor("zara1"))  # doctest: +SKIP
+    >>> tracker.update(12.4, ids=["a", "b"], positions=[[1.0, 2.0], [3.0, 4.0]])  # doctest: +SKIP
+    >>> prediction = tracker.predict()  # doctest: +SKIP
+    """
+
+    def __init__(
+        self,
+        predictor: Predictor,
+        *,
+        map: RasterMap | VectorMap | None = None,
+        max_gap: float | None = None,
+        default_class: ClassLike = "pedestrian",
+    ) -> None:
+        if not isinstance(predictor, Predictor):
+            raise InvalidFrameError(f"Tracker needs a dgan.Predictor, got {type(predictor).__name__}")
+        self._predictor = predictor
+        self._map = map
+        spec = predictor.spec
+        self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, max_gap, default_class)
+        # Integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids get
+        # codes by first appearance, and the frame gives the ids back.
+        self._integer_ids = False
+        self._codes: dict[Any, int] = {}
+        self._labels: list[Any] = []
+
+    @property
+    def now(self) -> float | None:
+        """The latest tick's time in seconds."""
+        return self._native.now
+
+    def __len__(self) -> int:
+        """Agents remembered (seen within the history window)."""
+        return len(self._native)
+
+    def _code(self, agent: Any) -> int:
+        key = agent.item() if isinstance(agent, np.generic) else agent
+        if key is None or (isinstance(key, float) and not np.isfinite(key)):
+            raise InvalidFrameError("an id is None or NaN")
+        if key not in self._codes:
+            self._codes[key] = len(self._labels)
+            self._labels.append(key)
+        return self._codes[key]
+
+    def update(
+        self,
+        time: float,
+        ids: npt.ArrayLike,
+        positions: npt.ArrayLike,
+        *,
+        classes: list[ClassLike] | None = None,
+        headings: npt.ArrayLike | None = None,
+        lengths: npt.ArrayLike | None = None,
+        widths: npt.ArrayLike | None = None,
+        velocities: npt.ArrayLike | None = None,
+    ) -> None:
+        """Adds one tick: every agent detected at ``time`` seconds (after the previous tick), with its id (integer
+        or string), world position ``(N, 2)`` in metres, and optionally class, heading, size and velocity.
+
+        Raises:
+            InvalidFrameError: shapes, repeated ids, non-finite positions. TimeBaseError: a tick not after the last.
+        """
+        if ids is None or isinstance(ids, (str, bytes)):
+            raise InvalidFrameError("ids must be a sequence of ids (integers or strings)")
+        id_array = np.asarray(ids)
+        n = int(id_array.size)
+        try:
+            pos2 = np.ascontiguousarray(positions, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise InvalidFrameError(f"positions must be an (N, 2) array of numbers: {e}") from None
+        if n == 0 and pos2.size == 0:
+            pos2 = pos2.reshape(0, 2)
+        if pos2.shape != (n, 2):
+            raise InvalidFrameError(f"positions must have shape ({n}, 2), got {pos2.shape}")
+        vel = None
+        if velocities is not None:
+            try:
+                vel = np.ascontiguousarray(velocities, dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise InvalidFrameError(f"velocities must be an (N, 2) array of numbers: {e}") from None
+            if vel.shape != (n, 2):
+                raise InvalidFrameError(f"velocities must have shape ({n}, 2), got {vel.shape}")
+        if classes is not None and len(classes) != n:
+            raise InvalidFrameError(f"{len(classes)} classes given for {n} detections")
+        if id_array.dtype.kind in "iu" and not self._labels:
+            self._integer_ids = True
+            codes = np.ascontiguousarray(id_array.ravel(), dtype=np.int64)
+        elif self._integer_ids and n:
+            raise InvalidFrameError("this tracker has had integer ids; give integer ids at every tick")
+        else:
+            codes = np.asarray([self._code(a) for a in id_array.ravel().tolist()], dtype=np.int64)
+        columns = {
+            "ids": codes,
+            "xs": np.ascontiguousarray(pos2[:, 0]),
+            "ys": np.ascontiguousarray(pos2[:, 1]),
+            "classes": None if classes is None else list(classes),
+            "headings": _column("headings", headings, n),
+            "lengths": _column("lengths", lengths, n),
+            "widths": _column("widths", widths, n),
+            "vxs": None if vel is None else np.ascontiguousarray(vel[:, 0]),
+            "vys": None if vel is None else np.ascontiguousarray(vel[:, 1]),
+        }
+        self._native.update(float(time), columns)
+
+    def frame(self) -> Frame:
+        """The frame at the latest tick: the agents detected then, by increasing integer id (other ids: by first
+        appearance)."""
+        native = self._native.frame()
+        labels = None
+        if not self._integer_ids:
+            labels = np.empty(len(native), dtype=object)
+            labels[:] = [self._labels[c] for c in native.ids]
+        out = Frame._wrap(native, labels, None)
+        return out if self._map is None else out.with_map(self._map)
+
+    def predict(self, *, modes: int | None = None) -> Prediction:
+        """The predictions of every agent detected at the latest tick."""
+        return self._predictor.predict(self.frame(), modes=modes)

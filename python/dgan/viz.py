@@ -1,0 +1,247 @@
+"""Pictures of predictions: :func:`plot` draws a frame, its predicted modes and optionally the map and the truth, in
+world metres (needs matplotlib: ``pip install dgan[plot]``).
+
+The map is drawn as the engine rasterises it for the network (the same colours, the same geometry): a north-up
+crop around the agents, so a raster map and a vector map look alike and what you see is what the model sees.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan.exceptions import DganError, InvalidFrameError, InvalidMapError
+from dgan.frame import Frame, RasterMap, VectorMap
+from dgan.predictor import Prediction
+
+#: Colour of each class in the pictures.
+CLASS_COLOURS = {"vehicle": "deepskyblue", "cyclist": "limegreen", "pedestrian": "orange"}
+#: Mode probability at which the colour scale saturates.
+SATURATION = 0.5
+
+Arr = npt.NDArray[Any]
+
+
+def _pyplot() -> Any:
+    try:
+        import matplotlib.pyplot as plt
+    except ImportError as e:
+        raise DganError("dgan.plot needs matplotlib: pip install 'dgan[plot]'") from e
+    return plt
+
+
+def render_map(
+    scene_map: RasterMap | VectorMap, centre: npt.ArrayLike, extent_m: float, pixels: int = 800
+) -> tuple[Arr, tuple[float, float, float, float]]:
+    """The map north-up, ``extent_m`` a side around ``centre``, as the engine rasterises it: an ``(H, W, 3)`` uint8
+    image and its ``(left, right, bottom, top)`` extent in world metres (for ``imshow(extent=...)``)."""
+    from dgan.spec import InputSpec, MapSpec, preprocess
+
+    if not (np.isfinite(extent_m) and extent_m > 0):
+        raise InvalidMapError(f"extent_m must be a positive number of metres, got {extent_m}")
+    side = int(np.clip(pixels, 16, 2048))
+    res = extent_m / side
+    c = np.asarray(centre, dtype=np.float64)
+    spec = InputSpec(dt_s=1.0, t_obs=2, t_f=1, map=MapSpec(side, side, res, side // 2, side // 2, draw_agents=False))
+    # A virtual agent at the centre heading north: its crop is the picture.
+    view = Frame(np.array([[c - [0.0, 0.1], c]]), headings=[np.pi / 2], map=scene_map)
+    crop = preprocess(view, spec)["map"][0]
+    image: Arr = (np.moveaxis(crop, 0, -1) * 255).round().clip(0, 255).astype(np.uint8)
+    a = side // 2
+    # Pixel (row, col) centre ↔ world (cx + (col − a)·res, cy + (a − row)·res).
+    extent = (
+        c[0] + (-0.5 - a) * res,
+        c[0] + (side - 0.5 - a) * res,
+        c[1] + (a - side + 0.5) * res,
+        c[1] + (a + 0.5) * res,
+    )
+    return image, extent
+
+
+def plot(
+    frame: Frame,
+    prediction: Prediction,
+    map: RasterMap | VectorMap | None = None,
+    ground_truth: Mapping[Any, npt.ArrayLike] | npt.ArrayLike | None = None,
+    *,
+    modes: int | None = None,
+    ax: Any = None,
+    title: str | None = None,
+    margin_m: float = 5.0,
+) -> Any:
+    """A matplotlib figure of a prediction, axes in world metres.
+
+    Args:
+        frame: the frame that was predicted (its observed paths are drawn dashed, coloured by class).
+        prediction: ``Predictor.predict(frame)``; modes are drawn most probable on top, coloured and thickened by
+            probability.
+        map: drawn underneath as the engine rasterises it (the frame's own map if None; none if neither).
+        ground_truth: the true futures, ``(N, T, 2)`` in frame row order (NaN where unknown) or a mapping from
+            agent id to a ``(T, 2)`` array; drawn in red up to the predicted horizon.
+        modes: the modes drawn per agent (all that the prediction holds if None).
+        ax: a matplotlib Axes to draw on (a new figure if None).
+        title: the axes' title.
+        margin_m: metres of margin around the drawn paths.
+
+    Returns:
+        The matplotlib Figure.
+
+    Raises:
+        InvalidFrameError: the prediction does not belong to the frame (other agents, other count).
+        DganError: matplotlib is not installed.
+    """
+    plt = _pyplot()
+    from matplotlib.colors import Normalize
+
+    if not isinstance(frame, Frame) or not isinstance(prediction, Prediction):
+        raise InvalidFrameError("plot takes a dgan.Frame and its dgan.Prediction")
+    n = len(frame)
+    if len(prediction) != n or not np.array_equal(np.asarray(prediction.agent_ids), np.asarray(frame.agent_ids)):
+        raise InvalidFrameError(f"the prediction ({len(prediction)} agents) is not of this frame ({n} agents)")
+    t_f = prediction.trajectories.shape[2]
+    m_all = prediction.trajectories.shape[1]
+    m = m_all if modes is None else int(np.clip(modes, 1, m_all))
+    truth: list[Arr | None] = [None] * n
+    if ground_truth is not None:
+        if isinstance(ground_truth, Mapping):
+            for i, a in enumerate(frame.agent_ids.tolist()):
+                if a in ground_truth:
+                    truth[i] = np.asarray(ground_truth[a], dtype=np.float64).reshape(-1, 2)[:t_f]
+        else:
+            gt = np.asarray(ground_truth, dtype=np.float64)
+            if gt.ndim != 3 or gt.shape[0] != n or gt.shape[2] != 2:
+                raise InvalidFrameError(f"ground_truth must have shape (N={n}, T, 2), got {gt.shape}")
+            truth = [gt[i, :t_f] for i in range(n)]
+    pts = [frame.positions[i][frame.mask[i]] for i in range(n)]
+    drawn = [*pts, *prediction.trajectories[:, :m].reshape(-1, t_f, 2)]
+    drawn += [t[np.isfinite(t).all(axis=1)] for t in truth if t is not None]
+    every = np.vstack([p for p in drawn if len(p)]) if n else np.zeros((1, 2))
+    lo, hi = every.min(axis=0) - margin_m, every.max(axis=0) + margin_m
+    if ax is None:  # sized to the scene's aspect, 8 inches high or 12 wide at most
+        aspect = float(np.clip((hi[0] - lo[0]) / (hi[1] - lo[1]), 0.3, 3.0))
+        w, h = (12.0, 12.0 / aspect) if aspect > 1.4 else (8.0 * aspect, 8.0)
+        fig, ax = plt.subplots(figsize=(max(w, 4.0) + 1.6, max(h, 3.0)), dpi=100, layout="constrained")
+    else:
+        fig = ax.figure
+    scene_map = frame.map if map is None else map
+    if scene_map is not None:
+        centre = (lo + hi) / 2
+        side = float(max(hi - lo))
+        image, extent = render_map(scene_map, centre, side)
+        ax.imshow(image, extent=extent, origin="upper", interpolation="nearest", zorder=0)
+    else:
+        ax.set_facecolor("0.96")
+    cmap = plt.get_cmap("viridis")
+    for i in range(n):
+        cls = frame.classes[i]
+        colour = CLASS_COLOURS.get(cls, "white")
+        hist = pts[i]
+        ax.plot(hist[:, 0], hist[:, 1], "--", color=colour, lw=1.6, zorder=3)
+        ax.plot(*hist[-1], "o", color=colour, ms=5, mec="black", zorder=5)
+        for k in reversed(range(m)):
+            pr = float(prediction.probabilities[i, k])
+            tr = np.vstack([hist[-1:], prediction.trajectories[i, k]])
+            ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / SATURATION)), lw=0.8 + 3 * pr, zorder=4)
+        if truth[i] is not None:
+            t = truth[i]
+            assert t is not None
+            t = t[np.isfinite(t).all(axis=1)]
+            if len(t):
+                g = np.vstack([hist[-1:], t])
+                ax.plot(g[:, 0], g[:, 1], "-", color="red", lw=1.6, zorder=4)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=Normalize(0, SATURATION))
+    fig.colorbar(sm, ax=ax, fraction=0.035, pad=0.01, label=f"mode probability (≥ {SATURATION:g} saturates)")
+    for cls in sorted(set(frame.classes)):
+        ax.plot([], [], "--", color=CLASS_COLOURS.get(cls, "white"), label=f"observed {cls}")
+    if any(t is not None for t in truth):
+        ax.plot([], [], "-", color="red", label="ground truth")
+    ax.plot([], [], "-", color=cmap(0.9), label=f"predicted modes ({t_f * prediction.dt_s:g} s)")
+    ax.legend(loc="best", fontsize=8)
+    if title is not None:
+        ax.set_title(title)
+    return fig
+
+
+_RGB = {"vehicle": (0, 191, 255), "cyclist": (50, 205, 50), "pedestrian": (255, 165, 0)}
+
+
+def log_rerun(
+    frame: Frame,
+    prediction: Prediction,
+    *,
+    recording: Any = None,
+    time_s: float | None = None,
+    ground_truth: Mapping[Any, npt.ArrayLike] | None = None,
+    map: RasterMap | VectorMap | None = None,
+    entity: str = "dgan",
+) -> None:
+    """Logs a frame and its prediction to a rerun recording (``pip install 'dgan[rerun]'``), in world metres: each
+    agent's observed path (``{entity}/observed``), its current position labelled by id, the modes
+    (``{entity}/modes``, labelled with their probability), the truth if given and the map (rendered as the engine
+    sees it) underneath. Call it at every tick with ``time_s`` to get a timeline (``time``).
+
+    Args:
+        recording: a ``rerun.RecordingStream`` (the global one if None); ``recording.save(path)`` writes an
+            ``.rrd`` file that ``rerun path.rrd`` opens.
+        time_s: the frame's current time in seconds, set on the ``time`` timeline.
+
+    Raises:
+        DganError: rerun is not installed. InvalidFrameError: the prediction is not of this frame.
+    """
+    try:
+        import rerun as rr
+    except ImportError as e:
+        raise DganError("logging to rerun needs rerun-sdk: pip install 'dgan[rerun]'") from e
+    if not isinstance(frame, Frame) or not isinstance(prediction, Prediction):
+        raise InvalidFrameError("log_rerun takes a dgan.Frame and its dgan.Prediction")
+    if len(prediction) != len(frame):
+        raise InvalidFrameError(f"the prediction ({len(prediction)} agents) is not of this frame ({len(frame)})")
+    rec = recording if recording is not None else rr.get_global_data_recording()
+    if rec is None:
+        raise DganError("no rerun recording: pass recording=rerun.RecordingStream(...) or call rerun.init first")
+    if time_s is not None:
+        rec.set_time("time", duration=float(time_s))
+    n = len(frame)
+    ids = [str(a) for a in frame.agent_ids.tolist()]
+    colours = [_RGB.get(c, (255, 255, 255)) for c in frame.classes]
+    hist = [frame.positions[i][frame.mask[i]] for i in range(n)]
+    rec.log(f"{entity}/observed", rr.LineStrips2D(hist, colors=colours, radii=0.05))
+    now = np.array([h[-1] for h in hist]) if n else np.zeros((0, 2))
+    rec.log(f"{entity}/agents", rr.Points2D(now, colors=colours, labels=ids, radii=0.2))
+    strips, strip_colours, labels = [], [], []
+    m = prediction.trajectories.shape[1]
+    for i in range(n):
+        for k in range(m):
+            p = float(prediction.probabilities[i, k])
+            strips.append(np.vstack([hist[i][-1:], prediction.trajectories[i, k]]))
+            level = round(min(1.0, p / SATURATION) * 255)
+            strip_colours.append((level, 64, 255 - level))
+            labels.append(f"{ids[i]} p={p:.2f}")
+    rec.log(f"{entity}/modes", rr.LineStrips2D(strips, colors=strip_colours, labels=labels, radii=0.04))
+    if ground_truth is not None:
+        truth = [
+            np.vstack([hist[i][-1:], np.asarray(ground_truth[a], dtype=np.float64).reshape(-1, 2)])
+            for i, a in enumerate(frame.agent_ids.tolist())
+            if a in ground_truth
+        ]
+        rec.log(f"{entity}/ground_truth", rr.LineStrips2D(truth, colors=(255, 0, 0), radii=0.05))
+    scene_map = frame.map if map is None else map
+    if scene_map is not None and n:
+        every = np.vstack([*hist, prediction.trajectories.reshape(-1, 2)])
+        lo, hi = every.min(axis=0) - 5.0, every.max(axis=0) + 5.0
+        image, (left, right, _bottom, top) = render_map(scene_map, (lo + hi) / 2, float(max(hi - lo)))
+        res = (right - left) / image.shape[1]
+        # Pixel (u, v) → world (left + u·res, top − v·res); the image sits under the agents.
+        rec.log(
+            f"{entity}/map",
+            rr.Transform3D(translation=[left, top, 0.0], mat3x3=[[res, 0, 0], [0, -res, 0], [0, 0, 1]]),
+            rr.Image(image, draw_order=-10.0),
+        )

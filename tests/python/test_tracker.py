@@ -1,0 +1,77 @@
+"""dgan.Tracker: a real ETH/UCY test sequence fed tick by tick equals predicting frames built from the history."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import shared_data
+
+import dgan
+from dgan import exceptions as exc
+
+
+def test_tracker_equals_predict_on_the_history_at_every_tick() -> None:
+    rows = np.loadtxt(shared_data("eth_ucy") / "eth_ucy" / "datasets" / "zara1" / "test" / "crowds_zara01.txt")
+    rows = rows[rows[:, 0] <= 3000]  # the first 300 ticks (2 min) of the zara1 test sequence
+    predictor = dgan.Predictor("zara1", modes=3)
+    scene_map = dgan.scene_map("zara1")
+    tracker = dgan.Tracker(predictor, map=scene_map)
+    ticks = np.unique(rows[:, 0])
+    assert len(ticks) == 287  # frames 0..3000 every 10, a few with nobody in view
+    checked = 0
+    for t in ticks:
+        now = rows[:, 0] == t
+        tracker.update(t * 0.04, ids=rows[now, 1].astype(np.int64), positions=rows[now, 2:4])
+        streamed = tracker.predict()
+        seen = rows[rows[:, 0] <= t]
+        history = {"agent_id": seen[:, 1].astype(np.int64), "time": seen[:, 0] * 0.04, "x": seen[:, 2], "y": seen[:, 3]}
+        frame = dgan.Frame.from_records(history, spec=predictor, current_time=t * 0.04, map=scene_map)
+        once = predictor.predict(frame)
+        assert streamed.agent_ids.tolist() == once.agent_ids.tolist()
+        np.testing.assert_array_equal(streamed.trajectories, once.trajectories)
+        np.testing.assert_array_equal(streamed.probabilities, once.probabilities)
+        checked += len(once)
+    assert checked > 1000
+    # Memory stays bounded: only agents seen within the history window are kept.
+    assert len(tracker) <= len(np.unique(rows[rows[:, 0] >= ticks[-1] - 80, 1]))
+
+
+def test_agents_appear_vanish_and_return_with_string_ids() -> None:
+    p = dgan.Predictor("zara1")
+    tracker = dgan.Tracker(p)
+    for k in range(12):
+        ids = ["a", "b"] if not 4 <= k < 6 else ["a"]  # b vanishes for two ticks, then returns
+        if k >= 9:
+            ids.append("c")
+        pos = [[0.5 * k, 0.0], [0.0, 0.4 * k], [1.0, 1.0 + 0.3 * k]][: len(ids)]
+        if ids == ["a"]:
+            pos = pos[:1]
+        tracker.update(0.4 * k, ids=ids, positions=pos)
+    frame = tracker.frame()
+    assert frame.agent_ids.tolist() == ["a", "b", "c"]
+    # b's history has a hole at ticks 4 and 5 (steps 0 and 1 of the window 4..11); c was seen at ticks 9..11.
+    np.testing.assert_array_equal(frame.mask[1], [False, False, True, True, True, True, True, True])
+    np.testing.assert_array_equal(frame.mask[2], [False] * 5 + [True] * 3)
+    assert tracker.predict().agent_ids.tolist() == ["a", "b", "c"]
+
+
+def test_tracker_errors() -> None:
+    p = dgan.Predictor("zara1")
+    tracker = dgan.Tracker(p)
+    with pytest.raises(exc.TimeBaseError, match="no tick"):
+        tracker.frame()
+    tracker.update(1.0, ids=[1, 2], positions=[[0, 0], [1, 1]])
+    with pytest.raises(exc.TimeBaseError, match="increasing time order"):
+        tracker.update(1.0, ids=[1], positions=[[0, 0]])
+    with pytest.raises(exc.InvalidFrameError, match="appears twice"):
+        tracker.update(1.4, ids=[1, 1], positions=[[0, 0], [1, 1]])
+    with pytest.raises(exc.InvalidFrameError, match="shape"):
+        tracker.update(1.4, ids=[1, 2], positions=[[0, 0]])
+    with pytest.raises(exc.InvalidFrameError, match="non-finite"):
+        tracker.update(1.4, ids=[1], positions=[[np.nan, 0]])
+    with pytest.raises(exc.InvalidFrameError, match="integer ids"):
+        tracker.update(1.4, ids=["x"], positions=[[0, 0]])
+    with pytest.raises(exc.InvalidFrameError, match="Predictor"):
+        dgan.Tracker("zara1")  # type: ignore[arg-type]
+    # An error loses nothing: the tracker still holds both agents at 1.0 s.
+    assert len(tracker.frame()) == 2

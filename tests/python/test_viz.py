@@ -1,0 +1,94 @@
+"""dgan.plot and dgan.viz.log_rerun on real predictions."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+import pytest
+from conftest import zara1_records
+
+import dgan
+from dgan import exceptions as exc
+from dgan.demo import waymo_scene
+from dgan.viz import log_rerun, render_map
+
+matplotlib.use("Agg")
+
+
+def zara1() -> tuple[dgan.Frame, dgan.Prediction, dict[int, np.ndarray]]:
+    rec = zara1_records()
+    p = dgan.Predictor("zara1", modes=3)
+    frame = dgan.Frame.from_records(rec, spec=p, time_unit=0.04, current_time=5500, map=dgan.scene_map("zara1"))
+    truth = {a: np.c_[rec["x"], rec["y"]][(rec["agent_id"] == a) & (rec["time"] > 5500)] for a in frame.agent_ids}
+    return frame, p.predict(frame), truth
+
+
+def test_plot_draws_in_metres_with_map_truth_and_legend(tmp_path: Path) -> None:
+    frame, pred, truth = zara1()
+    fig = dgan.plot(frame, pred, ground_truth=truth, title="zara1")
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "x (m)"
+    assert ax.get_ylabel() == "y (m)"
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert labels == ["observed pedestrian", "ground truth", "predicted modes (4.8 s)"]
+    assert len(ax.images) == 1  # the map underneath
+    # 18 observed paths, 18 × 3 modes, 18 truths (plus the legend's proxies and current positions).
+    assert len(ax.lines) >= 18 * 5
+    out = tmp_path / "plot.png"
+    fig.savefig(out)
+    assert out.stat().st_size > 20_000
+
+
+def test_render_map_is_north_up_in_world_metres() -> None:
+    # A vector map with one obstacle square east of the centre: it must appear right of the centre, north-up.
+    square = np.array([[5.0, -1.0], [7.0, -1.0], [7.0, 1.0], [5.0, 1.0]])
+    image, (left, right, bottom, top) = render_map(dgan.VectorMap([("obstacle", square)]), (0.0, 0.0), 20.0, 200)
+    assert (left, right) == pytest.approx((-10.05, 9.95))
+    assert (bottom, top) == pytest.approx((-9.95, 10.05))
+    lit = np.argwhere(image.sum(axis=2) > 0)
+    cols = left + (lit[:, 1] + 0.5) * 0.1
+    rows = top - (lit[:, 0] + 0.5) * 0.1
+    assert cols.min() == pytest.approx(5.0, abs=0.15)
+    assert cols.max() == pytest.approx(7.0, abs=0.15)
+    assert rows.min() == pytest.approx(-1.0, abs=0.15)
+    assert rows.max() == pytest.approx(1.0, abs=0.15)
+
+
+def test_plot_a_vector_map_scene_and_errors(tmp_path: Path) -> None:
+    p = dgan.Predictor("hdmap", modes=2)
+    scene = waymo_scene(p.spec.t_obs, p.spec.t_f, None)
+    pred = p.predict(scene.frame)
+    fig = dgan.plot(scene.frame, pred, ground_truth=scene.futures)
+    fig.savefig(tmp_path / "hdmap.png")
+    other, other_pred, _ = zara1()
+    with pytest.raises(exc.InvalidFrameError, match="not of this frame"):
+        dgan.plot(scene.frame, other_pred)
+    with pytest.raises(exc.InvalidFrameError, match="ground_truth"):
+        dgan.plot(other, other_pred, ground_truth=np.zeros((2, 12, 2)))
+
+
+def test_rerun_recording(tmp_path: Path) -> None:
+    import rerun as rr
+
+    rows = np.loadtxt(Path(dgan.demo.SCENE_FILE))
+    p = dgan.Predictor("zara1", modes=3)
+    tracker = dgan.Tracker(p, map=dgan.scene_map("zara1"))
+    rec = rr.RecordingStream("dgan-test")
+    path = tmp_path / "zara1.rrd"
+    rec.save(path)
+    for t in np.unique(rows[:, 0])[:8]:
+        now = rows[:, 0] == t
+        tracker.update(t * 0.04, ids=rows[now, 1].astype(np.int64), positions=rows[now, 2:4])
+        frame = tracker.frame()
+        log_rerun(frame, p.predict(frame), recording=rec, time_s=t * 0.04)
+    rec.flush()
+    rec.disconnect()
+    assert path.stat().st_size > 10_000
+    rerun_cli = Path(sys.executable).with_name("rerun")
+    out = subprocess.run([str(rerun_cli), "rrd", "print", str(path)], capture_output=True, text=True, check=True)
+    for entity in ("/dgan/observed", "/dgan/agents", "/dgan/modes", "/dgan/map"):
+        assert entity in out.stdout, entity
