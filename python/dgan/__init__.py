@@ -11,7 +11,7 @@ from dgan import demo, exceptions, io, metrics, models, scenes
 from dgan._dgan import __version__
 from dgan.exceptions import DganError
 from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
-from dgan.predictor import Prediction, Predictor
+from dgan.predictor import Prediction, Predictor, available_execution_providers
 from dgan.scenes import scene_map
 from dgan.spec import (
     InputSpec,
@@ -41,6 +41,7 @@ __all__ = [
     "VectorMap",
     "__version__",
     "attention_graph",
+    "available_execution_providers",
     "demo",
     "exceptions",
     "io",

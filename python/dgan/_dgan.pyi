@@ -14,6 +14,7 @@ __all__ = [
     "VectorMap",
     "__version__",
     "attention_graph",
+    "available_execution_providers",
     "frame_from_rows",
     "init_onnxruntime",
     "kinematic_prior",
@@ -88,6 +89,7 @@ class Predictor:
         onnxruntime_library: str | os.PathLike[str] | None,
         intra_threads: int = 1,
         sessions: int = 1,
+        execution_provider: str = "cpu",
     ) -> Predictor: ...
     @property
     def contract_json(self) -> str: ...
@@ -134,4 +136,5 @@ def to_world_frame(
 def attention_graph(
     centres: npt.NDArray[np.float64], radii: npt.NDArray[np.float64], brute_force: bool = False
 ) -> npt.NDArray[np.int64]: ...
+def available_execution_providers(onnxruntime_library: str | os.PathLike[str] | None) -> list[str]: ...
 def init_onnxruntime(path: str | os.PathLike[str] | None) -> str: ...

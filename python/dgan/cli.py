@@ -128,6 +128,7 @@ def _info(args: argparse.Namespace) -> int:
         how = f"mean velocity over {prior.window_s:g} s" if prior.window_s else "velocity of the last two steps"
         print(f"prior      {prior.kind} ({how})")
     print(f"temperature {c.get('temperature', 1.0):g} (of the anchor logits; contract {c['contract_version']})")
+    print(f"providers  {', '.join(dgan.available_execution_providers())} (in this ONNX Runtime library)")
     if c.get("description"):
         print(f"about      {c['description']}")
     return 0
@@ -197,7 +198,7 @@ def write_table(pred: dgan.Prediction, out: Path) -> None:
 
 
 def _predict(args: argparse.Namespace) -> int:
-    p = dgan.Predictor(args.model, modes=args.modes)
+    p = dgan.Predictor(args.model, modes=args.modes, execution_provider=args.provider)
     cols, unit = read_scene(Path(args.scene))
     time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
     scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
@@ -269,6 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     pred.add_argument("--pixel-to-world", default=None, help="the 3×3 homography file of an image --map")
     pred.add_argument("--modes", type=int, default=3, help="modes per agent (default 3)")
+    pred.add_argument(
+        "--provider", default="cpu", help="ONNX Runtime execution provider: cpu (default), cuda or cuda:N"
+    )
     pred.add_argument("--json", action="store_true", help="print JSON (times, classes, probabilities) to stdout")
     pred.add_argument("--out", default=None, help="write the long table of modes: .csv, .parquet or .jsonl")
     pred.set_defaults(func=_predict)

@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._runtime import onnxruntime_library as onnxruntime_library_path
-from dgan.exceptions import InvalidFrameError, InvalidSpecError
+from dgan.exceptions import InvalidFrameError, InvalidSpecError, ModelNotFoundError
 from dgan.frame import Frame
 from dgan.spec import InputSpec
 
@@ -99,6 +99,9 @@ class Predictor:
         sessions: ONNX Runtime sessions of the model: threads sharing this predictor run concurrently, up to this
             many at a time (default: 2, or 1 on a one-core machine).
         onnxruntime_library: absolute path of ``libonnxruntime``; found in the ``onnxruntime`` wheel if None.
+        execution_provider: where ONNX Runtime runs the network: ``"cpu"``, ``"cuda"`` or ``"cuda:N"`` (needs an
+            ONNX Runtime library built with CUDA, e.g. ``onnxruntime-gpu``'s; see
+            :func:`available_execution_providers`). A provider the library lacks raises at load, never falls back.
 
     Raises:
         ModelNotFoundError, ModelLoadError, ContractError, RuntimeLibraryError: at load, never later.
@@ -112,13 +115,25 @@ class Predictor:
         threads: int = 1,
         sessions: int | None = None,
         onnxruntime_library: str | os.PathLike[str] | None = None,
+        execution_provider: str = "cpu",
     ) -> None:
+        if model is None or not isinstance(model, (str, os.PathLike)):
+            raise ModelNotFoundError(f"model must be a path or a bundled model's name, got {type(model).__name__}")
         lib = Path(onnxruntime_library) if onnxruntime_library is not None else onnxruntime_library_path()
-        if threads < 1:
-            raise InvalidSpecError(f"threads must be at least 1, got {threads}")
+        cores = os.cpu_count() or 1
+        if isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= cores:
+            raise InvalidSpecError(f"threads must be an integer in 1..={cores} (this machine's cores), got {threads!r}")
         if sessions is None:
-            sessions = min(2, os.cpu_count() or 1)
-        self._predictor = _dgan.Predictor(os.fspath(_resolve(model)), os.fspath(lib), threads, sessions)
+            sessions = min(2, cores)
+        if isinstance(sessions, bool) or not isinstance(sessions, int) or not 1 <= sessions <= 64:
+            raise InvalidSpecError(f"sessions must be an integer in 1..=64, got {sessions!r}")
+        if not isinstance(execution_provider, str):
+            raise InvalidSpecError(
+                f"execution_provider must be a string such as 'cpu' or 'cuda', got {execution_provider!r}"
+            )
+        self._predictor = _dgan.Predictor(
+            os.fspath(_resolve(model)), os.fspath(lib), threads, sessions, execution_provider
+        )
         self._contract: dict[str, Any] = json.loads(self._predictor.contract_json)
         self._spec = InputSpec.from_dict(self._contract)
         self._modes = self._check_modes(modes)
@@ -210,10 +225,17 @@ def _native(frame: Any) -> _dgan.Frame:
 
 
 def _resolve(model: str | os.PathLike[str]) -> Path:
-    """A path as given, or a bundled model's file when ``model`` is a bundled name and no such file exists."""
+    """A model file as given, or a bundled model's file when ``model`` is a bundled name that is not a file here (a
+    folder named like a bundled model, ``./sdd`` say, does not shadow it)."""
     p = Path(model)
-    if isinstance(model, str) and not p.exists() and p.suffix == "" and "/" not in model:
+    if isinstance(model, str) and not p.is_file() and p.suffix == "" and "/" not in model and os.sep not in model:
         from dgan import models
 
         return models.path(model)  # a bundled name, or ModelNotFoundError listing them
     return p
+
+
+def available_execution_providers(onnxruntime_library: str | os.PathLike[str] | None = None) -> list[str]:
+    """The execution providers the ONNX Runtime library offers (``"cpu"``, and ``"cuda"`` with a CUDA build)."""
+    lib = Path(onnxruntime_library) if onnxruntime_library is not None else onnxruntime_library_path()
+    return list(_dgan.available_execution_providers(os.fspath(lib)))

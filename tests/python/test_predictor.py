@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 from pathlib import Path
 
@@ -159,7 +160,7 @@ def test_threads_share_one_predictor(nomap_model: Path, zara1_frame: dgan.Frame,
 
 
 def test_session_count_is_checked(nomap_model: Path) -> None:
-    with pytest.raises(exc.InvalidSpecError, match=r"sessions must be in 1\.\.=64"):
+    with pytest.raises(exc.InvalidSpecError, match=r"sessions must be an integer in 1\.\.=64"):
         dgan.Predictor(nomap_model, sessions=0)
     assert dgan.Predictor(nomap_model).sessions >= 1
 
@@ -240,3 +241,28 @@ def test_predict_batch_equals_predict_per_frame() -> None:
     assert dgan.Predictor("zara1").predict_batch([]) == []
     with pytest.raises(exc.InvalidFrameError):
         dgan.Predictor("zara1").predict_batch([dgan.Frame(np.zeros((2, 3, 2)))])
+
+
+def test_execution_providers_and_thread_bounds(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    assert dgan.available_execution_providers()[0] == "cpu"
+    assert dgan.Predictor("zara1", execution_provider="CPU").num_modes > 0
+    if "cuda" not in dgan.available_execution_providers():
+        # The CPU wheel's library has no CUDA: refused at load with the fix, never a silent fall-back to the CPU.
+        with pytest.raises(exc.RuntimeLibraryError, match="CUDA execution provider .* install onnxruntime-gpu"):
+            dgan.Predictor("zara1", execution_provider="cuda:0")
+    for bad in ("tpu", "cuda:-1", "cuda:x", ""):
+        with pytest.raises(exc.InvalidSpecError, match="execution provider"):
+            dgan.Predictor("zara1", execution_provider=bad)
+    cores = os.cpu_count() or 1
+    for threads in (0, cores + 1, 100_000, 2**31, True, 1.5):
+        with pytest.raises(exc.InvalidSpecError, match="threads must be an integer"):
+            dgan.Predictor("zara1", threads=threads)  # type: ignore[arg-type]
+    for sessions in (0, 65, 2**31):
+        with pytest.raises(exc.InvalidSpecError, match="sessions"):
+            dgan.Predictor("zara1", sessions=sessions)
+    with pytest.raises(exc.ModelNotFoundError, match="path or a bundled model"):
+        dgan.Predictor(None)  # type: ignore[arg-type]
+    # A folder in the working directory named like a bundled model does not shadow it.
+    (tmp_path / "sdd").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert dgan.Predictor("sdd").path.name == "sdd.onnx"

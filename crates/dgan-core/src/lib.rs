@@ -52,5 +52,7 @@ pub use frame::Frame;
 pub use history::{frame_at, tracks_from_rows, Detection, TimeBase, Tracker};
 pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
 pub use prior::{PriorKind, PriorSpec};
-pub use runtime::{init_onnxruntime, Prediction, Predictor, PredictorOptions};
+pub use runtime::{
+    available_execution_providers, init_onnxruntime, ExecutionProvider, Prediction, Predictor, PredictorOptions,
+};
 pub use spec::{GraphLayout, InputSpec, MapSpec};

@@ -75,12 +75,73 @@ pub struct PredictorOptions {
     /// ONNX Runtime sessions of the model (at least 1): calls from several threads run concurrently on different
     /// sessions (a session runs one call at a time). More sessions cost memory and load time, not accuracy.
     pub sessions: usize,
+    /// Where ONNX Runtime runs the network.
+    pub execution_provider: ExecutionProvider,
 }
 
 impl Default for PredictorOptions {
     fn default() -> Self {
-        Self { onnxruntime_library: None, intra_threads: 1, sessions: 1 }
+        Self { onnxruntime_library: None, intra_threads: 1, sessions: 1, execution_provider: ExecutionProvider::Cpu }
     }
+}
+
+/// Where ONNX Runtime runs the network. A provider the loaded ONNX Runtime library lacks is an error at load
+/// ([`DganError::RuntimeLibrary`]), never a silent fall-back to the CPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ExecutionProvider {
+    /// ONNX Runtime's CPU kernels (every build has them).
+    #[default]
+    Cpu,
+    /// NVIDIA CUDA on a GPU (needs the `onnxruntime-gpu` library and CUDA).
+    Cuda {
+        /// The GPU's index.
+        device_id: i32,
+    },
+}
+
+impl std::str::FromStr for ExecutionProvider {
+    type Err = DganError;
+
+    /// `"cpu"`, `"cuda"` or `"cuda:N"`.
+    fn from_str(s: &str) -> Result<Self> {
+        let bad =
+            || DganError::InvalidSpec(format!("execution provider must be \"cpu\", \"cuda\" or \"cuda:N\", got {s:?}"));
+        match s.trim().to_ascii_lowercase().as_str() {
+            "cpu" => Ok(Self::Cpu),
+            "cuda" => Ok(Self::Cuda { device_id: 0 }),
+            other => {
+                let id = other.strip_prefix("cuda:").ok_or_else(bad)?;
+                let device_id = id.parse::<i32>().ok().filter(|d| (0..=1024).contains(d)).ok_or_else(bad)?;
+                Ok(Self::Cuda { device_id })
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for ExecutionProvider {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Cpu => write!(f, "cpu"),
+            Self::Cuda { device_id } => write!(f, "cuda:{device_id}"),
+        }
+    }
+}
+
+/// The execution providers the loaded ONNX Runtime library offers, by dgan's names (`"cpu"`, `"cuda"`); loads the
+/// library first (see [`init_onnxruntime`]).
+pub fn available_execution_providers(onnxruntime_library: Option<&Path>) -> Result<Vec<&'static str>> {
+    use ort::ep::ExecutionProvider as _;
+    init_onnxruntime(onnxruntime_library)?;
+    let mut out = vec!["cpu"];
+    if ort::ep::CUDA::default().is_available().map_err(|e| DganError::RuntimeLibrary(e.to_string()))? {
+        out.push("cuda");
+    }
+    Ok(out)
+}
+
+/// Most threads one operator may use: the machine's cores.
+pub fn max_intra_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
 /// Most sessions one predictor may hold.
@@ -145,6 +206,16 @@ fn open_session(path: &Path, options: &PredictorOptions) -> Result<Session> {
         .map_err(builder_err)?
         .with_inter_threads(1)
         .map_err(builder_err)?;
+    if let ExecutionProvider::Cuda { device_id } = options.execution_provider {
+        let cuda = ort::ep::CUDA::default().with_device_id(device_id).build().error_on_failure();
+        builder = builder.with_execution_providers([cuda]).map_err(|e| {
+            DganError::RuntimeLibrary(format!(
+                "the CUDA execution provider (device {device_id}) cannot be used with this ONNX Runtime library: {e}; \
+                 install onnxruntime-gpu with CUDA and point onnxruntime_library (or ORT_DYLIB_PATH) at its \
+                 libonnxruntime, or use the CPU"
+            ))
+        })?;
+    }
     builder.commit_from_file(path).map_err(load_err)
 }
 
@@ -164,6 +235,13 @@ impl Predictor {
             return Err(DganError::InvalidSpec(format!(
                 "sessions must be in 1..={MAX_SESSIONS}, got {}",
                 options.sessions
+            )));
+        }
+        let cores = max_intra_threads();
+        if !(1..=cores).contains(&options.intra_threads) {
+            return Err(DganError::InvalidSpec(format!(
+                "threads must be in 1..={cores} (this machine's cores), got {}",
+                options.intra_threads
             )));
         }
         init_onnxruntime(options.onnxruntime_library.as_deref())?;
@@ -403,5 +481,33 @@ impl Predictor {
             .to_owned();
         let offsets = get(OUTPUT_OFFSETS)?.into_dimensionality::<Ix4>().map_err(shape_err(OUTPUT_OFFSETS))?.to_owned();
         Ok((class_logits, anchor_logits, offsets))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn execution_providers_parse_and_print() {
+        assert_eq!("cpu".parse::<ExecutionProvider>().unwrap(), ExecutionProvider::Cpu);
+        assert_eq!(" CUDA ".parse::<ExecutionProvider>().unwrap(), ExecutionProvider::Cuda { device_id: 0 });
+        assert_eq!("cuda:3".parse::<ExecutionProvider>().unwrap(), ExecutionProvider::Cuda { device_id: 3 });
+        assert_eq!(ExecutionProvider::Cuda { device_id: 3 }.to_string(), "cuda:3");
+        for bad in ["", "gpu", "cuda:", "cuda:-1", "cuda:99999999999"] {
+            assert!(matches!(bad.parse::<ExecutionProvider>(), Err(DganError::InvalidSpec(_))), "{bad}");
+        }
+    }
+
+    #[test]
+    fn thread_counts_are_bounded_by_the_cores() {
+        let options = PredictorOptions { intra_threads: max_intra_threads() + 1, ..Default::default() };
+        let err = Predictor::load_with(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml"), &options).unwrap_err();
+        assert!(err.to_string().contains("this machine's cores"), "{err}");
+        let options = PredictorOptions { intra_threads: 0, ..Default::default() };
+        assert!(matches!(
+            Predictor::load_with(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml"), &options),
+            Err(DganError::InvalidSpec(_))
+        ));
     }
 }

@@ -33,5 +33,6 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(geometry::to_world_frame, m)?)?;
     m.add_function(wrap_pyfunction!(geometry::attention_graph, m)?)?;
     m.add_function(wrap_pyfunction!(init_onnxruntime, m)?)?;
+    m.add_function(wrap_pyfunction!(predictor::available_execution_providers, m)?)?;
     Ok(())
 }

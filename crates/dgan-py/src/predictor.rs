@@ -2,7 +2,7 @@
 
 use crate::error::IntoPyResult;
 use crate::frame::PyFrame;
-use dgan_core::{Prediction, Predictor, PredictorOptions};
+use dgan_core::{ExecutionProvider, Prediction, Predictor, PredictorOptions};
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -29,15 +29,17 @@ fn prediction_dict<'py>(py: Python<'py>, p: Prediction) -> PyResult<Bound<'py, P
 #[pymethods]
 impl PyPredictor {
     #[new]
-    #[pyo3(signature = (path, onnxruntime_library, intra_threads = 1, sessions = 1))]
+    #[pyo3(signature = (path, onnxruntime_library, intra_threads = 1, sessions = 1, execution_provider = "cpu"))]
     fn new(
         py: Python<'_>,
         path: PathBuf,
         onnxruntime_library: Option<PathBuf>,
         intra_threads: usize,
         sessions: usize,
+        execution_provider: &str,
     ) -> PyResult<Self> {
-        let options = PredictorOptions { onnxruntime_library, intra_threads, sessions };
+        let execution_provider: ExecutionProvider = execution_provider.parse().py()?;
+        let options = PredictorOptions { onnxruntime_library, intra_threads, sessions, execution_provider };
         let inner = py.detach(|| Predictor::load_with(&path, &options)).py()?;
         Ok(Self { inner })
     }
@@ -83,4 +85,10 @@ impl PyPredictor {
         let p = py.detach(|| self.inner.predict_modes(frame, modes)).py()?;
         prediction_dict(py, p)
     }
+}
+
+/// The execution providers the ONNX Runtime library at `onnxruntime_library` offers (`"cpu"`, `"cuda"`).
+#[pyfunction]
+pub fn available_execution_providers(onnxruntime_library: Option<PathBuf>) -> PyResult<Vec<&'static str>> {
+    dgan_core::available_execution_providers(onnxruntime_library.as_deref()).py()
 }
