@@ -13,6 +13,7 @@ import onnx
 import torch
 
 import dgan
+from dgan import _dgan
 from training.config import Config
 from training.model import DGAN
 
@@ -60,14 +61,39 @@ def contract(
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
-        contract_version=3,
+        contract_version=4,
         units="m",
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
         temperature=round(float(temperature), 6),
         name=name,
         description=description,
+        weights_sha256=UNSEALED,
     )
     return d
+
+
+#: The digest's placeholder in a contract before :func:`seal` writes the file's SHA-256 in its place.
+UNSEALED = "0" * 64
+
+
+def seal(path: Path) -> str:
+    """Seals an exported model: the engine's :func:`dgan_core::integrity::seal` writes the SHA-256 of the file into
+    its contract (which must hold :data:`UNSEALED`); the engine refuses the file at load if any byte changes."""
+    digest: str = _dgan.seal_model(str(path))
+    return digest
+
+
+def upgrade(path: Path) -> str:
+    """Rewrites a contract-3 model's metadata as contract 4 and seals it (the graph and weights unchanged)."""
+    m = onnx.load(str(path))
+    props = {p.key: p.value for p in m.metadata_props}
+    meta = json.loads(props["dgan_contract"])
+    if meta.get("contract_version") != 3:
+        raise ValueError(f"{path}: contract_version {meta.get('contract_version')}, expected 3")
+    meta.update(contract_version=4, weights_sha256=UNSEALED)
+    onnx.helper.set_model_props(m, {**props, "dgan_contract": json.dumps(meta)})
+    onnx.save(m, str(path))
+    return seal(path)
 
 
 def example_inputs(spec: dgan.InputSpec, n: int = 3) -> tuple[torch.Tensor, ...]:
@@ -134,7 +160,8 @@ def export_model(
     meta = contract(spec, anchors, class_of, name, description, temperature)
     onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(meta)})
     onnx.save(m, str(path))
-    dgan.Predictor(path)  # the engine checks the contract
+    seal(path)
+    dgan.Predictor(path)  # the engine checks the contract and the seal
     return path
 
 
@@ -145,12 +172,19 @@ def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("checkpoint")
-    ap.add_argument("out")
+    ap.add_argument("checkpoint", help="a checkpoint to export, or with --upgrade the contract-3 .onnx files")
+    ap.add_argument("out", nargs="*")
     ap.add_argument("--name", default="dgan")
     ap.add_argument("--description", default="")
+    ap.add_argument("--upgrade", action="store_true", help="rewrite contract-3 models as contract 4, sealed")
     a = ap.parse_args()
-    print(export_checkpoint(Path(a.checkpoint), Path(a.out), a.name, a.description))
+    if a.upgrade:
+        for path in [a.checkpoint, *a.out]:
+            print(path, upgrade(Path(path)))
+        return
+    if len(a.out) != 1:
+        ap.error("give the checkpoint and one output path")
+    print(export_checkpoint(Path(a.checkpoint), Path(a.out[0]), a.name, a.description))
 
 
 if __name__ == "__main__":

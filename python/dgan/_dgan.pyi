@@ -19,6 +19,7 @@ __all__ = [
     "init_onnxruntime",
     "kinematic_prior",
     "preprocess",
+    "seal_model",
     "to_agent_frame",
     "to_world_frame",
     "validate_spec",
@@ -136,5 +137,6 @@ def to_world_frame(
 def attention_graph(
     centres: npt.NDArray[np.float64], radii: npt.NDArray[np.float64], brute_force: bool = False
 ) -> npt.NDArray[np.int64]: ...
+def seal_model(path: str | os.PathLike[str]) -> str: ...
 def available_execution_providers(onnxruntime_library: str | os.PathLike[str] | None) -> list[str]: ...
 def init_onnxruntime(path: str | os.PathLike[str] | None) -> str: ...

@@ -207,7 +207,7 @@ def test_bundled_map_models_also_serve_frames_without_a_map(zara1_frame: dgan.Fr
 def test_the_prior_and_temperature_are_declared(zara1_frame: dgan.Frame) -> None:
     predictor = dgan.Predictor("zara1")
     c = predictor.contract
-    assert c["contract_version"] == 3
+    assert c["contract_version"] == 4
     assert c["graph"] == "padded"
     assert c["prior"]["kind"] == "constant_velocity"
     assert 0.001 <= c["temperature"] <= 1000
@@ -248,7 +248,7 @@ def test_execution_providers_and_thread_bounds(tmp_path: Path, monkeypatch: pyte
     assert dgan.Predictor("zara1", execution_provider="CPU").num_modes > 0
     if "cuda" not in dgan.available_execution_providers():
         # The CPU wheel's library has no CUDA: refused at load with the fix, never a silent fall-back to the CPU.
-        with pytest.raises(exc.RuntimeLibraryError, match="CUDA execution provider .* install onnxruntime-gpu"):
+        with pytest.raises(exc.RuntimeLibraryError, match=r"CUDA execution provider .* install onnxruntime-gpu"):
             dgan.Predictor("zara1", execution_provider="cuda:0")
     for bad in ("tpu", "cuda:-1", "cuda:x", ""):
         with pytest.raises(exc.InvalidSpecError, match="execution provider"):

@@ -12,10 +12,10 @@ use std::collections::BTreeMap;
 
 /// The contract version the exporter writes. Version 2 adds the kinematic prior, optional maps (`map_present`)
 /// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph.
-pub const CONTRACT_VERSION: u32 = 3;
+pub const CONTRACT_VERSION: u32 = 4;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 3] = [1, 2, 3];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 4] = [1, 2, 3, 4];
 /// The ONNX `metadata_props` key holding the contract as JSON.
 pub const METADATA_KEY: &str = "dgan_contract";
 
@@ -100,6 +100,9 @@ pub struct ModelContract {
     /// Free-form provenance (data, protocol, metrics).
     #[serde(default)]
     pub description: String,
+    /// SHA-256 of the model file (contract 4, required there): see [`crate::integrity`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weights_sha256: Option<String>,
 }
 
 fn unit_temperature() -> f64 {
@@ -142,6 +145,18 @@ impl ModelContract {
             return Err(DganError::Contract(
                 "graph = \"padded\" is a contract-3 key; versions 1 and 2 take an edge list".into(),
             ));
+        }
+        match (self.contract_version >= 4, &self.weights_sha256) {
+            (true, None) => {
+                return Err(DganError::Contract(
+                    "a contract_version 4 model must declare weights_sha256, the digest its exporter sealed it with"
+                        .into(),
+                ))
+            }
+            (false, Some(_)) => {
+                return Err(DganError::Contract("weights_sha256 is a contract-4 key".into()));
+            }
+            _ => {}
         }
         if !(self.temperature.is_finite() && (1e-3..=1e3).contains(&self.temperature)) {
             return Err(DganError::Contract(format!(

@@ -36,6 +36,7 @@ pub mod error;
 pub mod frame;
 pub mod graph;
 pub mod history;
+pub mod integrity;
 pub mod map;
 pub mod preprocess;
 pub mod prior;

@@ -244,6 +244,7 @@ impl Predictor {
                 options.intra_threads
             )));
         }
+        let digest = crate::integrity::verify(&path)?; // before ONNX Runtime reads a byte of it
         init_onnxruntime(options.onnxruntime_library.as_deref())?;
         let session = open_session(&path, options)?;
         let json = session
@@ -258,6 +259,12 @@ impl Predictor {
                 ))
             })?;
         let contract = ModelContract::from_json(&json)?;
+        if contract.weights_sha256 != digest {
+            return Err(DganError::ModelLoad {
+                path: path.clone(),
+                reason: "the digest in its contract is not the one verified in the file".into(),
+            });
+        }
         let anchors = contract.anchors()?;
 
         let expected = contract.expected_inputs();

@@ -34,5 +34,6 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(geometry::attention_graph, m)?)?;
     m.add_function(wrap_pyfunction!(init_onnxruntime, m)?)?;
     m.add_function(wrap_pyfunction!(predictor::available_execution_providers, m)?)?;
+    m.add_function(wrap_pyfunction!(predictor::seal_model, m)?)?;
     Ok(())
 }

@@ -92,3 +92,10 @@ impl PyPredictor {
 pub fn available_execution_providers(onnxruntime_library: Option<PathBuf>) -> PyResult<Vec<&'static str>> {
     dgan_core::available_execution_providers(onnxruntime_library.as_deref()).py()
 }
+
+/// Seals a model file in place with the SHA-256 digest of its bytes (its contract holds 64 zeros as
+/// `weights_sha256`); returns the digest.
+#[pyfunction]
+pub fn seal_model(path: PathBuf) -> PyResult<String> {
+    dgan_core::integrity::seal(&path).py()
+}
