@@ -91,6 +91,7 @@ class Predictor:
         intra_threads: int = 1,
         sessions: int = 1,
         execution_provider: str = "cpu",
+        limits: tuple[int, int] | None = None,
     ) -> Predictor: ...
     @property
     def contract_json(self) -> str: ...

@@ -40,6 +40,11 @@ class TimeBaseError(InvalidFrameError):
     unordered times)."""
 
 
+class SceneTooLargeError(InvalidFrameError, MemoryError):
+    """A scene whose attention graph or input tensors exceed the predictor's limits (``max_edges``,
+    ``max_input_bytes``), refused before the memory is allocated."""
+
+
 class UnknownClassError(DganError, ValueError):
     """A class name or code that dgan or the model does not know."""
 

@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan.exceptions import InvalidFrameError, InvalidMapError
+from dgan.exceptions import InvalidFrameError, InvalidMapError, UnknownClassError
 
 #: The classes dgan knows, by canonical integer code.
 CLASSES: Final = ("vehicle", "cyclist", "pedestrian")
@@ -28,13 +28,58 @@ MAP_ELEMENT_KINDS: Final = (
 ClassLike = str | int
 
 
-def _array(name: str, value: Any, dtype: npt.DTypeLike, error: type[Exception] = InvalidFrameError) -> Any:
+def typename(value: Any) -> str:
+    """How an error message names what it was given: ``None``, or the type's name."""
+    return "None" if value is None else type(value).__name__
+
+
+#: The array kinds each target dtype accepts without losing information (numpy ``dtype.kind`` codes).
+_ACCEPTED_KINDS = {"f": "fiu", "i": "iu", "b": "b", "u": "u"}
+#: The largest number of values one input array may hold (2³¹: 16 GiB of float64).
+MAX_ARRAY_VALUES: Final = 2**31
+
+
+def _array(
+    name: str,
+    value: Any,
+    dtype: npt.DTypeLike,
+    error: type[Exception] = InvalidFrameError,
+    *,
+    required: bool = False,
+) -> Any:
+    """``value`` as a contiguous array of ``dtype``, refusing every conversion that would lose or invent information:
+    complex, bool-as-number, strings, objects, ints out of range, a float mask that is not 0/1, a float image."""
+    target = np.dtype(dtype)
     if value is None:
+        if required:
+            raise error(f"{name} is required, got None")
         return None
     try:
-        return np.ascontiguousarray(value, dtype=dtype)
-    except (TypeError, ValueError) as exc:
-        raise error(f"{name} must be an array of {np.dtype(dtype).name}: {exc}") from None
+        arr = np.asarray(value)
+    except (TypeError, ValueError, OverflowError, MemoryError) as exc:
+        raise error(f"{name} must be an array of {target.name}: {exc}") from None
+    if arr.size > MAX_ARRAY_VALUES:
+        raise error(f"{name} has {arr.size} values; at most {MAX_ARRAY_VALUES} are accepted")
+    kind = arr.dtype.kind
+    if target == np.uint8 and kind != "u" and arr.size:
+        raise error(f"{name} must be uint8, got {arr.dtype}; convert it yourself (e.g. (img * 255).round())")
+    if target.kind == "b" and kind in "fiu":
+        # A mask given as numbers: only exact 0 and 1 (NaN or 0.5 are not "observed").
+        if arr.size and not np.all((arr == 0) | (arr == 1)):
+            raise error(f"{name} must be bool or 0/1, got values such as {arr[(arr != 0) & (arr != 1)].flat[0]!r}")
+    elif kind not in _ACCEPTED_KINDS.get(target.kind, target.kind) and arr.size:
+        what = {"c": "complex", "b": "bool", "U": "string", "S": "bytes", "O": "object", "M": "datetime"}.get(
+            kind, kind
+        )
+        raise error(f"{name} must be an array of {target.name}, got {what} values ({arr.dtype})")
+    if target.kind in "iu" and kind in "iu" and arr.size:
+        info = np.iinfo(target)
+        if arr.min() < info.min or arr.max() > info.max:
+            raise error(f"{name} holds values outside the range of {target.name} ({info.min}..{info.max})")
+    try:
+        return np.ascontiguousarray(arr, dtype=target)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise error(f"{name} must be an array of {target.name}: {exc}") from None
 
 
 class RasterMap:
@@ -46,14 +91,14 @@ class RasterMap:
     __slots__ = ("_map",)
 
     def __init__(self, image: npt.ArrayLike, world_to_pixel: npt.ArrayLike) -> None:
-        img = _array("image", image, np.uint8, InvalidMapError)
-        h = _array("world_to_pixel", world_to_pixel, np.float64, InvalidMapError)
+        img = _array("image", image, np.uint8, InvalidMapError, required=True)
+        h = _array("world_to_pixel", world_to_pixel, np.float64, InvalidMapError, required=True)
         self._map = _dgan.RasterMap(img, h)
 
     @classmethod
     def from_file(cls, path: str | os.PathLike[str], world_to_pixel: npt.ArrayLike) -> RasterMap:
         """Reads a PNG or JPEG image (converted to RGB)."""
-        h = _array("world_to_pixel", world_to_pixel, np.float64, InvalidMapError)
+        h = _array("world_to_pixel", world_to_pixel, np.float64, InvalidMapError, required=True)
         obj = cls.__new__(cls)
         obj._map = _dgan.RasterMap.from_file(os.fspath(path), h)
         return obj
@@ -61,7 +106,7 @@ class RasterMap:
     @classmethod
     def from_pixel_to_world(cls, image_path: str | os.PathLike[str], pixel_to_world: npt.ArrayLike) -> RasterMap:
         """Reads an image whose homography is given pixel → world (as ETH/UCY's ``H.txt``)."""
-        h = _array("pixel_to_world", pixel_to_world, np.float64, InvalidMapError)
+        h = _array("pixel_to_world", pixel_to_world, np.float64, InvalidMapError, required=True)
         if h.shape != (3, 3):
             raise InvalidMapError(f"pixel_to_world must be 3×3, got {h.shape}")
         try:
@@ -98,13 +143,17 @@ class VectorMap:
     __slots__ = ("_map",)
 
     def __init__(self, elements: Iterable[tuple[str, npt.ArrayLike]] = ()) -> None:
+        if elements is None or isinstance(elements, (str, bytes)) or not hasattr(elements, "__iter__"):
+            raise InvalidMapError(f"elements must be an iterable of (kind, points) pairs, got {typename(elements)}")
         items = []
         for k, item in enumerate(elements):
             try:
                 kind, points = item
             except (TypeError, ValueError):
                 raise InvalidMapError(f"element {k} must be a (kind, points) pair") from None
-            items.append((str(kind), _array(f"points of element {k}", points, np.float64, InvalidMapError)))
+            if not isinstance(kind, str):
+                raise InvalidMapError(f"element {k}'s kind must be a string of {MAP_ELEMENT_KINDS}, got {kind!r}")
+            items.append((kind, _array(f"points of element {k}", points, np.float64, InvalidMapError, required=True)))
         self._map = _dgan.VectorMap(items)
 
     def elements(self) -> list[tuple[str, npt.NDArray[np.float64]]]:
@@ -160,9 +209,13 @@ class VectorMap:
 def _classes(classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int) -> list[Any]:
     if classes is None:
         return ["pedestrian"] * n
-    if isinstance(classes, str):
-        raise InvalidFrameError("classes must be a sequence with one class per agent, not a single string")
-    return np.asarray(classes).tolist() if isinstance(classes, np.ndarray) else list(classes)  # type: ignore[arg-type]
+    if isinstance(classes, (str, bytes)) or not hasattr(classes, "__iter__"):
+        raise InvalidFrameError(f"classes must be a sequence with one class per agent, got {typename(classes)}")
+    out = np.asarray(classes).tolist() if isinstance(classes, np.ndarray) else list(classes)  # type: ignore[arg-type]
+    for c in out:
+        if isinstance(c, bool) or not isinstance(c, (str, int)):
+            raise UnknownClassError(f"a class must be a name {CLASSES} or a code 0, 1, 2; got {c!r}")
+    return out
 
 
 def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[Any] | None]:
@@ -170,8 +223,10 @@ def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[An
     if ids is None:
         return None, None
     arr = np.asarray(ids)
-    if arr.dtype.kind in "iu":
+    if arr.dtype.kind == "i" or (arr.dtype.kind == "u" and (arr.size == 0 or arr.max() <= np.iinfo(np.int64).max)):
         return _array("ids", arr, np.int64), None
+    if arr.dtype.kind == "u":  # uint64 ids past int64 (hashes): kept as labels
+        arr = arr.astype(object)
     if arr.dtype.kind == "f":
         if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
             raise InvalidFrameError("float ids must be whole finite numbers (NaN or fractional ids are ambiguous)")
@@ -224,7 +279,7 @@ class Frame:
         map: RasterMap | VectorMap | None = None,
         dt: float | None = None,
     ) -> None:
-        pos = _array("positions", positions, np.float64)
+        pos = _array("positions", positions, np.float64, required=True)
         if map is not None and not isinstance(map, (RasterMap, VectorMap)):
             raise InvalidMapError(f"map must be a dgan.RasterMap or dgan.VectorMap, got {type(map).__name__}")
         n = pos.shape[0] if pos.ndim >= 1 else 0
@@ -303,6 +358,8 @@ class Frame:
             dt = spec.dt_s if dt is None else dt
         if t_obs is None:
             raise InvalidFrameError("from_records needs t_obs (or spec=, a model's InputSpec or Predictor)")
+        if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+            raise TimeBaseError(f"dt must be a positive number of seconds, got {dt!r}")
         if isinstance(t_obs, bool) or not isinstance(t_obs, (int, np.integer)) or not 1 <= t_obs <= 1000:
             raise InvalidFrameError(f"t_obs must be an integer in 1..=1000, got {t_obs!r}")
         if not (isinstance(time_unit, (int, float)) and np.isfinite(time_unit) and time_unit > 0):

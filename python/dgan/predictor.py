@@ -15,7 +15,7 @@ import numpy.typing as npt
 from dgan import _dgan
 from dgan._runtime import onnxruntime_library as onnxruntime_library_path
 from dgan.exceptions import InvalidFrameError, InvalidSpecError, ModelNotFoundError
-from dgan.frame import Frame
+from dgan.frame import Frame, typename
 from dgan.spec import InputSpec
 
 
@@ -102,6 +102,9 @@ class Predictor:
         execution_provider: where ONNX Runtime runs the network: ``"cpu"``, ``"cuda"`` or ``"cuda:N"`` (needs an
             ONNX Runtime library built with CUDA, e.g. ``onnxruntime-gpu``'s; see
             :func:`available_execution_providers`). A provider the library lacks raises at load, never falls back.
+        max_edges: the most attention-zone edges one frame may have (a denser scene raises
+            :class:`~dgan.exceptions.SceneTooLargeError` before the network runs).
+        max_input_bytes: the most bytes of network inputs one frame may need (the map crops dominate).
 
     Raises:
         ModelNotFoundError, ModelLoadError, ContractError, RuntimeLibraryError: at load, never later.
@@ -116,9 +119,11 @@ class Predictor:
         sessions: int | None = None,
         onnxruntime_library: str | os.PathLike[str] | None = None,
         execution_provider: str = "cpu",
+        max_edges: int = 200_000,
+        max_input_bytes: int = 2 << 30,
     ) -> None:
         if model is None or not isinstance(model, (str, os.PathLike)):
-            raise ModelNotFoundError(f"model must be a path or a bundled model's name, got {type(model).__name__}")
+            raise ModelNotFoundError(f"model must be a path or a bundled model's name, got {typename(model)}")
         lib = Path(onnxruntime_library) if onnxruntime_library is not None else onnxruntime_library_path()
         cores = os.cpu_count() or 1
         if isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= cores:
@@ -131,8 +136,16 @@ class Predictor:
             raise InvalidSpecError(
                 f"execution_provider must be a string such as 'cpu' or 'cuda', got {execution_provider!r}"
             )
+        for key, value in (("max_edges", max_edges), ("max_input_bytes", max_input_bytes)):
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 2**62:
+                raise InvalidSpecError(f"{key} must be a positive integer, got {value!r}")
         self._predictor = _dgan.Predictor(
-            os.fspath(_resolve(model)), os.fspath(lib), threads, sessions, execution_provider
+            os.fspath(_resolve(model)),
+            os.fspath(lib),
+            threads,
+            sessions,
+            execution_provider,
+            (max_edges, max_input_bytes),
         )
         self._contract: dict[str, Any] = json.loads(self._predictor.contract_json)
         self._spec = InputSpec.from_dict(self._contract)
@@ -210,7 +223,7 @@ class Predictor:
         """
         m = self._modes if modes is None else self._check_modes(modes)
         if isinstance(frames, Frame) or not isinstance(frames, Sequence):
-            raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {type(frames).__name__}")
+            raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {typename(frames)}")
         outs = self._predictor.predict_batch([_native(f) for f in frames], m)
         return [self._prediction(o, f) for o, f in zip(outs, frames, strict=True)]
 
@@ -220,7 +233,7 @@ class Predictor:
 
 def _native(frame: Any) -> _dgan.Frame:
     if not isinstance(frame, Frame):
-        raise InvalidFrameError(f"expected a dgan.Frame, got {type(frame).__name__}")
+        raise InvalidFrameError(f"expected a dgan.Frame, got {typename(frame)}")
     return frame._frame
 
 

@@ -4,6 +4,7 @@ tensors it receives. Training uses :func:`preprocess` so that training and infer
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -12,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan.exceptions import InvalidFrameError, InvalidSpecError
 from dgan.frame import Frame
 
 
@@ -61,7 +63,16 @@ class InputSpec:
     graph: str = "edge_list"
 
     def __post_init__(self) -> None:
+        if isinstance(self.classes, str) or not hasattr(self.classes, "__iter__"):
+            raise InvalidSpecError(f"classes must be a sequence of class names, got {self.classes!r}")
         object.__setattr__(self, "classes", tuple(self.classes))
+        numbers = {"dt_s": self.dt_s, "attention_lambda": self.attention_lambda}
+        if self.map is not None:
+            numbers["map.resolution_m"] = self.map.resolution_m
+        numbers["prior.window_s"] = self.prior.window_s
+        for key, value in numbers.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise InvalidSpecError(f"invalid specification: {key} must be a finite number, got {value}")
         _dgan.validate_spec(self.to_json())
 
     def to_json(self) -> str:
@@ -99,8 +110,18 @@ def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:
     frame, and ``origin (N, 2)``, ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and
     undirected ``edges``.
     """
-    out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, spec.to_json())
+    if not isinstance(frame, Frame):
+        raise InvalidFrameError(
+            f"preprocess takes a dgan.Frame, got {'None' if frame is None else type(frame).__name__}"
+        )
+    out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, _spec_json(spec))
     return out
+
+
+def _spec_json(spec: Any) -> str:
+    if not isinstance(spec, InputSpec):
+        raise InvalidSpecError(f"spec must be a dgan.InputSpec (a Predictor's .spec), got {type(spec).__name__}")
+    return spec.to_json()
 
 
 def kinematic_prior(
@@ -109,7 +130,7 @@ def kinematic_prior(
     """The engine's kinematic prior ``(N, T_f, 2)`` (agent frame) from the network inputs ``trajectory``,
     ``trajectory_mask`` and ``state``; training fits its anchors and offsets to the residual from it."""
     t, m, s = (np.ascontiguousarray(a, dtype=np.float32) for a in (trajectory, trajectory_mask, state))
-    return _dgan.kinematic_prior(t, m, s, spec.to_json())
+    return _dgan.kinematic_prior(t, m, s, _spec_json(spec))
 
 
 def to_agent_frame(

@@ -9,7 +9,7 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan.exceptions import InvalidFrameError
-from dgan.frame import ClassLike, Frame, RasterMap, VectorMap
+from dgan.frame import ClassLike, Frame, RasterMap, VectorMap, typename
 from dgan.predictor import Prediction, Predictor
 
 
@@ -51,7 +51,7 @@ class Tracker:
         default_class: ClassLike = "pedestrian",
     ) -> None:
         if not isinstance(predictor, Predictor):
-            raise InvalidFrameError(f"Tracker needs a dgan.Predictor, got {type(predictor).__name__}")
+            raise InvalidFrameError(f"Tracker needs a dgan.Predictor, got {typename(predictor)}")
         self._predictor = predictor
         self._map = map
         spec = predictor.spec

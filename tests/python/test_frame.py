@@ -58,7 +58,7 @@ def test_masked_out_steps_may_hold_nan() -> None:
         ({"classes": ["vehicle", "truck"]}, exc.UnknownClassError, "truck"),
         ({"classes": [0, 7]}, exc.UnknownClassError, "class code 7"),
         ({"classes": ["vehicle"]}, exc.InvalidFrameError, "1 classes given for 2 agents"),
-        ({"classes": "vehicle"}, exc.InvalidFrameError, "single string"),
+        ({"classes": "vehicle"}, exc.InvalidFrameError, "one class per agent, got str"),
         ({"ids": [3, 3]}, exc.InvalidFrameError, "appears more than once"),
         ({"ids": [1, 2, 3]}, exc.InvalidFrameError, "3 ids given for 2 agents"),
         ({"headings": [np.inf, 0.0]}, exc.InvalidFrameError, "heading of agent 0 is infinite"),

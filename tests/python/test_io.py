@@ -153,3 +153,11 @@ def test_prediction_as_a_long_table(tmp_path: Path) -> None:
     assert back.column("agent_id").to_pylist()[:1] == [pred.agent_ids[0]]
     np.testing.assert_array_equal(back.column("y").to_numpy(), rec["y"])
     np.testing.assert_allclose(pred.times_s, np.arange(1, t_f + 1) / 3)
+
+
+def test_ids_beyond_int64_are_kept_as_given() -> None:
+    p = dgan.Predictor("zara1")
+    positions = np.cumsum(np.full((3, 8, 2), 0.4), axis=1)
+    for ids in ([2**70, 1, 2], np.array([2**64 - 1, 5, 7], dtype=np.uint64)):
+        pred = p.predict(dgan.Frame(positions, ids=ids))
+        assert [int(a) for a in pred.agent_ids] == [int(a) for a in ids]

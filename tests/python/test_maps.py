@@ -21,11 +21,11 @@ def test_raster_map_from_a_real_scene() -> None:
 
 def test_raster_map_errors(tmp_path: Path) -> None:
     with pytest.raises(exc.InvalidMapError, match=r"\(H, W, 3\)"):
-        dgan.RasterMap(np.zeros((4, 4)), np.eye(3))
+        dgan.RasterMap(np.zeros((4, 4), dtype=np.uint8), np.eye(3))
     with pytest.raises(exc.InvalidMapError, match="3×3"):
-        dgan.RasterMap(np.zeros((4, 4, 3)), np.eye(2))
+        dgan.RasterMap(np.zeros((4, 4, 3), dtype=np.uint8), np.eye(2))
     with pytest.raises(exc.InvalidMapError, match="singular"):
-        dgan.RasterMap(np.zeros((4, 4, 3)), np.zeros((3, 3)))
+        dgan.RasterMap(np.zeros((4, 4, 3), dtype=np.uint8), np.zeros((3, 3)))
     with pytest.raises(exc.InvalidMapError, match="cannot read image"):
         dgan.RasterMap.from_file(tmp_path / "missing.png", np.eye(3))
     bad = tmp_path / "bad.png"

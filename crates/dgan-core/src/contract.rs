@@ -105,6 +105,46 @@ pub struct ModelContract {
     pub weights_sha256: Option<String>,
 }
 
+/// Parses JSON into `T` with an error that names the key and says what was wrong and what is allowed, in words
+/// ("key `t_f`: invalid value: integer `-1`, expected usize (an integer ≥ 0)") rather than a line and column.
+pub fn from_json_readably<T: serde::de::DeserializeOwned>(json: &str) -> std::result::Result<T, String> {
+    let de = &mut serde_json::Deserializer::from_str(json);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        if inner.is_syntax() || inner.is_eof() {
+            // Where, as text: the line and column of a one-line document say little.
+            let line = json.lines().nth(inner.line().saturating_sub(1)).unwrap_or("");
+            let at = line.char_indices().map(|(i, _)| i).nth(inner.column().saturating_sub(1)).unwrap_or(line.len());
+            let from = line[..at].char_indices().rev().nth(30).map_or(0, |(i, _)| i);
+            let near: String = line[from..].chars().take(50).collect();
+            return format!("not valid JSON ({}) near `{near}`", readable(&inner.to_string()));
+        }
+        keyed(&path, &inner.to_string())
+    })
+}
+
+/// [`from_json_readably`] for an already parsed JSON value.
+pub fn from_value_readably<T: serde::de::DeserializeOwned>(value: serde_json::Value) -> std::result::Result<T, String> {
+    serde_path_to_error::deserialize(value).map_err(|e| keyed(&e.path().to_string(), &e.inner().to_string()))
+}
+
+fn readable(msg: &str) -> String {
+    let msg = msg.rfind(" at line ").map_or(msg, |cut| &msg[..cut]);
+    msg.replace("expected usize", "expected a whole number ≥ 0")
+        .replace("expected u32", "expected a whole number ≥ 0")
+        .replace("expected f64", "expected a number")
+}
+
+fn keyed(path: &str, msg: &str) -> String {
+    let msg = readable(msg);
+    if path == "." || path.is_empty() {
+        msg
+    } else {
+        format!("key `{path}`: {msg}")
+    }
+}
+
 fn unit_temperature() -> f64 {
     1.0
 }
@@ -112,8 +152,11 @@ fn unit_temperature() -> f64 {
 impl ModelContract {
     /// Parses and checks the metadata JSON.
     pub fn from_json(json: &str) -> Result<Self> {
-        let c: ModelContract = serde_json::from_str(json)
-            .map_err(|e| DganError::Contract(format!("metadata {METADATA_KEY:?} is not a valid contract: {e}")))?;
+        let bad = |e: String| DganError::Contract(format!("metadata {METADATA_KEY:?} is not a valid contract: {e}"));
+        let value: serde_json::Value = from_json_readably(json).map_err(bad)?;
+        // The input specification's keys first: the contract flattens them, which would hide their names.
+        from_value_readably::<InputSpec>(value.clone()).map_err(bad)?;
+        let c: ModelContract = from_value_readably(value).map_err(bad)?;
         c.validate()?;
         Ok(c)
     }

@@ -15,6 +15,9 @@ pub enum DganError {
     /// The model's map branch needs a map and the frame has none.
     #[error("map required: {0}")]
     MapRequired(String),
+    /// A scene whose attention graph or input tensors exceed the configured [`Limits`](crate::preprocess::Limits).
+    #[error("scene too large: {0}")]
+    SceneTooLarge(String),
     /// A frame's time base differs from the model's, or data cannot be resampled to it (too sparse, unordered).
     #[error("time base: {0}")]
     TimeBase(String),

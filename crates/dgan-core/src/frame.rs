@@ -7,6 +7,15 @@ use ndarray::{Array2, Array3, ArrayView2};
 use std::collections::HashSet;
 use std::sync::Arc;
 
+/// The largest coordinate magnitude, metres, of a position or map vertex: far beyond any real scene (UTM northings
+/// are below 10⁷ m), so that a value of 10³⁰ m is caught as the unit or data error it is.
+pub const MAX_COORDINATE_M: f64 = 1e9;
+
+/// The largest agent length or width, metres (an articulated bus is 25 m).
+pub const MAX_SIZE_M: f64 = 100.0;
+/// The largest speed a velocity may give, m/s (720 km/h).
+pub const MAX_SPEED_MPS: f64 = 200.0;
+
 /// The scene at the current time. Positions are world metres, oldest step first; the last step is t_obs.
 ///
 /// Optional per-agent values use NaN for "not given for this agent": headings then come from the motion,
@@ -61,6 +70,12 @@ impl Frame {
                     return Err(invalid_frame(format!(
                         "agent {i} has a non-finite position ({x}, {y}) at valid step {s}; mark the step invalid in \
                          the mask or fix the value"
+                    )));
+                }
+                if x.abs().max(y.abs()) > MAX_COORDINATE_M {
+                    return Err(invalid_frame(format!(
+                        "agent {i} is at ({x}, {y}) m at step {s}, beyond ±{MAX_COORDINATE_M:e} m of the origin; \
+                         positions are in metres"
                     )));
                 }
             }
@@ -118,6 +133,10 @@ impl Frame {
                 out.push(None);
             } else if vx.is_infinite() || vy.is_infinite() {
                 return Err(invalid_frame(format!("velocity of agent {i} is infinite")));
+            } else if vx.hypot(vy) > MAX_SPEED_MPS {
+                return Err(invalid_frame(format!(
+                    "velocity of agent {i} is ({vx}, {vy}) m/s, faster than {MAX_SPEED_MPS} m/s; velocities are in m/s"
+                )));
             } else {
                 out.push(Some([vx, vy]));
             }
@@ -166,8 +185,10 @@ impl Frame {
             if g.is_nan() {
                 continue;
             }
-            if !g.is_finite() || *g <= 0.0 {
-                return Err(invalid_frame(format!("{what} of agent {i} must be a positive number of metres, got {g}")));
+            if !g.is_finite() || *g <= 0.0 || *g > MAX_SIZE_M {
+                return Err(invalid_frame(format!(
+                    "{what} of agent {i} must be a positive number of metres up to {MAX_SIZE_M}, got {g}"
+                )));
             }
             *t = *g;
         }

@@ -39,6 +39,14 @@ fn intersects(a: [f64; 2], ra: f64, b: [f64; 2], rb: f64) -> bool {
 
 /// Undirected edges `[i, j]` with `i < j`, sorted, between agents whose attention circles intersect.
 pub fn attention_zone_edges(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[u32; 2]>> {
+    attention_zone_edges_within(centres, radii, usize::MAX)
+}
+
+/// [`attention_zone_edges`], refused with [`DganError::SceneTooLarge`] as soon as more than `max_edges` edges are
+/// found: the work stays bounded by about `max_edges + N` whatever the scene (1,000 agents on one point would make
+/// 499,500 edges).
+pub fn attention_zone_edges_within(centres: &[[f64; 2]], radii: &[f64], max_edges: usize) -> Result<Vec<[u32; 2]>> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
     check(centres, radii)?;
     let boxes: Vec<GeomWithData<Rectangle<[f64; 2]>, u32>> = centres
         .iter()
@@ -49,7 +57,11 @@ pub fn attention_zone_edges(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[
         })
         .collect();
     let tree = RTree::bulk_load(boxes);
+    let found = AtomicUsize::new(0);
     let edges_of = |i: usize| {
+        if found.load(Ordering::Relaxed) > max_edges {
+            return vec![];
+        }
         let (c, r) = (centres[i], radii[i]);
         let envelope = AABB::from_corners([c[0] - r, c[1] - r], [c[0] + r, c[1] + r]);
         let mut out: Vec<[u32; 2]> = tree
@@ -59,6 +71,7 @@ pub fn attention_zone_edges(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[
             .map(|j| [i as u32, j])
             .collect();
         out.sort_unstable();
+        found.fetch_add(out.len(), Ordering::Relaxed);
         out
     };
     // Below a few thousand agents the queries take well under a millisecond: a sequential loop leaves no idle pool
@@ -68,6 +81,15 @@ pub fn attention_zone_edges(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[
     } else {
         (0..centres.len()).into_par_iter().map(edges_of).collect()
     };
+    let total = found.into_inner();
+    if total > max_edges {
+        return Err(DganError::SceneTooLarge(format!(
+            "the attention graph has more than {max_edges} edges (at least {total}, among {} agents): the agents' \
+             attention zones overlap too much for the network's memory and time; raise the limit \
+             (max_edges of the Predictor) or predict fewer agents at once",
+            centres.len()
+        )));
+    }
     Ok(per_agent.concat())
 }
 
@@ -112,5 +134,18 @@ mod tests {
         assert!(attention_zone_edges(&[[0.0, 0.0]], &[-1.0]).is_err());
         assert!(attention_zone_edges(&[[0.0, 0.0]], &[]).is_err());
         assert!(attention_zone_edges(&[], &[]).unwrap().is_empty());
+    }
+
+    #[test]
+    fn the_edge_budget_stops_early() {
+        // 2,000 agents on one point would make 1,999,000 edges: refused fast, past the budget.
+        let c = vec![[5.0, 5.0]; 2000];
+        let r = vec![1.0; 2000];
+        let started = std::time::Instant::now();
+        let err = attention_zone_edges_within(&c, &r, 10_000).unwrap_err();
+        assert!(matches!(err, DganError::SceneTooLarge(_)), "{err}");
+        assert!(err.to_string().contains("more than 10000 edges"), "{err}");
+        assert!(started.elapsed().as_secs_f64() < 1.0);
+        assert_eq!(attention_zone_edges_within(&c[..100], &r[..100], 4950).unwrap().len(), 4950);
     }
 }

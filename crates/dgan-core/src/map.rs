@@ -183,9 +183,35 @@ pub struct MapElement {
     bbox: [f64; 4],
 }
 
-/// Ramer–Douglas–Peucker: the vertices of `points` to keep so that no dropped vertex is farther than `tolerance` from
-/// the simplified line (the first and last are always kept).
+/// Vertices per stretch when [`simplify`] falls back to stretches (see there).
+pub const SIMPLIFY_CHUNK: usize = 256;
+/// Distance evaluations per vertex that [`simplify`] allows Ramer–Douglas–Peucker on a whole polyline.
+pub const SIMPLIFY_WORK_PER_VERTEX: usize = 64;
+
+/// The vertices of `points` to keep so that no dropped vertex is farther than `tolerance` from the simplified line
+/// (the first and last are always kept): Ramer–Douglas–Peucker on the whole polyline, which takes about
+/// `n · log n` steps on real maps; it is quadratic in the worst case (a zigzag), so past
+/// [`SIMPLIFY_WORK_PER_VERTEX`]` · n` steps it starts again stretch by stretch ([`SIMPLIFY_CHUNK`] vertices, each
+/// stretch's ends kept): the work is bounded by about `(64 + 256) · n` whatever the geometry.
 fn simplify(points: &[[f64; 2]], tolerance: f64) -> Vec<[f64; 2]> {
+    let mut budget = SIMPLIFY_WORK_PER_VERTEX.saturating_mul(points.len()).max(1 << 16);
+    if let Some(out) = simplify_all(points, tolerance, &mut budget) {
+        return out;
+    }
+    let mut out = vec![points[0]];
+    let mut start = 0;
+    while start + 1 < points.len() {
+        let end = (start + SIMPLIFY_CHUNK - 1).min(points.len() - 1);
+        let mut unlimited = usize::MAX; // a stretch of 256 vertices costs at most 256² / 2
+        let stretch = simplify_all(&points[start..=end], tolerance, &mut unlimited);
+        out.extend_from_slice(&stretch.unwrap_or_else(|| points[start..=end].to_vec())[1..]);
+        start = end;
+    }
+    out
+}
+
+/// Ramer–Douglas–Peucker, or `None` once `budget` distance evaluations are spent.
+fn simplify_all(points: &[[f64; 2]], tolerance: f64, budget: &mut usize) -> Option<Vec<[f64; 2]>> {
     fn distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
         let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
         let len2 = dx * dx + dy * dy;
@@ -193,13 +219,14 @@ fn simplify(points: &[[f64; 2]], tolerance: f64) -> Vec<[f64; 2]> {
         (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
     }
     if points.len() < 3 {
-        return points.to_vec();
+        return Some(points.to_vec());
     }
     let mut keep = vec![false; points.len()];
     keep[0] = true;
     keep[points.len() - 1] = true;
     let mut stack = vec![(0, points.len() - 1)];
     while let Some((a, b)) = stack.pop() {
+        *budget = budget.checked_sub(b - a)?;
         let (mut worst, mut at) = (0.0, a);
         for i in a + 1..b {
             let d = distance(points[i], points[a], points[b]);
@@ -213,7 +240,7 @@ fn simplify(points: &[[f64; 2]], tolerance: f64) -> Vec<[f64; 2]> {
             stack.push((at, b));
         }
     }
-    points.iter().zip(keep).filter_map(|(p, k)| k.then_some(*p)).collect()
+    Some(points.iter().zip(keep).filter_map(|(p, k)| k.then_some(*p)).collect())
 }
 
 impl MapElement {
@@ -225,6 +252,14 @@ impl MapElement {
         }
         if points.iter().flatten().any(|v| !v.is_finite()) {
             return Err(DganError::InvalidMap(format!("a {kind} has NaN or infinite coordinates")));
+        }
+        if let Some(p) = points.iter().find(|p| p[0].abs().max(p[1].abs()) > crate::frame::MAX_COORDINATE_M) {
+            return Err(DganError::InvalidMap(format!(
+                "a {kind} has a vertex at ({}, {}) m, beyond ±{:e} m of the origin; maps are in metres",
+                p[0],
+                p[1],
+                crate::frame::MAX_COORDINATE_M
+            )));
         }
         let mut bbox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
         for p in &points {
@@ -345,5 +380,18 @@ mod tests {
         assert_eq!(map.elements()[0].kind(), MapElementKind::Crosswalk);
         assert_eq!("road_edge".parse::<MapElementKind>().unwrap(), MapElementKind::RoadEdge);
         assert!("river".parse::<MapElementKind>().is_err());
+    }
+
+    #[test]
+    fn simplification_work_is_bounded_on_a_zigzag_and_far_vertices_are_refused() {
+        // A zigzag is Ramer–Douglas–Peucker's worst case: quadratic, 66 s for 10⁵ vertices before the bound.
+        let zig: Vec<[f64; 2]> = (0..100_000).map(|i| [i as f64 * 0.01, f64::from(i % 2) * 0.2]).collect();
+        let started = std::time::Instant::now();
+        let e = MapElement::new(MapElementKind::LaneCenterline, zig.clone()).unwrap();
+        assert!(started.elapsed().as_secs_f64() < 5.0, "{:?}", started.elapsed());
+        assert!(e.drawn_points().len() > zig.len() * 9 / 10); // a 0.2 m zigzag cannot be drawn through few
+        let far = vec![[0.0, 0.0], [1e30, 5.0]];
+        let err = MapElement::new(MapElementKind::RoadEdge, far).unwrap_err();
+        assert!(err.to_string().contains("beyond ±1e9 m"), "{err}");
     }
 }

@@ -3,7 +3,7 @@
 
 use crate::error::{invalid_frame, DganError, Result};
 use crate::frame::Frame;
-use crate::graph::{attention_radius, attention_zone_edges};
+use crate::graph::{attention_radius, attention_zone_edges_within};
 use crate::raster::rasterize;
 use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
 use crate::state::{traffic_states, TrafficState};
@@ -86,8 +86,39 @@ pub struct Preprocessed {
     pub edges: Vec<[u32; 2]>,
 }
 
-/// Builds the network inputs of a frame.
+/// Bounds on the work one frame may cause, checked before the memory is allocated; a scene beyond them is refused
+/// with [`DganError::SceneTooLarge`], naming the size and the limit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Most undirected attention edges (default 200,000: 2,000 agents of 200 neighbours each).
+    pub max_edges: usize,
+    /// Most bytes of the network's input tensors (default 2 GiB; the map crops dominate: 3 · H · W · 4 bytes an
+    /// agent).
+    pub max_input_bytes: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self { max_edges: 200_000, max_input_bytes: 2 << 30 }
+    }
+}
+
+impl Limits {
+    /// The bytes of the input tensors of `n` agents with at most `degree` senders each (itself included).
+    pub fn input_bytes(spec: &InputSpec, n: usize, degree: usize) -> usize {
+        let map = spec.map.as_ref().map_or(0, |m| 3 * m.height_px * m.width_px + 1);
+        let per_agent = spec.t_obs * 3 + spec.state_dim() + map + spec.t_f * 2 + degree * (2 + 1 + EDGE_FEATURES.len());
+        n.saturating_mul(per_agent).saturating_mul(4)
+    }
+}
+
+/// Builds the network inputs of a frame, within the default [`Limits`].
 pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
+    preprocess_within(frame, spec, &Limits::default())
+}
+
+/// Builds the network inputs of a frame, refusing one beyond `limits` before allocating for it.
+pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Result<Preprocessed> {
     spec.validate()?;
     frame.check_dt(spec.dt_s)?;
     let n = frame.len();
@@ -131,12 +162,23 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
     let centres: Vec<[f64; 2]> = states.iter().map(|s| s.position).collect();
     let radii: Vec<f64> =
         states.iter().map(|s| attention_radius(s.speed, spec.horizon_s(), spec.attention_lambda, s.length)).collect();
-    let edges = attention_zone_edges(&centres, &radii)?;
+    let edges = attention_zone_edges_within(&centres, &radii, limits.max_edges)?;
 
     let mut neighbours: Vec<Vec<usize>> = (0..n).map(|i| vec![i]).collect();
     for [i, j] in &edges {
         neighbours[*i as usize].push(*j as usize);
         neighbours[*j as usize].push(*i as usize);
+    }
+    let degree = neighbours.iter().map(Vec::len).max().unwrap_or(0);
+    let bytes = Limits::input_bytes(spec, n, degree);
+    if bytes > limits.max_input_bytes {
+        return Err(DganError::SceneTooLarge(format!(
+            "the network's inputs for {n} agents (up to {degree} senders each{}) take {:.2} GiB, above the limit of \
+             {:.2} GiB (max_input_bytes of the Predictor); predict fewer agents at once",
+            spec.map.as_ref().map_or(String::new(), |m| format!(", map crops of {}×{} px", m.height_px, m.width_px)),
+            bytes as f64 / f64::from(1u32 << 30),
+            limits.max_input_bytes as f64 / f64::from(1u32 << 30)
+        )));
     }
     let e = n + 2 * edges.len();
     let mut edge_index = Array2::<i64>::zeros((e, 2));

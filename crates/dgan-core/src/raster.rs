@@ -56,35 +56,124 @@ fn line_width_m(kind: MapElementKind) -> f64 {
 /// Dash pattern of dashed lane lines, metres: 3 m painted, 6 m gap.
 const DASH_M: (f64, f64) = (3.0, 6.0);
 
-/// Adds the dashes of a polyline `px` (pixels) that starts `at` pixels along its line: `on` pixels painted in every
-/// `period`, from the line's start. A dash that runs through a vertex stays one subpath (its join is kept).
-fn add_dashes(pb: &mut PathBuilder, px: &[(f32, f32)], at: f32, on: f32, period: f32) {
-    let mut s = at;
+/// Liang–Barsky: the part `[t0, t1]` (fractions of the segment) of `a → b` inside `rect = [x0, y0, x1, y1]`.
+fn clip_segment(a: (f64, f64), b: (f64, f64), rect: [f64; 4]) -> Option<(f64, f64)> {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [(-dx, a.0 - rect[0]), (dx, rect[2] - a.0), (-dy, a.1 - rect[1]), (dy, rect[3] - a.1)] {
+        if p == 0.0 {
+            if q < 0.0 {
+                return None;
+            }
+        } else {
+            let r = q / p;
+            if p < 0.0 {
+                t0 = t0.max(r);
+            } else {
+                t1 = t1.min(r);
+            }
+        }
+    }
+    (t0 <= t1).then_some((t0, t1))
+}
+
+/// Adds a polyline `px` (pixels, f64) to `pb`, clipped to `rect`: only the parts of its segments inside the rectangle,
+/// so the work and the coordinates handed to the rasteriser stay bounded whatever the geometry (a segment of 10⁷ m,
+/// a stray vertex at 10⁸ m). Segments that meet inside the rectangle stay one subpath, so their joins are those of
+/// the whole line. With `dash = (on, period)` (pixels) only the painted stretches are added, phased by the arc
+/// length from the line's start.
+fn add_clipped(pb: &mut PathBuilder, px: &[(f64, f64)], rect: [f64; 4], dash: Option<(f64, f64)>) {
+    let mut s = 0.0f64;
     let mut down = false;
     for w in px.windows(2) {
-        let ((ax, ay), (bx, by)) = (w[0], w[1]);
-        let len = (bx - ax).hypot(by - ay);
-        let point = |t: f32| (ax + (bx - ax) * t / len, ay + (by - ay) * t / len);
-        let mut t = 0.0f32;
-        while t < len {
-            let phase = (s + t).rem_euclid(period);
-            let (painted, left) = if phase < on { (true, on - phase) } else { (false, period - phase) };
-            let end = (t + left.max(1e-3)).min(len);
-            if painted {
+        let (a, b) = (w[0], w[1]);
+        let len = (b.0 - a.0).hypot(b.1 - a.1);
+        let point = |t: f64| {
+            let f = if len > 0.0 { t / len } else { 0.0 };
+            ((a.0 + (b.0 - a.0) * f) as f32, (a.1 + (b.1 - a.1) * f) as f32)
+        };
+        let Some((f0, f1)) = clip_segment(a, b, rect) else {
+            down = false;
+            s += len;
+            continue;
+        };
+        let (t0, t1) = (f0 * len, f1 * len);
+        if t0 > 0.0 {
+            down = false;
+        }
+        match dash {
+            None => {
                 if !down {
-                    let (u, v) = point(t);
+                    let (u, v) = point(t0);
                     pb.move_to(u, v);
-                    down = true;
                 }
-                let (u, v) = point(end);
+                let (u, v) = point(t1);
                 pb.line_to(u, v);
-            } else {
-                down = false;
+                down = true;
             }
-            t = end;
+            Some((on, period)) => {
+                let mut t = t0;
+                while t < t1 {
+                    let phase = (s + t).rem_euclid(period);
+                    let (painted, left) = if phase < on { (true, on - phase) } else { (false, period - phase) };
+                    let end = (t + left.max(1e-3)).min(t1);
+                    if painted {
+                        if !down {
+                            let (u, v) = point(t);
+                            pb.move_to(u, v);
+                            down = true;
+                        }
+                        let (u, v) = point(end);
+                        pb.line_to(u, v);
+                    } else {
+                        down = false;
+                    }
+                    t = end;
+                }
+            }
+        }
+        if t1 < len {
+            down = false;
         }
         s += len;
     }
+}
+
+/// Sutherland–Hodgman: the polygon `px` clipped to `rect` (its parts outside cannot colour the crop).
+fn clip_polygon(px: &[(f64, f64)], rect: [f64; 4]) -> Vec<(f64, f64)> {
+    let mut out = px.to_vec();
+    // (axis, bound, whether inside is at or above the bound)
+    for (axis, v, above) in [(0, rect[0], true), (0, rect[2], false), (1, rect[1], true), (1, rect[3], false)] {
+        let inside = |p: (f64, f64), v: f64| {
+            let x = if axis == 0 { p.0 } else { p.1 };
+            if above {
+                x >= v
+            } else {
+                x <= v
+            }
+        };
+        let input = std::mem::take(&mut out);
+        let Some(&last) = input.last() else { break };
+        let mut prev = last;
+        for &cur in &input {
+            let cross = |a: (f64, f64), b: (f64, f64)| {
+                let (pa, pb) = if axis == 0 { (a.0, b.0) } else { (a.1, b.1) };
+                let t = (v - pa) / (pb - pa);
+                (a.0 + (b.0 - a.0) * t, a.1 + (b.1 - a.1) * t)
+            };
+            match (inside(prev, v), inside(cur, v)) {
+                (true, true) => out.push(cur),
+                (true, false) => out.push(cross(prev, cur)),
+                (false, true) => {
+                    out.push(cross(prev, cur));
+                    out.push(cur);
+                }
+                (false, false) => {}
+            }
+            prev = cur;
+        }
+    }
+    out
 }
 
 fn paint(rgb: Rgb) -> Paint<'static> {
@@ -122,68 +211,44 @@ fn line_width_px(spec: &MapSpec, kind: MapElementKind) -> f32 {
 }
 
 impl Canvas<'_> {
-    fn pixel(&self, world: [f64; 2]) -> (f32, f32) {
+    fn pixel(&self, world: [f64; 2]) -> (f64, f64) {
         let [u, v] = self.spec.local_to_pixel(self.pose.to_local(world));
-        (u as f32, v as f32)
+        (u, v)
     }
 
-    /// Adds a closed polygon to `pb`.
+    /// The pixel rectangle that geometry is clipped to: the crop, widened beyond any cap or miter join (miter
+    /// limit 4: at most 2 widths from its vertex) of the widest line, so that clipping changes no pixel of the crop.
+    fn clip_rect(&self) -> [f64; 4] {
+        let margin = 2.0 * f64::from(line_width_px(self.spec, MapElementKind::RoadEdge).max(1.0)) + 4.0;
+        [-margin, -margin, self.spec.width_px as f64 + margin, self.spec.height_px as f64 + margin]
+    }
+
+    /// Adds a closed polygon to `pb`, clipped to the crop.
     fn add_polygon(&self, pb: &mut PathBuilder, points: &[[f64; 2]]) {
-        for (k, p) in points.iter().enumerate() {
-            let (u, v) = self.pixel(*p);
+        let px: Vec<(f64, f64)> = points.iter().map(|p| self.pixel(*p)).collect();
+        let clipped = clip_polygon(&px, self.clip_rect());
+        if clipped.len() < 3 {
+            return;
+        }
+        for (k, (u, v)) in clipped.iter().enumerate() {
             if k == 0 {
-                pb.move_to(u, v);
+                pb.move_to(*u as f32, *v as f32);
             } else {
-                pb.line_to(u, v);
+                pb.line_to(*u as f32, *v as f32);
             }
         }
         pb.close();
     }
 
-    /// Adds a polyline to `pb`: only the runs of segments that come near the crop (and one segment either side, so
-    /// that the joins are those of the whole line), since long lane lines and road edges reach far outside it.
-    /// Dashed lines are cut into their dashes here, each run from its own arc length, so that the pattern is the one
-    /// the whole line has.
+    /// Adds a polyline to `pb`, clipped to the crop ([`add_clipped`]); dashed lines are cut into their dashes,
+    /// phased from the whole line's start.
     fn add_polyline(&self, pb: &mut PathBuilder, points: &[[f64; 2]], kind: MapElementKind) {
-        let width = line_width_px(self.spec, kind);
-        let px: Vec<(f32, f32)> = points.iter().map(|p| self.pixel(*p)).collect();
-        // Beyond any cap or miter join (miter limit 4: at most 2 widths from its vertex).
-        let margin = 2.0 * width + 2.0;
-        let (w, h) = (self.spec.width_px as f32 + margin, self.spec.height_px as f32 + margin);
-        let segments = px.len().saturating_sub(1);
-        let near: Vec<bool> = (0..segments)
-            .map(|i| {
-                let (a, b) = (px[i], px[i + 1]);
-                a.0.max(b.0) >= -margin && a.0.min(b.0) <= w && a.1.max(b.1) >= -margin && a.1.min(b.1) <= h
-            })
-            .collect();
-        let keep = |i: usize| near[i] || (i > 0 && near[i - 1]) || (i + 1 < segments && near[i + 1]);
+        let px: Vec<(f64, f64)> = points.iter().map(|p| self.pixel(*p)).collect();
         let dash = (kind == MapElementKind::LaneLineDashed).then(|| {
             let res = self.spec.resolution_m;
-            ((DASH_M.0 / res) as f32, ((DASH_M.0 + DASH_M.1) / res) as f32)
+            (DASH_M.0 / res, (DASH_M.0 + DASH_M.1) / res)
         });
-        let mut emit = |run: &[(f32, f32)], at: f32| match dash {
-            Some((on, period)) => add_dashes(pb, run, at, on, period),
-            None => {
-                pb.move_to(run[0].0, run[0].1);
-                for &(u, v) in &run[1..] {
-                    pb.line_to(u, v);
-                }
-            }
-        };
-        let mut run: Option<(usize, f32)> = None;
-        let mut length = 0.0f32;
-        for i in 0..segments {
-            if keep(i) {
-                run.get_or_insert((i, length));
-            } else if let Some((first, at)) = run.take() {
-                emit(&px[first..=i], at);
-            }
-            length += (px[i + 1].0 - px[i].0).hypot(px[i + 1].1 - px[i].1);
-        }
-        if let Some((first, at)) = run {
-            emit(&px[first..], at);
-        }
+        add_clipped(pb, &px, self.clip_rect(), dash);
     }
 
     /// Draws one kind's elements, batched into one path: a fill for regions, a butt-capped stroke for lines.
@@ -434,5 +499,26 @@ mod tests {
         // World +x is the agent's right: image columns right of the agent are red, left are black.
         assert_eq!(rgb(&img, 10, 30), [1.0, 0.0, 0.0]);
         assert_eq!(rgb(&img, 10, 10), [0.0; 3]);
+    }
+
+    #[test]
+    fn pathological_geometry_costs_little_and_draws_what_is_inside() {
+        // A dashed line with one 6·10⁷ m segment through the crop, a stray vertex 10⁸ m away, a huge polygon:
+        // each used to hang the rasteriser (dashing the whole segment, stroking coordinates far outside).
+        let els = vec![
+            MapElement::new(MapElementKind::LaneLineDashed, vec![[100.0, -3e7], [100.0, 3e7]]).unwrap(),
+            MapElement::new(MapElementKind::RoadEdge, vec![[95.0, 40.0], [95.0, 60.0], [1e8, 61.0]]).unwrap(),
+            MapElement::new(MapElementKind::Obstacle, vec![[104.0, 55.0], [1e8, 55.0], [104.0, 1e8]]).unwrap(),
+        ];
+        let (f, s) = frame_with(SceneMap::Vector(VectorMap::new(els)));
+        let started = std::time::Instant::now();
+        let img = rasterize(&f, &s, &spec(false)).unwrap();
+        assert!(started.elapsed().as_secs_f64() < 1.0, "{:?}", started.elapsed());
+        // The dashed line runs along the agent's column (x = 100), some rows painted and some not.
+        let painted = (0..40).filter(|&r| rgb(&img, r, 20)[0] > 0.9).count();
+        assert!((5..35).contains(&painted), "{painted}");
+        // The road edge at x = 95 (10 px left of the agent) is yellow; the polygon covers x > 104 above y = 55.
+        assert_eq!(rgb(&img, 25, 10), [1.0, 1.0, 0.0]);
+        assert!((rgb(&img, 5, 35)[0] - 1.0).abs() < 1e-6); // obstacle pink: (255, 105, 180)
     }
 }

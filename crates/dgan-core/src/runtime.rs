@@ -14,7 +14,7 @@ use crate::contract::{
 use crate::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
-use crate::preprocess::{preprocess, NetworkInputs, Preprocessed};
+use crate::preprocess::{preprocess_within, Limits, NetworkInputs, Preprocessed};
 use ndarray::{s, Array2, Array4, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
 use ort::value::{Tensor, TensorElementType, ValueType};
@@ -77,11 +77,19 @@ pub struct PredictorOptions {
     pub sessions: usize,
     /// Where ONNX Runtime runs the network.
     pub execution_provider: ExecutionProvider,
+    /// Bounds on the work one frame may cause (attention edges, input bytes).
+    pub limits: Limits,
 }
 
 impl Default for PredictorOptions {
     fn default() -> Self {
-        Self { onnxruntime_library: None, intra_threads: 1, sessions: 1, execution_provider: ExecutionProvider::Cpu }
+        Self {
+            onnxruntime_library: None,
+            intra_threads: 1,
+            sessions: 1,
+            execution_provider: ExecutionProvider::Cpu,
+            limits: Limits::default(),
+        }
     }
 }
 
@@ -172,6 +180,7 @@ pub struct Predictor {
     contract: ModelContract,
     anchors: Anchors,
     path: PathBuf,
+    limits: Limits,
 }
 
 fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
@@ -297,7 +306,7 @@ impl Predictor {
         for _ in 1..options.sessions {
             sessions.push(Mutex::new(open_session(&path, options)?));
         }
-        Ok(Self { sessions, next: AtomicUsize::new(0), contract, anchors, path })
+        Ok(Self { sessions, next: AtomicUsize::new(0), contract, anchors, path, limits: options.limits })
     }
 
     /// How many ONNX Runtime sessions serve this predictor.
@@ -342,7 +351,7 @@ impl Predictor {
     /// Predicts the `modes` most probable modes (at most K) for every agent.
     pub fn predict_modes(&self, frame: &Frame, modes: usize) -> Result<Prediction> {
         check_modes(modes)?;
-        let pre = preprocess(frame, &self.contract.input)?;
+        let pre = preprocess_within(frame, &self.contract.input, &self.limits)?;
         let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes)?;
         out.pop().ok_or_else(|| DganError::Inference("no prediction for the frame".into()))
     }
@@ -356,7 +365,7 @@ impl Predictor {
             return Ok(vec![]);
         }
         let spec = &self.contract.input;
-        let pres = frames.par_iter().map(|f| preprocess(f, spec)).collect::<Result<Vec<_>>>()?;
+        let pres = frames.par_iter().map(|f| preprocess_within(f, spec, &self.limits)).collect::<Result<Vec<_>>>()?;
         self.run_and_decode(frames, pres, modes)
     }
 

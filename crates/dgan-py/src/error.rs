@@ -12,6 +12,7 @@ fn class_name(err: &DganError) -> &'static str {
         DganError::UnknownClass(_) => "UnknownClassError",
         DganError::MapRequired(_) => "MapRequiredError",
         DganError::TimeBase(_) => "TimeBaseError",
+        DganError::SceneTooLarge(_) => "SceneTooLargeError",
         DganError::InvalidMap(_) => "InvalidMapError",
         DganError::InvalidSpec(_) => "InvalidSpecError",
         DganError::ModelNotFound(_) => "ModelNotFoundError",

@@ -248,8 +248,8 @@ pub struct PyVectorMap {
 #[pymethods]
 impl PyVectorMap {
     #[new]
-    fn new(elements: Vec<(String, PyReadonlyArrayDyn<'_, f64>)>) -> PyResult<Self> {
-        let mut out = Vec::with_capacity(elements.len());
+    fn new(py: Python<'_>, elements: Vec<(String, PyReadonlyArrayDyn<'_, f64>)>) -> PyResult<Self> {
+        let mut raw = Vec::with_capacity(elements.len());
         for (k, (kind, pts)) in elements.into_iter().enumerate() {
             let kind: MapElementKind = kind.parse().py()?;
             let view = pts.as_array();
@@ -259,12 +259,21 @@ impl PyVectorMap {
                     view.shape()
                 ))));
             }
-            let points = view.rows().into_iter().map(|r| [r[0], r[1]]).collect();
-            out.push(
-                MapElement::new(kind, points).map_err(|e| to_py(DganError::InvalidMap(format!("element {k}: {e}"))))?,
-            );
+            raw.push((kind, view.rows().into_iter().map(|r| [r[0], r[1]]).collect::<Vec<_>>()));
         }
-        Ok(Self { inner: Arc::new(SceneMap::Vector(VectorMap::new(out))) })
+        // Checking and simplifying the geometry runs without the GIL.
+        let out = py.detach(|| {
+            raw.into_iter()
+                .enumerate()
+                .map(|(k, (kind, points))| {
+                    MapElement::new(kind, points).map_err(|e| match e {
+                        DganError::InvalidMap(m) => DganError::InvalidMap(format!("element {k}: {m}")),
+                        other => other,
+                    })
+                })
+                .collect::<dgan_core::Result<Vec<_>>>()
+        });
+        Ok(Self { inner: Arc::new(SceneMap::Vector(VectorMap::new(out.py()?))) })
     }
 
     fn __len__(&self) -> usize {

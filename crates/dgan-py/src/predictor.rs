@@ -2,7 +2,7 @@
 
 use crate::error::IntoPyResult;
 use crate::frame::PyFrame;
-use dgan_core::{ExecutionProvider, Prediction, Predictor, PredictorOptions};
+use dgan_core::{ExecutionProvider, Limits, Prediction, Predictor, PredictorOptions};
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -29,7 +29,7 @@ fn prediction_dict<'py>(py: Python<'py>, p: Prediction) -> PyResult<Bound<'py, P
 #[pymethods]
 impl PyPredictor {
     #[new]
-    #[pyo3(signature = (path, onnxruntime_library, intra_threads = 1, sessions = 1, execution_provider = "cpu"))]
+    #[pyo3(signature = (path, onnxruntime_library, intra_threads = 1, sessions = 1, execution_provider = "cpu", limits = None))]
     fn new(
         py: Python<'_>,
         path: PathBuf,
@@ -37,9 +37,12 @@ impl PyPredictor {
         intra_threads: usize,
         sessions: usize,
         execution_provider: &str,
+        limits: Option<(usize, usize)>,
     ) -> PyResult<Self> {
         let execution_provider: ExecutionProvider = execution_provider.parse().py()?;
-        let options = PredictorOptions { onnxruntime_library, intra_threads, sessions, execution_provider };
+        let limits =
+            limits.map_or_else(Limits::default, |(max_edges, max_input_bytes)| Limits { max_edges, max_input_bytes });
+        let options = PredictorOptions { onnxruntime_library, intra_threads, sessions, execution_provider, limits };
         let inner = py.detach(|| Predictor::load_with(&path, &options)).py()?;
         Ok(Self { inner })
     }

@@ -10,8 +10,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 pub(crate) fn parse_spec(json: &str) -> dgan_core::Result<InputSpec> {
-    let spec: InputSpec =
-        serde_json::from_str(json).map_err(|e| DganError::InvalidSpec(format!("not an input specification: {e}")))?;
+    let spec: InputSpec = dgan_core::contract::from_json_readably(json)
+        .map_err(|e| DganError::InvalidSpec(format!("not an input specification: {e}")))?;
     spec.validate()?;
     Ok(spec)
 }
