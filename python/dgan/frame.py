@@ -76,6 +76,8 @@ def _array(
         info = np.iinfo(target)
         if arr.min() < info.min or arr.max() > info.max:
             raise error(f"{name} holds values outside the range of {target.name} ({info.min}..{info.max})")
+    if arr.size == 0:  # nothing to convert (and no casting warning for an empty complex array)
+        return np.zeros(arr.shape, dtype=target)
     try:
         return np.ascontiguousarray(arr, dtype=target)
     except (TypeError, ValueError, OverflowError) as exc:
