@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import zara1_records
+from conftest import FIXTURES, zara1_records
 
 import dgan
 from dgan import exceptions as exc
@@ -545,6 +545,17 @@ def file_and_misc_cases(tmp: Path) -> list[Case]:
                 "vector map|kind|version|elements|sea",
             )
         )
+    data = (FIXTURES / "contract_nomap.onnx").read_bytes()
+    at = data.find(b'"contract_version"')
+    (tmp / "bad_utf8.onnx").write_bytes(data[: at + 3] + b"\xff" + data[at + 4 :])
+    cases.append(
+        (
+            "model metadata not UTF-8",
+            lambda: dgan.Predictor(tmp / "bad_utf8.onnx"),
+            exc.ContractError,
+            "cannot be read \\(not valid UTF-8",
+        )
+    )
     frame = dgan.Frame(GOOD)
     p = dgan.Predictor("zara1")
     more: list[tuple[str, Callable[[], Any], type[Exception], str]] = [

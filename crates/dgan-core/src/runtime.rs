@@ -262,10 +262,21 @@ impl Predictor {
             .custom(METADATA_KEY)
             .filter(|s| !s.is_empty())
             .ok_or_else(|| {
-                DganError::Contract(format!(
-                    "{} has no {METADATA_KEY:?} metadata; export it with dgan's exporter (docs/model-contract.md)",
-                    path.display()
-                ))
+                // ONNX Runtime gives no value for metadata that is not valid UTF-8: tell that apart from none.
+                let key = format!("\"{METADATA_KEY}\"");
+                let raw = std::fs::read(&path).unwrap_or_default();
+                let present = raw.windows(METADATA_KEY.len()).any(|w| w == METADATA_KEY.as_bytes());
+                DganError::Contract(if present {
+                    format!(
+                        "{}: its {key} metadata cannot be read (not valid UTF-8, or damaged); export the model again",
+                        path.display()
+                    )
+                } else {
+                    format!(
+                        "{} has no {key} metadata; export it with dgan's exporter (docs/model-contract.md)",
+                        path.display()
+                    )
+                })
             })?;
         let contract = ModelContract::from_json(&json)?;
         if contract.weights_sha256 != digest {
