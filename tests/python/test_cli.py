@@ -158,3 +158,17 @@ def test_demo_prints_and_draws(model: str, expected: str, tmp_path: Path, capsys
     assert crop.is_file() == has_map  # one agent's map crop, for the models with a map branch
     if has_map:
         assert "one agent's map crop" in text
+
+
+def test_demo_needs_only_the_runtime_and_leaves_nothing_tracked(tmp_path: Path) -> None:
+    """`./dev demo` installs the runtime's requirements only (no torch), and the demo's pictures are ignored by git."""
+    import subprocess
+
+    dev = (ROOT / "dev").read_text()
+    assert 'demo) setup runtime; exec "$PY" -m dgan demo' in dev
+    runtime = (ROOT / "requirements-runtime.txt").read_text()
+    assert "onnxruntime" in runtime
+    assert "torch" not in runtime
+    for name in ("dgan_demo.png", "dgan_demo_crop.png"):
+        ignored = subprocess.run(["git", "check-ignore", "-q", name], cwd=ROOT, check=False)
+        assert ignored.returncode == 0, f"{name} is not ignored by git"
