@@ -16,6 +16,9 @@ pub const CONTRACT_VERSION: u32 = 4;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
 pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 4] = [1, 2, 3, 4];
+/// The most anchors a class may have (checked before the anchor arrays are allocated).
+pub const MAX_ANCHORS_PER_CLASS: usize = 1024;
+
 /// The ONNX `metadata_props` key holding the contract as JSON.
 pub const METADATA_KEY: &str = "dgan_contract";
 
@@ -223,6 +226,12 @@ impl ModelContract {
                 .anchors
                 .get(class.name())
                 .ok_or_else(|| DganError::Contract(format!("no anchors for class {class}")))?;
+            if rows.is_empty() || rows.len() > MAX_ANCHORS_PER_CLASS {
+                return Err(DganError::Contract(format!(
+                    "anchors of {class}: {} given, a class needs 1..={MAX_ANCHORS_PER_CLASS}",
+                    rows.len()
+                )));
+            }
             let mut arr = Array3::zeros((rows.len(), t_f, 2));
             for (k, anchor) in rows.iter().enumerate() {
                 if anchor.len() != t_f {
