@@ -264,8 +264,12 @@ impl Predictor {
             .ok_or_else(|| {
                 // ONNX Runtime gives no value for metadata that is not valid UTF-8: tell that apart from none.
                 let key = format!("\"{METADATA_KEY}\"");
+                // As ONNX's protobuf stores a metadata entry's key: field 1, length, the key, then field 2 (value).
                 let raw = std::fs::read(&path).unwrap_or_default();
-                let present = raw.windows(METADATA_KEY.len()).any(|w| w == METADATA_KEY.as_bytes());
+                let mut entry = vec![0x0a, METADATA_KEY.len() as u8];
+                entry.extend_from_slice(METADATA_KEY.as_bytes());
+                entry.push(0x12);
+                let present = raw.windows(entry.len()).any(|w| w == entry.as_slice());
                 DganError::Contract(if present {
                     format!(
                         "{}: its {key} metadata cannot be read (not valid UTF-8, or damaged); export the model again",
