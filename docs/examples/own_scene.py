@@ -88,8 +88,10 @@ def main() -> None:
     # The same scenario streamed tick by tick at 10 Hz through the tracker, logged to rerun.
     import rerun as rr
 
+    import rerun.blueprint as rrb
+
     rec = rr.RecordingStream("dgan-own-scene")
-    rec.save(out / "own_scene.rrd")
+    rec.save(out / "own_scene.rrd", default_blueprint=rrb.Spatial2DView(origin="/dgan", name="dgan (world metres)"))
     tracker = dgan.Tracker(predictor, map=scene_map)
     for (t,), tick in history.sort("time").group_by("time", maintain_order=True):
         tracker.update(

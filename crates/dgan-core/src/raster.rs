@@ -87,31 +87,37 @@ fn add_clipped(pb: &mut PathBuilder, px: &[(f64, f64)], rect: [f64; 4], dash: Op
     let mut down = false;
     for w in px.windows(2) {
         let (a, b) = (w[0], w[1]);
-        let len = (b.0 - a.0).hypot(b.1 - a.1);
-        let point = |t: f64| {
-            let f = if len > 0.0 { t / len } else { 0.0 };
-            ((a.0 + (b.0 - a.0) * f) as f32, (a.1 + (b.1 - a.1) * f) as f32)
-        };
-        let Some((f0, f1)) = clip_segment(a, b, rect) else {
+        // A segment wholly on one side of the rectangle: nothing to draw (most segments of a map, per crop).
+        let outside = a.0.max(b.0) < rect[0]
+            || a.0.min(b.0) > rect[2]
+            || a.1.max(b.1) < rect[1]
+            || a.1.min(b.1) > rect[3];
+        let clipped = if outside { None } else { clip_segment(a, b, rect) };
+        let Some((f0, f1)) = clipped else {
             down = false;
-            s += len;
+            if dash.is_some() {
+                s += (b.0 - a.0).hypot(b.1 - a.1);
+            }
             continue;
         };
-        let (t0, t1) = (f0 * len, f1 * len);
-        if t0 > 0.0 {
+        let at = |f: f64| ((a.0 + (b.0 - a.0) * f) as f32, (a.1 + (b.1 - a.1) * f) as f32);
+        if f0 > 0.0 {
             down = false;
         }
         match dash {
             None => {
                 if !down {
-                    let (u, v) = point(t0);
+                    let (u, v) = at(f0);
                     pb.move_to(u, v);
                 }
-                let (u, v) = point(t1);
+                let (u, v) = at(f1);
                 pb.line_to(u, v);
                 down = true;
             }
             Some((on, period)) => {
+                let len = (b.0 - a.0).hypot(b.1 - a.1);
+                let frac = |t: f64| if len > 0.0 { t / len } else { 0.0 };
+                let (t0, t1) = (f0 * len, f1 * len);
                 let mut t = t0;
                 while t < t1 {
                     let phase = (s + t).rem_euclid(period);
@@ -119,23 +125,23 @@ fn add_clipped(pb: &mut PathBuilder, px: &[(f64, f64)], rect: [f64; 4], dash: Op
                     let end = (t + left.max(1e-3)).min(t1);
                     if painted {
                         if !down {
-                            let (u, v) = point(t);
+                            let (u, v) = at(frac(t));
                             pb.move_to(u, v);
                             down = true;
                         }
-                        let (u, v) = point(end);
+                        let (u, v) = at(frac(end));
                         pb.line_to(u, v);
                     } else {
                         down = false;
                     }
                     t = end;
                 }
+                s += len;
             }
         }
-        if t1 < len {
+        if f1 < 1.0 {
             down = false;
         }
-        s += len;
     }
 }
 
