@@ -88,10 +88,8 @@ fn add_clipped(pb: &mut PathBuilder, px: &[(f64, f64)], rect: [f64; 4], dash: Op
     for w in px.windows(2) {
         let (a, b) = (w[0], w[1]);
         // A segment wholly on one side of the rectangle: nothing to draw (most segments of a map, per crop).
-        let outside = a.0.max(b.0) < rect[0]
-            || a.0.min(b.0) > rect[2]
-            || a.1.max(b.1) < rect[1]
-            || a.1.min(b.1) > rect[3];
+        let outside =
+            a.0.max(b.0) < rect[0] || a.0.min(b.0) > rect[2] || a.1.max(b.1) < rect[1] || a.1.min(b.1) > rect[3];
         let clipped = if outside { None } else { clip_segment(a, b, rect) };
         let Some((f0, f1)) = clipped else {
             down = false;
