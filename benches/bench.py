@@ -140,8 +140,9 @@ def fmt_row(r: dict[str, Any]) -> str:
     return "| " + " | ".join(cells) + " |"
 
 
-def throughput(name: str, n: int, calls: int) -> None:
-    """Predictions per second of one Predictor shared by 1 and 2 threads; and predict_batch against a loop."""
+def throughput(name: str, n: int, calls: int, rounds: int = 5) -> None:
+    """Predictions per second of one Predictor shared by 1 and 2 threads (medians of ``rounds`` alternating
+    rounds)."""
     predictor = dgan.Predictor(name)
     frame = tiled(scene_for(predictor.spec).frame, n)
     predictor.predict(frame)
@@ -159,7 +160,12 @@ def throughput(name: str, n: int, calls: int) -> None:
             t.join()
         return (calls // threads) * threads / (time.perf_counter() - t0)
 
-    one, two = per_second(1), per_second(2)
+    # Alternating rounds, medians: one round of a second or so is at the mercy of the machine's noise.
+    ones, twos = [], []
+    for _ in range(rounds):
+        ones.append(per_second(1))
+        twos.append(per_second(2))
+    one, two = float(np.median(ones)), float(np.median(twos))
     print(f"| {name} | {n} | {one:.0f} | {two:.0f} | {two / one:.2f}× |", flush=True)
 
 

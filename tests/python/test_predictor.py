@@ -266,3 +266,25 @@ def test_execution_providers_and_thread_bounds(tmp_path: Path, monkeypatch: pyte
     (tmp_path / "sdd").mkdir()
     monkeypatch.chdir(tmp_path)
     assert dgan.Predictor("sdd").path.name == "sdd.onnx"
+
+
+def test_eight_threads_with_maps_are_bit_identical_to_serial(zara1_frame: dgan.Frame) -> None:
+    # A map model: concurrent predictions share the cores for drawing crops differently, the crops stay the same.
+    predictor = dgan.Predictor("zara1", sessions=2)
+    frame = zara1_frame.with_map(dgan.scene_map("zara1"))
+    want = predictor.predict(frame)
+    results: list[dgan.Prediction] = []
+
+    def work() -> None:
+        for _ in range(10):
+            results.append(predictor.predict(frame))
+
+    threads = [threading.Thread(target=work) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(results) == 80
+    for r in results:
+        np.testing.assert_array_equal(r.trajectories, want.trajectories)
+        np.testing.assert_array_equal(r.probabilities, want.probabilities)

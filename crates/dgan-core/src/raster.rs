@@ -13,6 +13,7 @@ use crate::transform::AgentPose;
 use ndarray::Array4;
 use rstar::primitives::GeomWithData;
 use rstar::{RTree, AABB};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
 /// An RGB colour.
@@ -334,6 +335,27 @@ impl Canvas<'_> {
     }
 }
 
+/// Predictions in flight in this process: the rasteriser shares the cores among them (two threads predicting at once
+/// on two cores each draw on their own thread instead of both spawning helpers that then compete).
+static IN_FLIGHT: AtomicUsize = AtomicUsize::new(0);
+
+/// Marks a prediction in flight for as long as it lives.
+#[derive(Debug)]
+pub(crate) struct InFlight;
+
+impl InFlight {
+    pub(crate) fn enter() -> Self {
+        IN_FLIGHT.fetch_add(1, Ordering::SeqCst);
+        Self
+    }
+}
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        IN_FLIGHT.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
 /// Crops `(N, 3, H, W)` with values in [0, 1], one per agent, from the frame's map (black where there is none).
 pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Result<Array4<f32>> {
     spec.validate()?;
@@ -369,7 +391,8 @@ pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Resu
     // Scoped threads that end with the call, rather than a pool whose idle workers keep spinning on the cores that
     // ONNX Runtime runs on next (on two cores that cost as much as the parallel drawing saved).
     let per = 3 * h * w;
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(states.len() / 8).max(1);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = (cores / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(states.len() / 8).max(1);
     if threads == 1 {
         for (crop, s) in flat.chunks_mut(per).zip(states) {
             draw(crop, s)?;

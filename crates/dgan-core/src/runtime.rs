@@ -366,6 +366,7 @@ impl Predictor {
     /// Predicts the `modes` most probable modes (at most K) for every agent.
     pub fn predict_modes(&self, frame: &Frame, modes: usize) -> Result<Prediction> {
         check_modes(modes)?;
+        let _in_flight = crate::raster::InFlight::enter();
         let pre = preprocess_within(frame, &self.contract.input, &self.limits)?;
         let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes)?;
         out.pop().ok_or_else(|| DganError::Inference("no prediction for the frame".into()))
@@ -376,6 +377,7 @@ impl Predictor {
     /// Equal to calling [`Predictor::predict_modes`] on each frame, up to float rounding.
     pub fn predict_batch(&self, frames: &[Frame], modes: usize) -> Result<Vec<Prediction>> {
         check_modes(modes)?;
+        let _in_flight = crate::raster::InFlight::enter();
         if frames.is_empty() {
             return Ok(vec![]);
         }
