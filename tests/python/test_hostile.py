@@ -356,7 +356,15 @@ def predictor_cases(tmp: Path) -> list[Case]:
                 dgan.Frame(np.cumsum(np.full((40, 8, 2), 0.4), axis=1) + np.arange(40)[:, None, None] * 50)
             ),
             exc.SceneTooLargeError,
-            "GiB, above the limit",
+            "KiB, above the limit of 97.7 KiB",
+        ),
+        (
+            "a batch beyond the input budget",
+            lambda: dgan.Predictor("zara1", max_input_bytes=10**6).predict_batch(
+                [dgan.Frame(np.cumsum(np.full((30, 8, 2), 0.4), axis=1) + np.arange(30)[:, None, None] * 50)] * 4
+            ),
+            exc.SceneTooLargeError,
+            "the 4 frames joined \\(120 agents\\) need .* MiB",
         ),
     ]
     cases += [(f"Predictor {label}", fn, err, msg) for label, fn, err, msg in frames]

@@ -112,6 +112,18 @@ impl Limits {
     }
 }
 
+/// A byte count for people: `1.4 MiB`, `2.00 GiB`.
+pub(crate) fn human_bytes(bytes: usize) -> String {
+    let b = bytes as f64;
+    if b >= f64::from(1u32 << 30) {
+        format!("{:.2} GiB", b / f64::from(1u32 << 30))
+    } else if b >= f64::from(1u32 << 20) {
+        format!("{:.1} MiB", b / f64::from(1u32 << 20))
+    } else {
+        format!("{:.1} KiB", b / 1024.0)
+    }
+}
+
 /// Builds the network inputs of a frame, within the default [`Limits`].
 pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
     preprocess_within(frame, spec, &Limits::default())
@@ -173,11 +185,11 @@ pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Re
     let bytes = Limits::input_bytes(spec, n, degree);
     if bytes > limits.max_input_bytes {
         return Err(DganError::SceneTooLarge(format!(
-            "the network's inputs for {n} agents (up to {degree} senders each{}) take {:.2} GiB, above the limit of \
-             {:.2} GiB (max_input_bytes of the Predictor); predict fewer agents at once",
+            "the network's inputs for {n} agents (up to {degree} senders each{}) take {}, above the limit of {} \
+             (max_input_bytes of the Predictor); predict fewer agents at once",
             spec.map.as_ref().map_or(String::new(), |m| format!(", map crops of {}×{} px", m.height_px, m.width_px)),
-            bytes as f64 / f64::from(1u32 << 30),
-            limits.max_input_bytes as f64 / f64::from(1u32 << 30)
+            human_bytes(bytes),
+            human_bytes(limits.max_input_bytes)
         )));
     }
     let e = n + 2 * edges.len();

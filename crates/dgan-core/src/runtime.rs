@@ -383,6 +383,19 @@ impl Predictor {
         }
         let spec = &self.contract.input;
         let pres = frames.par_iter().map(|f| preprocess_within(f, spec, &self.limits)).collect::<Result<Vec<_>>>()?;
+        // The joined graph: all the agents, each padded to the largest degree of any frame.
+        let agents: usize = pres.iter().map(|p| p.poses.len()).sum();
+        let degree = pres.iter().filter_map(|p| p.inputs.neighbors.as_ref().map(|nb| nb.index.ncols())).max();
+        let bytes = Limits::input_bytes(spec, agents, degree.unwrap_or(0));
+        if frames.len() > 1 && bytes > self.limits.max_input_bytes {
+            return Err(DganError::SceneTooLarge(format!(
+                "the {} frames joined ({agents} agents) need {} of network inputs, above the limit of {} \
+                 (max_input_bytes of the Predictor); predict them in smaller batches",
+                frames.len(),
+                crate::preprocess::human_bytes(bytes),
+                crate::preprocess::human_bytes(self.limits.max_input_bytes)
+            )));
+        }
         self.run_and_decode(frames, pres, modes)
     }
 
