@@ -85,16 +85,34 @@ impl RasterMap {
         }
         let (u0, v0) = (u.floor(), v.floor());
         let (fu, fv) = ((u - u0) as f32, (v - v0) as f32);
+        let (r0, c0) = (v0 as i64, u0 as i64);
         let mut out = [0.0f32; 3];
+        // The four taps in the same order and arithmetic as ever; reading the row-major image directly where all
+        // four lie inside it (almost every pixel of a crop), with bounds checks only along the image's edges.
+        let data = self.image.as_slice();
+        let inside = r0 >= 0 && c0 >= 0 && r0 + 1 < h as i64 && c0 + 1 < w as i64;
         for (dv, wv) in [(0i64, 1.0 - fv), (1, fv)] {
             for (du, wu) in [(0i64, 1.0 - fu), (1, fu)] {
-                let (row, col) = (v0 as i64 + dv, u0 as i64 + du);
+                let (row, col) = (r0 + dv, c0 + du);
                 let wgt = wu * wv;
-                if wgt == 0.0 || row < 0 || col < 0 || row >= h as i64 || col >= w as i64 {
+                if wgt == 0.0 {
                     continue;
                 }
-                for (ch, o) in out.iter_mut().enumerate() {
-                    *o += wgt * f32::from(self.image[[row as usize, col as usize, ch]]);
+                match data {
+                    Some(data) if inside => {
+                        let k = (row as usize * w + col as usize) * 3;
+                        for (ch, o) in out.iter_mut().enumerate() {
+                            *o += wgt * f32::from(data[k + ch]);
+                        }
+                    }
+                    _ => {
+                        if row < 0 || col < 0 || row >= h as i64 || col >= w as i64 {
+                            continue;
+                        }
+                        for (ch, o) in out.iter_mut().enumerate() {
+                            *o += wgt * f32::from(self.image[[row as usize, col as usize, ch]]);
+                        }
+                    }
                 }
             }
         }
