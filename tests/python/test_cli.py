@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-from conftest import DATA, ROOT
+from conftest import DATA, ROOT, shared_data
 
 import dgan
 from dgan.cli import main
@@ -73,10 +73,48 @@ def test_predict_with_a_map_and_a_table_out(tmp_path: Path, capsys: pytest.Captu
     args = ["predict", "zara1", str(SCENE), "--time", "5500", "--json", "--modes", "1"]
     assert main([*args, "--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(scene / "H.txt")]) == 0
     assert len(json.loads(capsys.readouterr().out)["agents"]) == 18
-    vmap = tmp_path / "map.json"
-    dgan.VectorMap([("road_edge", [[0.0, 0.0], [20.0, 0.0]])]).to_json(vmap)
-    assert main(["predict", "hdmap", str(tmp_path / "scene.csv"), "--map", str(vmap)]) == 2  # no such scene
-    assert "cannot read scene" in capsys.readouterr().err
+
+
+def test_predict_an_argoverse_scenario_with_its_vector_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 10 Hz Argoverse 2 scenario (never trained on) as a parquet table, its map archive as --map, the 5 Hz hdmap
+    model: resampled, predicted with the map, and the same map through dgan's own vector-map JSON."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    from dgan.datasets.hdmaps import AV2_SCENARIO_CLASSES, av2_map
+
+    folder = next((shared_data("argoverse2") / "argoverse2" / "motion_forecasting").iterdir())
+    src = pq.read_table(next(folder.glob("scenario_*.parquet")))
+    keep = pc.is_in(src.column("object_type"), value_set=pa.array(list(AV2_SCENARIO_CLASSES)))
+    src = src.filter(keep)
+    table = pa.table(
+        {
+            "agent_id": src.column("track_id"),
+            "time": pc.multiply(src.column("timestep").cast(pa.float64()), 0.1),
+            "x": src.column("position_x"),
+            "y": src.column("position_y"),
+            "class": pa.array([AV2_SCENARIO_CLASSES[t] for t in src.column("object_type").to_pylist()]),
+        }
+    )
+    scene = tmp_path / "scenario.parquet"
+    pq.write_table(table, scene)
+    archive = next(folder.glob("log_map_archive_*.json"))
+    outs = []
+    own = tmp_path / "map.json"
+    dgan.VectorMap(av2_map(archive)).to_json(own)
+    for m in (archive, own):
+        assert main(["predict", "hdmap", str(scene), "--time", "4.9", "--map", str(m), "--json", "--modes", "2"]) == 0
+        outs.append(json.loads(capsys.readouterr().out))
+    assert outs[0]["dt_s"] == 0.2
+    assert len(outs[0]["agents"]) >= 10
+    assert isinstance(outs[0]["agents"][0]["id"], str)
+    assert outs[0] == outs[1]
+    # Without --map the optional-map model still predicts, and says so; with another map it predicts differently.
+    assert main(["predict", "hdmap", str(scene), "--time", "4.9", "--json", "--modes", "2"]) == 0
+    captured = capsys.readouterr()
+    assert "no --map given" in captured.err
+    assert json.loads(captured.out)["agents"] != outs[0]["agents"]
 
 
 def test_models_lists_every_bundled_model(capsys: pytest.CaptureFixture[str]) -> None:
