@@ -302,7 +302,7 @@ impl Canvas<'_> {
                 let rgb = map.project(world).map_or([0.0; 3], |uv| map.sample(uv));
                 let k = (row * w + col) * 4;
                 for ch in 0..3 {
-                    data[k + ch] = rgb[ch].round().clamp(0.0, 255.0) as u8;
+                    data[k + ch] = round_u8(rgb[ch]);
                 }
                 data[k + 3] = 255;
             }
@@ -333,6 +333,21 @@ impl Canvas<'_> {
             b[k] = f32::from(px[2]) / 255.0;
         }
     }
+}
+
+/// `x.round().clamp(0.0, 255.0) as u8` for the non-negative, finite values a bilinear sample of a u8 image gives,
+/// exactly (rounding half away from zero), without a call to libm's `roundf` per channel and pixel.
+#[inline]
+fn round_u8(x: f32) -> u8 {
+    if x.is_nan() || x <= 0.0 {
+        return 0; // also NaN, as `as u8` would give
+    }
+    if x >= 255.0 {
+        return 255;
+    }
+    let t = x as u32; // truncates; the fraction x - t is exact below 2²³
+    let up = u32::from(x - t as f32 >= 0.5);
+    (t + up) as u8
 }
 
 /// Predictions in flight in this process: the rasteriser shares the cores among them (two threads predicting at once
@@ -547,5 +562,17 @@ mod tests {
         // The road edge at x = 95 (10 px left of the agent) is yellow; the polygon covers x > 104 above y = 55.
         assert_eq!(rgb(&img, 25, 10), [1.0, 1.0, 0.0]);
         assert!((rgb(&img, 5, 35)[0] - 1.0).abs() < 1e-6); // obstacle pink: (255, 105, 180)
+    }
+
+    #[test]
+    fn exact_rounding_matches_the_library() {
+        let mut x = 0.0f32;
+        while x < 256.0 {
+            assert_eq!(round_u8(x), x.round().clamp(0.0, 255.0) as u8, "{x}");
+            x = f32::from_bits(x.to_bits() + 997);
+        }
+        for x in [0.5f32, 1.5, 254.5, 0.49999997, 255.49, 300.0, -3.0, f32::NAN] {
+            assert_eq!(round_u8(x), x.round().clamp(0.0, 255.0) as u8, "{x}");
+        }
     }
 }
