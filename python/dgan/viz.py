@@ -61,6 +61,18 @@ def render_map(
     return image, extent
 
 
+def _bounds(point_sets: list[Arr], margin_m: float) -> tuple[Arr, Arr]:
+    """The corners ``(lo, hi)`` of the box around every point of ``point_sets``, widened by ``margin_m``."""
+    points = [p for p in point_sets if len(p)]
+    every = np.vstack(points) if points else np.zeros((1, 2))
+    return every.min(axis=0) - margin_m, every.max(axis=0) + margin_m
+
+
+def _map_under(scene_map: RasterMap | VectorMap, lo: Arr, hi: Arr) -> tuple[Arr, tuple[float, float, float, float]]:
+    """:func:`render_map` of the square around the box ``(lo, hi)``."""
+    return render_map(scene_map, (lo + hi) / 2, float(max(hi - lo)))
+
+
 def plot(
     frame: Frame,
     prediction: Prediction,
@@ -118,8 +130,7 @@ def plot(
     pts = [frame.positions[i][frame.mask[i]] for i in range(n)]
     drawn = [*pts, *prediction.trajectories[:, :m].reshape(-1, t_f, 2)]
     drawn += [t[np.isfinite(t).all(axis=1)] for t in truth if t is not None]
-    every = np.vstack([p for p in drawn if len(p)]) if n else np.zeros((1, 2))
-    lo, hi = every.min(axis=0) - margin_m, every.max(axis=0) + margin_m
+    lo, hi = _bounds(drawn, margin_m)
     if ax is None:  # sized to the scene's aspect, 8 inches high or 12 wide at most
         aspect = float(np.clip((hi[0] - lo[0]) / (hi[1] - lo[1]), 0.3, 3.0))
         w, h = (12.0, 12.0 / aspect) if aspect > 1.4 else (8.0 * aspect, 8.0)
@@ -128,9 +139,7 @@ def plot(
         fig = ax.figure
     scene_map = frame.map if map is None else map
     if scene_map is not None:
-        centre = (lo + hi) / 2
-        side = float(max(hi - lo))
-        image, extent = render_map(scene_map, centre, side)
+        image, extent = _map_under(scene_map, lo, hi)
         ax.imshow(image, extent=extent, origin="upper", interpolation="nearest", zorder=0)
     else:
         ax.set_facecolor("0.96")
@@ -235,9 +244,8 @@ def log_rerun(
         rec.log(f"{entity}/ground_truth", rr.LineStrips2D(truth, colors=(255, 0, 0), radii=0.05))
     scene_map = frame.map if map is None else map
     if scene_map is not None and n:
-        every = np.vstack([*hist, prediction.trajectories.reshape(-1, 2)])
-        lo, hi = every.min(axis=0) - 5.0, every.max(axis=0) + 5.0
-        image, (left, right, _bottom, top) = render_map(scene_map, (lo + hi) / 2, float(max(hi - lo)))
+        lo, hi = _bounds([*hist, prediction.trajectories.reshape(-1, 2)], 5.0)
+        image, (left, right, _bottom, top) = _map_under(scene_map, lo, hi)
         res = (right - left) / image.shape[1]
         # Pixel (u, v) → world (left + u·res, top − v·res); the image sits under the agents.
         rec.log(

@@ -92,6 +92,12 @@ impl TimeBase {
         Ok(Self { t_obs, dt_s, max_gap_s })
     }
 
+    /// The earliest detection time a frame at `now_s` can use: the oldest grid time less the longest gap bridged.
+    /// [`frame_at`] reads from here and [`Tracker`] forgets what is older, so the two agree.
+    fn window_start(&self, now_s: f64) -> f64 {
+        self.time_of(now_s, 0) - self.max_gap_s - self.eps()
+    }
+
     /// The grid time of step `k` (0 = oldest) for the current time `now_s`.
     fn time_of(&self, now_s: f64, k: usize) -> f64 {
         now_s - (self.t_obs - 1 - k) as f64 * self.dt_s
@@ -148,7 +154,7 @@ pub fn frame_at(
         return Err(DganError::TimeBase(format!("the current time must be finite, got {now_s}")));
     }
     let eps = base.eps();
-    let window_start = base.time_of(now_s, 0) - base.max_gap_s - eps;
+    let window_start = base.window_start(now_s);
     let mut windows: Vec<(i64, &[Detection])> = Vec::with_capacity(tracks.len());
     for (id, track) in tracks {
         if let Some(w) =
@@ -302,7 +308,7 @@ impl Tracker {
     /// Drops what no later frame can use: detections before the window (keeping one before it for interpolation),
     /// and agents with nothing left.
     fn forget(&mut self, now_s: f64) {
-        let start = self.base.time_of(now_s, 0) - self.base.max_gap_s - self.base.eps();
+        let start = self.base.window_start(now_s);
         self.tracks.retain(|_, track| {
             let lo = track.partition_point(|d| d.time_s < start);
             track.drain(..lo);

@@ -21,30 +21,34 @@ struct Columns<'py> {
     vys: Option<PyReadonlyArray1<'py, f64>>,
 }
 
+/// An optional column of a dict: missing and None are both absent.
+fn item<'py>(d: &Bound<'py, PyDict>, k: &str) -> PyResult<Option<Bound<'py, PyAny>>> {
+    Ok(d.get_item(k)?.filter(|v| !v.is_none()))
+}
+
+/// An optional float64 column of a dict.
+fn floats<'py>(d: &Bound<'py, PyDict>, k: &str) -> PyResult<Option<PyReadonlyArray1<'py, f64>>> {
+    item(d, k)?.map(|v| v.extract().map_err(|_| invalid_frame(format!("{k} must be a 1-D float64 array")))).transpose()
+}
+
+/// A required float64 column of a dict.
+fn required_floats<'py>(d: &Bound<'py, PyDict>, k: &str) -> PyResult<PyReadonlyArray1<'py, f64>> {
+    floats(d, k)?.ok_or_else(|| invalid_frame(format!("the column {k} is required")))
+}
+
 impl<'py> Columns<'py> {
     fn from_dict(d: &Bound<'py, PyDict>) -> PyResult<Self> {
-        let get = |k: &str| -> PyResult<Option<Bound<'py, PyAny>>> { Ok(d.get_item(k)?.filter(|v| !v.is_none())) };
-        let required = |k: &str| -> PyResult<Bound<'py, PyAny>> {
-            get(k)?.ok_or_else(|| invalid_frame(format!("the column {k} is required")))
-        };
-        let floats = |k: &str| -> PyResult<Option<PyReadonlyArray1<'py, f64>>> {
-            get(k)?
-                .map(|v| v.extract().map_err(|_| invalid_frame(format!("{k} must be a 1-D float64 array"))))
-                .transpose()
-        };
-        let need = |k: &str| -> PyResult<PyReadonlyArray1<'py, f64>> {
-            floats(k)?.ok_or_else(|| invalid_frame(format!("the column {k} is required")))
-        };
+        let ids = item(d, "ids")?.ok_or_else(|| invalid_frame("the column ids is required"))?;
         Ok(Self {
-            ids: required("ids")?.extract().map_err(|_| invalid_frame("ids must be a 1-D int64 array"))?,
-            xs: need("xs")?,
-            ys: need("ys")?,
-            classes: get("classes")?,
-            headings: floats("headings")?,
-            lengths: floats("lengths")?,
-            widths: floats("widths")?,
-            vxs: floats("vxs")?,
-            vys: floats("vys")?,
+            ids: ids.extract().map_err(|_| invalid_frame("ids must be a 1-D int64 array"))?,
+            xs: required_floats(d, "xs")?,
+            ys: required_floats(d, "ys")?,
+            classes: item(d, "classes")?,
+            headings: floats(d, "headings")?,
+            lengths: floats(d, "lengths")?,
+            widths: floats(d, "widths")?,
+            vxs: floats(d, "vxs")?,
+            vys: floats(d, "vys")?,
         })
     }
 }
@@ -54,7 +58,7 @@ impl Columns<'_> {
     fn detections(&self, times: &[f64]) -> PyResult<Vec<(i64, Detection)>> {
         let ids = self.ids.as_slice()?;
         let n = ids.len();
-        let column = |name: &str, a: &Option<PyReadonlyArray1<'_, f64>>| -> PyResult<Vec<f64>> {
+        let column = |name: &str, a: Option<&PyReadonlyArray1<'_, f64>>| -> PyResult<Vec<f64>> {
             match a {
                 Some(a) => {
                     let v = a.as_slice()?.to_vec();
@@ -66,10 +70,10 @@ impl Columns<'_> {
                 None => Ok(vec![f64::NAN; n]),
             }
         };
-        let (xs, ys) = (column("x", &Some(self.xs.clone()))?, column("y", &Some(self.ys.clone()))?);
-        let (hs, ls, ws) =
-            (column("heading", &self.headings)?, column("length", &self.lengths)?, column("width", &self.widths)?);
-        let (vx, vy) = (column("vx", &self.vxs)?, column("vy", &self.vys)?);
+        let (xs, ys) = (column("x", Some(&self.xs))?, column("y", Some(&self.ys))?);
+        let (hs, ls) = (column("heading", self.headings.as_ref())?, column("length", self.lengths.as_ref())?);
+        let ws = column("width", self.widths.as_ref())?;
+        let (vx, vy) = (column("vx", self.vxs.as_ref())?, column("vy", self.vys.as_ref())?);
         if times.len() != n {
             return Err(invalid_frame(format!("{} times given for {n} rows", times.len())));
         }
@@ -120,11 +124,7 @@ pub fn frame_from_rows<'py>(
 ) -> PyResult<PyFrame> {
     let default_class = parse_default_class(&default_class)?;
     let base = time_base(t_obs, dt, max_gap)?;
-    let times: PyReadonlyArray1<'py, f64> = columns
-        .get_item("times")?
-        .ok_or_else(|| invalid_frame("the column times is required"))?
-        .extract()
-        .map_err(|_| invalid_frame("times must be a 1-D float64 array"))?;
+    let times = required_floats(columns, "times")?;
     let rows = Columns::from_dict(columns)?.detections(times.as_slice()?)?;
     let frame = py
         .detach(|| {
