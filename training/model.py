@@ -107,37 +107,52 @@ class GATLayer(nn.Module):
         out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
         return out
 
-    def forward_padded(self, h: Tensor, index: Tensor, mask: Tensor, features: Tensor) -> Tensor:
-        """The same attention over padded senders ``index (N, D)`` with ``mask (N, D)`` and ``features (N, D, 6)``.
+    def forward_padded(self, h: Tensor, index: Tensor, bias: Tensor, features: Tensor) -> Tensor:
+        """The same attention over padded senders ``index (N, D)`` with ``features (N, D, 6)``; ``bias (N, 1, D)`` is
+        0 for a real sender and -10⁴ for padding (:func:`padding_bias`, computed once for every layer).
 
-        Rearranged for speed, exactly equal in arithmetic: the edge MLP's second linear layer W2 is applied after the
-        sum over senders rather than to every edge (Σ α (W2 e + b2) = W2 (Σ α e) + b2 Σ α), and its contribution to
-        the score is the hidden edge vector times W2ᵀ a_send, so no (N·D × dim × dim) product remains.
+        Arranged for ONNX Runtime, equal in arithmetic (every agent hears at least itself, so each softmax row has a
+        real sender; the edge-list form's 1e-9 in the denominator is the only difference):
+        - scores in ``(N, H, D)``, normalised by one Softmax over the senders;
+        - receiver and sender scores from one matrix product with W folded into a_recv and a_send;
+        - the edge MLP's second linear layer W2 applied after the sum over senders (Σ α (W2 e + b2) = W2 (Σ α e) +
+          b2, as Σ α = 1), as one product with the block-diagonal of the heads' W2, and its part of the score as the
+          hidden edge vector times W2ᵀ a_send;
+        - the messages of the senders' nodes as one batched product α (N, H, D) @ (N, D, dim), of which each head
+          keeps its own dh columns.
+        The weights-only products are constants that the exporter folds.
         """
         n = index.shape[0]
         heads, dh = self.heads, self.dh
         lin1, lin2 = self.we[0], self.we[2]
         assert isinstance(lin1, nn.Linear)
         assert isinstance(lin2, nn.Linear)
-        wh = self.w(h).view(n, heads, dh)
-        hidden = torch.relu(lin1(features))  # (N, D, dim)
+        w_t = self.w.weight.t()  # (dim, dim)
+        w_heads = w_t.reshape(-1, heads, dh)
+        a_both = torch.cat([(w_heads * self.a_recv).sum(-1), (w_heads * self.a_send).sum(-1)], dim=1)  # (dim, 2H)
         w2 = lin2.weight.view(heads, dh, -1)  # (H, dh, dim)
-        b2 = lin2.bias.view(heads, dh)
         v = (w2 * self.a_send.unsqueeze(-1)).sum(1).t()  # (dim, H)
-        score = (
-            (wh * self.a_recv).sum(-1).unsqueeze(1)
-            + (wh * self.a_send).sum(-1)[index]
-            + hidden @ v
-            + (b2 * self.a_send).sum(-1)
-        )  # (N, D, H)
-        weight = torch.exp(torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0)) * mask.unsqueeze(-1)
-        alpha = weight / (weight.sum(dim=1, keepdim=True) + 1e-9)  # (N, D, H)
-        from_nodes = (alpha.unsqueeze(-1) * wh[index]).sum(dim=1)  # (N, H, dh)
-        from_edges = alpha.transpose(1, 2) @ hidden  # (N, H, dim)
-        edges_out = (from_edges.transpose(0, 1) @ w2.transpose(1, 2)).transpose(0, 1)  # (N, H, dh)
-        agg = from_nodes + edges_out + alpha.sum(dim=1).unsqueeze(-1) * b2
-        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
+        c = (lin2.bias.view(heads, dh) * self.a_send).sum(-1)  # (H,)
+        eye = torch.eye(heads, dtype=h.dtype)
+        # The block-diagonal (H·dim, H·dh) of the heads' W2ᵀ (torch.block_diag has no ONNX export).
+        w2_blocks = (w2.transpose(1, 2).unsqueeze(2) * eye.view(heads, 1, heads, 1)).reshape(-1, heads * dh)
+        own = eye.repeat_interleave(dh, dim=1)  # (H, dim): head k keeps its own dh columns
+        wh = h @ w_t  # (N, dim)
+        s = h @ a_both  # (N, 2H)
+        hidden = torch.relu(lin1(features))  # (N, D, dim)
+        score = (s[:, heads:][index] + hidden @ v).transpose(1, 2) + (s[:, :heads] + c).unsqueeze(-1)  # (N, H, D)
+        score = torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0) + bias
+        alpha = torch.softmax(score, dim=-1)  # (N, H, D)
+        from_nodes = ((alpha @ wh[index]) * own).sum(1)  # (N, dim)
+        from_edges = (alpha @ hidden).reshape(n, -1) @ w2_blocks  # (N, dim)
+        agg = from_nodes + from_edges + lin2.bias
+        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg)))
         return out
+
+
+def padding_bias(mask: Tensor) -> Tensor:
+    """``(N, D)`` sender mask → the ``(N, 1, D)`` additive score bias of :meth:`GATLayer.forward_padded`."""
+    return ((mask - 1.0) * 1e4).unsqueeze(1)
 
 
 class DGAN(nn.Module):
@@ -243,9 +258,10 @@ class DGAN(nn.Module):
         if not self.cfg.use_edge_features:
             neighbor_features = neighbor_features * 0.0
         p = v
+        bias = padding_bias(neighbor_mask)
         for layer in self.gat:
             assert isinstance(layer, GATLayer)
-            p = layer.forward_padded(p, neighbor_index, neighbor_mask, neighbor_features)
+            p = layer.forward_padded(p, neighbor_index, bias, neighbor_features)
         if not self.cfg.use_gat:
             unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
             p = unused * 0.0
