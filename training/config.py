@@ -28,6 +28,8 @@ class DataConfig:
     # "constant_velocity"; prior_window_s > 0 estimates its velocity over that many seconds of observed positions.
     prior: str = "none"
     prior_window_s: float = 0.0
+    # Where agents' headings come from (dgan.InputSpec.heading): "measured", "motion_when_moving" or "motion".
+    heading: str = "measured"
 
 
 @dataclass(frozen=True)

@@ -236,7 +236,7 @@ def cached_windows(
     ``cache_dir`` by content."""
     files = source_files(dataset, data_root, split, fold)
     key = hashlib.sha256(
-        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v6"]).encode()
+        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v7"]).encode()
     ).hexdigest()[:16]
     path = cache_dir / f"{dataset}{'_' + fold if fold else ''}_{split}_{key}.npz"
     if path.is_file():

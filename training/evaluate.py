@@ -75,9 +75,15 @@ def summarise(per: dict[str, np.ndarray], sel: np.ndarray) -> dict[str, Any]:
 
 
 def evaluate(
-    predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str = "", with_map: bool = True
+    predictor: dgan.Predictor,
+    dataset: str,
+    data_root: Path,
+    fold: str = "",
+    with_map: bool = True,
+    split: str = "test",
 ) -> dict[str, Any]:
-    """Per-agent metrics of the model and of constant velocity on a test split, averaged overall (flat keys), per
+    """Per-agent metrics of the model and of constant velocity on a split (``"test"``; ``"val"`` for model
+    selection), averaged overall (flat keys), per
     class (``by_class``) and per label (``by_label``), with window and agent counts. ``with_map=False`` runs a map
     model on frames without their map (a model whose map is not optional then raises ``MapRequiredError``)."""
     info = DATASETS[dataset]
@@ -93,7 +99,7 @@ def evaluate(
     windows = 0
     model_classes = list(predictor.classes)
     use_map = with_map and spec.map is not None
-    for rec in recordings(dataset, data_root, "test", fold, with_map=use_map):
+    for rec in recordings(dataset, data_root, split, fold, with_map=use_map):
         for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
             windows += 1
             pred = predictor.predict(w.frame(info, spec.t_obs, with_map=use_map))
@@ -168,10 +174,11 @@ def main() -> None:
     ap.add_argument("--scene", default="", help="the held-out ETH/UCY scene (ethucy only)")
     ap.add_argument("--data-root", default="../shared/data")
     ap.add_argument("--json", type=Path, help="also write the metrics here")
+    ap.add_argument("--split", default="test", choices=["val", "test"], help="val: for choosing models and settings")
     a = ap.parse_args()
     if a.dataset == "ethucy" and not a.scene:
         ap.error("--scene is required for ethucy")
-    res = evaluate(dgan.Predictor(a.model), a.dataset, Path(a.data_root).expanduser(), a.scene)
+    res = evaluate(dgan.Predictor(a.model), a.dataset, Path(a.data_root).expanduser(), a.scene, split=a.split)
     if a.json:
         a.json.write_text(json.dumps(res, indent=2))
     print(json.dumps({k: v for k, v in res.items() if k != "calibration"}, indent=2))

@@ -61,7 +61,7 @@ def contract(
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
-        contract_version=4,
+        contract_version=_dgan.CONTRACT_VERSION,
         units="m",
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
         temperature=round(float(temperature), 6),

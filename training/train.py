@@ -58,6 +58,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
         attention_lambda=0.5,
         map=map_spec,
         prior=dgan.PriorSpec(d.prior, d.prior_window_s),
+        heading=d.heading,
     )
 
 

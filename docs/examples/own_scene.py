@@ -87,7 +87,6 @@ def main() -> None:
 
     # The same scenario streamed tick by tick at 10 Hz through the tracker, logged to rerun.
     import rerun as rr
-
     import rerun.blueprint as rrb
 
     rec = rr.RecordingStream("dgan-own-scene")

@@ -7,6 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
+    "CONTRACT_VERSION",
     "Frame",
     "Predictor",
     "RasterMap",
@@ -26,6 +27,8 @@ __all__ = [
 ]
 
 __version__: str
+#: The model contract version the exporter writes (``dgan_core::contract::CONTRACT_VERSION``).
+CONTRACT_VERSION: int
 
 @final
 class Frame:

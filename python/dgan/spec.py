@@ -61,6 +61,11 @@ class InputSpec:
     #: How the attention graph reaches the network: ``"edge_list"`` (``edge_index``, ``edge_features``; contracts 1
     #: and 2) or ``"padded"`` (``neighbor_index``, ``neighbor_mask``, ``neighbor_features``; contract 3).
     graph: str = "edge_list"
+    #: Where each agent's heading (the orientation of its agent-centric frame) comes from (contract 5):
+    #: ``"measured"``, the frame's headings where given, else the direction of motion (contracts 1–4);
+    #: ``"motion_when_moving"``, the direction of motion for agents moving at least 1 m/s and the measured heading
+    #: only for slower ones; ``"motion"``, measured headings ignored.
+    heading: str = "measured"
 
     def __post_init__(self) -> None:
         if isinstance(self.classes, str) or not hasattr(self.classes, "__iter__"):
@@ -92,6 +97,7 @@ class InputSpec:
             map=None if m is None else MapSpec(**m),
             prior=PriorSpec(**d.get("prior", {})),
             graph=str(d.get("graph", "edge_list")),
+            heading=str(d.get("heading", "measured")),
         )
 
     @property

@@ -5,17 +5,18 @@ use crate::class::AgentClass;
 use crate::decode::Anchors;
 use crate::error::{DganError, Result};
 use crate::prior::PriorSpec;
-use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES};
+use crate::spec::{GraphLayout, HeadingSource, InputSpec, EDGE_FEATURES};
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// The contract version the exporter writes. Version 2 adds the kinematic prior, optional maps (`map_present`)
-/// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph.
-pub const CONTRACT_VERSION: u32 = 4;
+/// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph; version 4 the
+/// sealed weights (`weights_sha256`); version 5 where headings come from (`heading`).
+pub const CONTRACT_VERSION: u32 = 5;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 4] = [1, 2, 3, 4];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 5] = [1, 2, 3, 4, 5];
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
 pub const MAX_ANCHORS_PER_CLASS: usize = 1024;
 
@@ -190,6 +191,11 @@ impl ModelContract {
         if self.contract_version < 3 && self.input.graph != GraphLayout::EdgeList {
             return Err(DganError::Contract(
                 "graph = \"padded\" is a contract-3 key; versions 1 and 2 take an edge list".into(),
+            ));
+        }
+        if self.contract_version < 5 && self.input.heading != HeadingSource::Measured {
+            return Err(DganError::Contract(
+                "heading is a contract-5 key; versions 1 to 4 take measured headings".into(),
             ));
         }
         match (self.contract_version >= 4, &self.weights_sha256) {
@@ -394,12 +400,24 @@ mod tests {
         // Version 1: no prior, temperature 1.
         let v1 = ModelContract::from_json(&json()).unwrap();
         assert_eq!((v1.input.prior, v1.temperature), (PriorSpec::NONE, 1.0));
+        assert_eq!(v1.input.heading, HeadingSource::Measured);
+        // Version 5 says where headings come from.
+        let v5 = v3.replace("\"contract_version\": 3", "\"contract_version\": 5").replace(
+            "\"temperature\"",
+            &format!(
+                "\"weights_sha256\": \"{}\", \"heading\": \"motion_when_moving\", \"temperature\"",
+                "0".repeat(64)
+            ),
+        );
+        assert_eq!(ModelContract::from_json(&v5).unwrap().input.heading, HeadingSource::MotionWhenMoving);
     }
 
     #[test]
     fn rejects_broken_contracts() {
         let cases = [
             json().replace("\"contract_version\": 1", "\"contract_version\": 4"),
+            // heading is a contract-5 key
+            json().replace("\"map\": null", "\"map\": null, \"heading\": \"motion\""),
             json().replace("\"map\": null", "\"map\": null, \"graph\": \"padded\""),
             json().replace("\"map\": null", "\"map\": null, \"temperature\": 2.0"),
             json()

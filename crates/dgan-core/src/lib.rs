@@ -57,4 +57,4 @@ pub use prior::{PriorKind, PriorSpec};
 pub use runtime::{
     available_execution_providers, init_onnxruntime, ExecutionProvider, Prediction, Predictor, PredictorOptions,
 };
-pub use spec::{GraphLayout, InputSpec, MapSpec};
+pub use spec::{GraphLayout, HeadingSource, InputSpec, MapSpec};

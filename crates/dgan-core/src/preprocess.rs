@@ -6,7 +6,7 @@ use crate::frame::Frame;
 use crate::graph::{attention_radius, attention_zone_edges_within};
 use crate::raster::rasterize;
 use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
-use crate::state::{traffic_states, TrafficState};
+use crate::state::{traffic_states_with, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
 use ndarray::{Array1, Array2, Array3, Array4};
 
@@ -142,7 +142,7 @@ pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Re
         )));
     }
     let class_idx: Vec<usize> = frame.classes().iter().map(|c| spec.class_index(*c)).collect::<Result<_>>()?;
-    let states = traffic_states(frame, spec.dt_s);
+    let states = traffic_states_with(frame, spec.dt_s, spec.heading);
     let poses: Vec<AgentPose> = states.iter().map(TrafficState::pose).collect();
 
     let mut trajectory = Array3::<f32>::zeros((n, spec.t_obs, 2));
@@ -257,6 +257,7 @@ mod tests {
     use super::*;
     use crate::class::AgentClass;
     use crate::prior::{PriorKind, PriorSpec};
+    use crate::spec::HeadingSource;
     use crate::spec::MapSpec;
     use ndarray::Array3;
 
@@ -282,6 +283,7 @@ mod tests {
             }),
             prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.0 },
             graph: GraphLayout::Padded,
+            heading: HeadingSource::Measured,
         }
     }
 

@@ -4,6 +4,7 @@
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
 use crate::prior::PriorSpec;
+pub use crate::state::HeadingSource;
 use serde::{Deserialize, Serialize};
 
 /// The agent-centric map crop each agent's map branch sees.
@@ -98,6 +99,9 @@ pub struct InputSpec {
     /// How the attention graph reaches the network (contract 3 adds the padded layout).
     #[serde(default)]
     pub graph: GraphLayout,
+    /// Where each agent's heading comes from (contract 5; older models take measured headings).
+    #[serde(default)]
+    pub heading: HeadingSource,
 }
 
 /// How the attention-zone graph is given to the network.
@@ -192,6 +196,7 @@ mod tests {
             }),
             prior: PriorSpec::NONE,
             graph: GraphLayout::EdgeList,
+            heading: HeadingSource::Measured,
         }
     }
 

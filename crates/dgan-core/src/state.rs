@@ -2,9 +2,33 @@
 
 use crate::frame::Frame;
 use crate::transform::{wrap_angle, AgentPose};
+use serde::{Deserialize, Serialize};
 
 /// Below this speed (m/s) the direction of motion is too noisy to define a heading.
 pub const MIN_MOVING_SPEED_MPS: f64 = 0.2;
+
+/// From this speed (m/s) up, [`HeadingSource::MotionWhenMoving`] takes the direction of motion over a measured
+/// heading: at 2 Hz an agent this fast has moved 0.5 m between the last two steps.
+pub const MOTION_HEADING_MIN_SPEED_MPS: f64 = 1.0;
+
+/// Where the heading of each agent's frame (its agent-centric frame, the crops, the neighbours' relative headings)
+/// comes from (`InputSpec::heading`, contract 5).
+///
+/// Measured headings follow conventions that differ between sources and even between recordings of one source
+/// (ApolloScape's heading column agrees with the direction of motion in some recordings and is reversed, mirrored or
+/// turned by 90° in others), and a heading off by 180° turns the agent's frame around.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadingSource {
+    /// The frame's measured heading where it has one, else the direction of motion (contracts 1–4).
+    #[default]
+    Measured,
+    /// The direction of motion for agents moving at least [`MOTION_HEADING_MIN_SPEED_MPS`]; the measured heading,
+    /// where there is one, only for slower agents.
+    MotionWhenMoving,
+    /// The direction of motion (else of the observed displacement, else 0), measured headings ignored.
+    Motion,
+}
 
 /// One agent's state at t_obs, in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -39,8 +63,14 @@ fn finite_diff(a: [f64; 2], b: [f64; 2], dt: f64) -> [f64; 2] {
     [(b[0] - a[0]) / dt, (b[1] - a[1]) / dt]
 }
 
-/// The traffic state of every agent of a frame whose steps are `dt_s` seconds apart.
+/// The traffic state of every agent of a frame whose steps are `dt_s` seconds apart, headings as measured
+/// ([`HeadingSource::Measured`]).
 pub fn traffic_states(frame: &Frame, dt_s: f64) -> Vec<TrafficState> {
+    traffic_states_with(frame, dt_s, HeadingSource::Measured)
+}
+
+/// [`traffic_states`] with the headings taken from `source`.
+pub fn traffic_states_with(frame: &Frame, dt_s: f64, source: HeadingSource) -> Vec<TrafficState> {
     let pos = frame.positions();
     let mask = frame.mask();
     (0..frame.len())
@@ -68,7 +98,7 @@ pub fn traffic_states(frame: &Frame, dt_s: f64) -> Vec<TrafficState> {
             }
             let first = p(valid[0]);
             let disp = [p(last)[0] - first[0], p(last)[1] - first[1]];
-            let heading = frame.headings()[i].unwrap_or_else(|| {
+            let from_motion = || {
                 if speed >= MIN_MOVING_SPEED_MPS {
                     velocity[1].atan2(velocity[0])
                 } else if disp[0].hypot(disp[1]) >= MIN_MOVING_SPEED_MPS * dt_s * n as f64 {
@@ -76,7 +106,12 @@ pub fn traffic_states(frame: &Frame, dt_s: f64) -> Vec<TrafficState> {
                 } else {
                     0.0
                 }
-            });
+            };
+            let heading = match (source, frame.headings()[i]) {
+                (HeadingSource::Measured, Some(h)) => h,
+                (HeadingSource::MotionWhenMoving, Some(h)) if speed < MOTION_HEADING_MIN_SPEED_MPS => h,
+                _ => from_motion(),
+            };
             TrafficState {
                 position: p(last),
                 velocity,
@@ -139,5 +174,23 @@ mod tests {
             .unwrap();
         let s = traffic_states(&f, 1.0)[0];
         assert_eq!((s.heading, s.velocity, s.speed), (1.0, [0.0, 3.0], 3.0));
+    }
+
+    #[test]
+    fn heading_sources() {
+        // Agent 0 drives +x at 2 m/s with a measured heading reversed (π, as in some ApolloScape recordings); agent 1
+        // creeps +x at 0.5 m/s with a measured heading of 1 rad; agent 2 has no measured heading and drives +y.
+        let speeds = [[2.0, 0.0], [0.5, 0.0], [0.0, 2.0]];
+        let p = Array3::from_shape_fn((3, 3, 2), |(i, t, d)| speeds[i][d] * t as f64 + 10.0 * i as f64);
+        let f = Frame::new(p, None, vec![AgentClass::Vehicle; 3])
+            .unwrap()
+            .with_headings(&[std::f64::consts::PI, 1.0, f64::NAN])
+            .unwrap();
+        let headings = |source| traffic_states_with(&f, 1.0, source).iter().map(|s| s.heading).collect::<Vec<_>>();
+        let up = std::f64::consts::FRAC_PI_2;
+        assert_eq!(headings(HeadingSource::Measured), vec![std::f64::consts::PI, 1.0, up]);
+        assert_eq!(headings(HeadingSource::MotionWhenMoving), vec![0.0, 1.0, up]);
+        assert_eq!(headings(HeadingSource::Motion), vec![0.0, 0.0, up]);
+        assert_eq!(traffic_states(&f, 1.0), traffic_states_with(&f, 1.0, HeadingSource::Measured));
     }
 }

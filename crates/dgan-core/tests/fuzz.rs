@@ -11,7 +11,9 @@ use dgan_core::integrity::{digest_offset, file_digest};
 use dgan_core::preprocess::{preprocess_within, Limits};
 use dgan_core::raster::rasterize;
 use dgan_core::state::traffic_states;
-use dgan_core::{AgentClass, Frame, InputSpec, MapElement, MapElementKind, MapSpec, SceneMap, VectorMap};
+use dgan_core::{
+    AgentClass, Frame, HeadingSource, InputSpec, MapElement, MapElementKind, MapSpec, SceneMap, VectorMap,
+};
 use ndarray::{Array2, Array3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -63,6 +65,8 @@ fn spec(rng: &mut ChaCha8Rng, t_obs: usize) -> InputSpec {
         map,
         prior: Default::default(),
         graph: if rng.random() { dgan_core::GraphLayout::Padded } else { dgan_core::GraphLayout::EdgeList },
+        heading: [HeadingSource::Measured, HeadingSource::MotionWhenMoving, HeadingSource::Motion]
+            [rng.random_range(0..3)],
     }
 }
 

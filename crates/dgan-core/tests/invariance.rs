@@ -3,8 +3,8 @@
 
 use dgan_core::preprocess::preprocess;
 use dgan_core::{
-    AgentClass, Frame, GraphLayout, InputSpec, MapElement, MapElementKind, MapSpec, PriorKind, PriorSpec, SceneMap,
-    VectorMap,
+    AgentClass, Frame, GraphLayout, HeadingSource, InputSpec, MapElement, MapElementKind, MapSpec, PriorKind,
+    PriorSpec, SceneMap, VectorMap,
 };
 use ndarray::{Array2, Array3};
 use rand::{Rng, SeedableRng};
@@ -94,6 +94,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
         }),
         prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.8 },
         graph: GraphLayout::Padded,
+        heading: HeadingSource::Measured,
     };
     let base = preprocess(&frame(0.0, [0.0, 0.0]), &spec).unwrap();
     for (angle, shift) in [(1.0, [100.0, -50.0]), (-2.5, [3000.0, 4000.0]), (std::f64::consts::PI, [0.0, 0.0])] {

@@ -20,6 +20,7 @@ fn init_onnxruntime(path: Option<std::path::PathBuf>) -> PyResult<std::path::Pat
 #[pymodule]
 fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("CONTRACT_VERSION", dgan_core::contract::CONTRACT_VERSION)?;
     m.add_class::<frame::PyFrame>()?;
     m.add_class::<frame::PyRasterMap>()?;
     m.add_class::<frame::PyVectorMap>()?;

@@ -333,8 +333,30 @@ def waymo_json_map(roads: Sequence[Mapping[str, Any]]) -> list[Element]:
     return out
 
 
+def _waymo_heading_scale(objects: list[tuple[Arr, Arr, Arr]]) -> float:
+    """Radians per unit of a GPUDrive file's headings: exports of this format differ, some in radians, some in
+    degrees. The unit is the one whose headings agree with the direction of motion of the agents moving faster than
+    2 m/s (median angle); without such agents, degrees where any valid heading exceeds 2π in magnitude."""
+    errors: dict[float, list[float]] = {1.0: [], np.pi / 180.0: []}
+    largest = 0.0
+    for p, ok, hd in objects:
+        if ok.any():
+            largest = max(largest, float(np.abs(hd[ok]).max()))
+        both = ok[1:] & ok[:-1]
+        v = (p[1:] - p[:-1])[both] / 0.1
+        moving = np.hypot(v[:, 0], v[:, 1]) > 2.0
+        motion = np.arctan2(v[moving, 1], v[moving, 0])
+        h = hd[1:][both][moving]
+        for scale, errs in errors.items():
+            errs.extend(np.abs((h * scale - motion + np.pi) % (2 * np.pi) - np.pi).tolist())
+    if errors[1.0]:
+        return min(errors, key=lambda s: float(np.median(errors[s])))
+    return np.pi / 180.0 if largest > 2 * np.pi + 1e-6 else 1.0
+
+
 def read_waymo_json(path: str | os.PathLike[str]) -> Scenario:
-    """A Waymo Open Motion scenario in GPUDrive/Nocturne JSON (``.json`` or ``.json.gz``), 91 steps at 10 Hz."""
+    """A Waymo Open Motion scenario in GPUDrive/Nocturne JSON (``.json`` or ``.json.gz``), 91 steps at 10 Hz; headings
+    in radians or degrees, whichever the file holds (:func:`_waymo_heading_scale`)."""
     path = Path(path)
     try:
         opener = gzip.open if path.suffix == ".gz" else open
@@ -345,15 +367,19 @@ def read_waymo_json(path: str | os.PathLike[str]) -> Scenario:
     if not isinstance(d, dict) or "objects" not in d or "roads" not in d:
         raise InvalidFrameError(f"{path}: not a GPUDrive scenario (needs objects and roads)")
     tracks = _Tracks()
+    objects = []
     for k, o in enumerate(d["objects"]):
         cls = str(o.get("type", ""))
         if cls not in ("vehicle", "pedestrian", "cyclist"):
             continue
         p = np.array([[q["x"], q["y"]] for q in o["position"]], dtype=np.float64)
         ok = np.asarray(o["valid"], dtype=bool) & (p[:, 0] != WAYMO_INVALID)
-        hd = np.where(ok, np.asarray(o["heading"], dtype=np.float64), 0.0)
+        objects.append((k, o, cls, p, ok, np.where(ok, np.asarray(o["heading"], dtype=np.float64), 0.0)))
+    to_rad = _waymo_heading_scale([(p, ok, hd) for _, _, _, p, ok, hd in objects])
+    for k, o, cls, p, ok, hd in objects:
         t = len(p)
-        tracks.add(int(o.get("id", k)), cls, p, ok, hd, np.full(t, float(o["length"])), np.full(t, float(o["width"])))
+        length, width = np.full(t, float(o["length"])), np.full(t, float(o["width"]))
+        tracks.add(int(o.get("id", k)), cls, p, ok, hd * to_rad, length, width)
     name = str(d.get("scenario_id") or d.get("name") or path.name.split(".")[0])
     return tracks.scenario(path, name, "waymo", 0.1, waymo_json_map(d["roads"]))
 
