@@ -73,6 +73,12 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             f"Trained with map dropout ({t['map_dropout']:g} of the crops blanked), so it also runs without a map "
             "(`map.optional`)."
         )
+    heading = d.get("heading", "measured")
+    if heading != "measured":
+        parts.append(
+            "Agents' headings come from their direction of motion"
+            + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
+        )
     parts.append(f"Mode probabilities at the temperature {metrics.get('temperature', 1.0):.2f} fitted on validation.")
     return " ".join(parts)
 
@@ -136,14 +142,17 @@ MULTICLASS = {
     "apolloscape": {
         "title": "ApolloScape trajectory (multi-class)",
         "data": "ApolloScape trajectory (urban traffic recorded from a vehicle, 2 Hz) with each agent's measured "
-        "class, length, width and heading. Split by recording: test 9048, 9056, 9058, 9061; val 9049, 9060; "
+        "class, length and width. Its heading column follows the direction of motion in some recordings and is "
+        "reversed, mirrored or turned by 90° in others, so the model takes headings from the motion (contract 5, "
+        '`heading = "motion"`). '
+        "Split by recording: test 9048, 9056, 9058, 9061; val 9049, 9060; "
         "train the other eight. Small and big vehicles → vehicle; bicyclists and motorcyclists → cyclist; "
         'pedestrians; "others" are neighbours only. No map: the model has no map branch.',
         "protocol": "6 observed steps (3 s), 6 predicted (3 s); targets present at all 12 steps.",
         "licence": "ApolloScape: **non-commercial academic research** only. Cite Ma et al. 2019 (TrafficPredict).",
         "reproduce": "--train-multiclass` (this model and its per-class baselines)",
-        "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split). Pass measured headings, "
-        "lengths and widths in the frame, as in training",
+        "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split). Pass lengths and widths in "
+        "the frame, as in training; the model ignores given headings",
     },
     "hdmap": {
         "title": "driving scenes with a vector HD map (nuScenes mini and Waymo Open Motion)",

@@ -6,7 +6,8 @@
   30/13/17 by video, box centres in pixels, one step = 10 video frames ≈ 0.33 s). Positions become metres with each
   video's scale from ``estimated_scales.yaml``; errors are reported back in pixels (``Recording.unit_m``). Each
   video's ``reference.jpg``, box-filtered to about 0.25 m per pixel, is its raster map.
-- ``apolloscape``: ApolloScape trajectory (2 Hz, measured class, length, width and heading), split by recording;
+- ``apolloscape``: ApolloScape trajectory (2 Hz, measured class, length, width and heading; the heading's
+  convention differs between recordings), split by recording;
   no map. Its "others" take part as neighbours only, never as targets.
 - ``hdmap``: driving scenes with vector HD maps, nuScenes mini (ScenarioNet) and Waymo Open Motion (GPUDrive JSON and
   ScenarioNet), read by :mod:`dgan.datasets.hdmaps`, at 5 Hz: 2 s observed (10 steps), 3 s predicted (15 steps), split
