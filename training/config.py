@@ -52,6 +52,9 @@ class TrainConfig:
     # Map dropout: the share of target agents whose map crop is blanked (and flagged absent through map_present)
     # in each training batch. > 0 makes the model's map optional: it serves frames with and without a map.
     map_dropout: float = 0.0
+    # Class balance of the loss: each target weighs (its class's share of the training targets)^-class_balance,
+    # normalised to a mean of 1 (0: every target alike, the default; 1: every class alike). Validation stays unweighted.
+    class_balance: float = 0.0
     # Fit a temperature of the anchor logits on the validation split after training (written into the model).
     calibrate: bool = True
 

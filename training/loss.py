@@ -24,11 +24,13 @@ def dgan_loss(
     class_of_anchor: Tensor,
     alpha: float,
     beta: float = 0.0,
+    weights: Tensor | None = None,
 ) -> tuple[Tensor, dict[str, float]]:
     """Mean loss over the given (target) agents, and its parts.
 
     ``beta`` > 0 adds the mean L2 error of the most probable mode (its selection carries no gradient), so the offset
     of the mode a user sees first also learns to correct a wrong anchor choice; the other modes keep their diversity.
+    ``weights`` ``(N,)`` makes the mean a weighted one (:func:`class_weights`).
     """
     k_star = closest_anchor(future, anchors, class_of_anchor, class_index)
     rows = torch.arange(len(future))
@@ -38,15 +40,26 @@ def dgan_loss(
     cls = -(log_pc + log_pk)
     pred = anchors[k_star] + offsets[rows, k_star]
     reg = torch.linalg.norm(pred - future, dim=-1).mean(dim=-1)
-    loss = (cls + alpha * reg).mean()
+    per_agent = cls + alpha * reg
     parts = {"cls": float(cls.mean().detach()), "reg": float(reg.mean().detach())}
     if beta > 0:
         with torch.no_grad():
             top = mode_probabilities(class_logits, anchor_logits, class_of_anchor).argmax(dim=1)
         top_err = torch.linalg.norm(anchors[top] + offsets[rows, top] - future, dim=-1).mean(dim=-1)
-        loss = loss + beta * top_err.mean()
+        per_agent = per_agent + beta * top_err
         parts["top1"] = float(top_err.mean().detach())
+    loss = per_agent.mean() if weights is None else (weights * per_agent).sum() / weights.sum()
     return loss, parts
+
+
+def class_weights(class_index: Tensor, num_classes: int, power: float) -> Tensor:
+    """``(C,)`` loss weight of each class: (its share of the targets)^-power, scaled so that the mean weight over the
+    targets is 1. ``power`` 0 weighs every target alike, 1 every class alike; a class without targets weighs 0."""
+    counts = torch.bincount(class_index, minlength=num_classes).to(torch.float64)
+    share = counts / counts.sum()
+    w = torch.where(counts > 0, share.clamp(min=1e-12) ** -power, torch.zeros_like(share))
+    w = w / (w[class_index].mean() if len(class_index) else 1.0)
+    return w.to(torch.float32)
 
 
 def mode_probabilities(

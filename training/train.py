@@ -31,7 +31,7 @@ from training.anchors import kmeans_anchors
 from training.config import Config
 from training.data import Windows, cached_windows
 from training.datasets import DATASETS
-from training.loss import decode_torch, dgan_loss
+from training.loss import class_weights, decode_torch, dgan_loss
 from training.model import DGAN
 
 
@@ -160,15 +160,23 @@ def fit_anchors(cfg: Config, train: Windows, spec: dgan.InputSpec, num_classes: 
 
 
 def forward_loss(
-    net: torch.nn.Module, b: dict[str, torch.Tensor], anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config
+    net: torch.nn.Module,
+    b: dict[str, torch.Tensor],
+    anchors: torch.Tensor,
+    class_of: torch.Tensor,
+    cfg: Config,
+    weight_of_class: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
-    """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior);
-    also the targets' outputs."""
+    """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior),
+    each weighted by its class's ``weight_of_class`` if given (``train.class_balance``); also the targets' outputs."""
     cl, al, off = net(*forward_inputs(b))
     t = b["target"]
     outs = (cl[t], al[t], off[t])
     residual = b["future"][t] - b["prior"][t]
-    loss, parts = dgan_loss(*outs, residual, b["class_index"][t], anchors, class_of, cfg.train.alpha, cfg.train.beta)
+    classes = b["class_index"][t]
+    weights = None if weight_of_class is None else weight_of_class[classes]
+    a, beta = cfg.train.alpha, cfg.train.beta
+    loss, parts = dgan_loss(*outs, residual, classes, anchors, class_of, a, beta, weights)
     return loss, parts, outs
 
 
@@ -265,6 +273,10 @@ def main(argv: list[str] | None = None) -> Path:
         restrict_targets(val, spec, cfg.data.target_class)
     anchors = torch.from_numpy(anchors_np)
     class_of = torch.from_numpy(class_of_np).long()
+    weight_of_class = None
+    if cfg.train.class_balance > 0:
+        train_classes = torch.from_numpy(train.class_index[train.target]).long()
+        weight_of_class = class_weights(train_classes, len(spec.classes), cfg.train.class_balance)
     model = build_model(cfg, spec, len(anchors))
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
     # OneCycleLR divides by pct_start * total - 1, which is 0 at exactly 10 epochs: nudge only that case.
@@ -310,7 +322,7 @@ def main(argv: list[str] | None = None) -> Path:
         for idx in bar:
             flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
             b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout, rng)
-            loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg)
+            loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg, weight_of_class)
             opt.zero_grad()
             loss.backward()  # type: ignore[no-untyped-call]
             torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)

@@ -17,7 +17,7 @@ from conftest import shared_data
 import dgan
 from training.config import Config
 from training.export import export_model, load_checkpoint
-from training.loss import closest_anchor, decode_torch, dgan_loss
+from training.loss import class_weights, closest_anchor, decode_torch, dgan_loss
 from training.train import INPUTS, build_model, input_spec
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -59,6 +59,32 @@ def test_loss_picks_the_closest_anchor_of_the_class() -> None:
     assert float(loss) == pytest.approx(parts["cls"] + parts["reg"], rel=1e-6)
     _, prob = decode_torch(torch.zeros(2, 2), torch.zeros(2, 3), zeros, anchors, class_of)
     assert prob.sum(dim=1).tolist() == pytest.approx([1.0, 1.0])
+    # Class balance: weights 1 and 3 make agent 1's loss count three times.
+    weighted, _ = dgan_loss(
+        torch.zeros(2, 2),
+        torch.zeros(2, 3),
+        zeros,
+        future,
+        torch.tensor([0, 1]),
+        anchors,
+        class_of,
+        1.0,
+        weights=torch.tensor([1.0, 3.0]),
+    )
+    each = [np.log(4) + np.sqrt(17), np.log(2) + 1.0]
+    assert float(weighted) == pytest.approx((each[0] + 3 * each[1]) / 4, rel=1e-6)
+
+
+def test_class_weights_balance_the_classes() -> None:
+    classes = torch.tensor([0] * 70 + [1] * 20 + [2] * 10)
+    assert class_weights(classes, 3, 0.0).tolist() == [1.0, 1.0, 1.0]
+    w = class_weights(classes, 3, 1.0)
+    # Every class carries the same total weight, and the mean weight of a target is 1.
+    totals = [float(w[c]) * int((classes == c).sum()) for c in range(3)]
+    assert totals == pytest.approx([totals[0]] * 3, rel=1e-5)
+    assert float(w[classes].mean()) == pytest.approx(1.0, rel=1e-6)
+    # A class without targets weighs nothing.
+    assert class_weights(torch.tensor([0, 0, 2]), 3, 1.0)[1] == 0.0
 
 
 def real_frames(spec: dgan.InputSpec) -> list[dgan.Frame]:
