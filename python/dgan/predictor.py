@@ -214,9 +214,10 @@ class Predictor:
         return Prediction(classes=self.classes, dt_s=self._spec.dt_s, **out)
 
     def predict_batch(self, frames: Sequence[Frame], *, modes: int | None = None) -> list[Prediction]:
-        """Predicts several frames in one network call (their graphs joined, disjoint; each frame preprocessed in
-        parallel). Equal to :meth:`predict` on each frame, up to float rounding; faster for many small frames.
-        Releases the GIL while the engine runs.
+        """Predicts several frames: each preprocessed in parallel, consecutive frames' graphs joined (disjoint) into
+        network calls of up to 256 agents (``dgan_core::runtime::BATCH_AGENTS_PER_CALL``). Equal to :meth:`predict`
+        on each frame, up to float rounding; 0.96–1.45× the throughput of a loop of :meth:`predict` for 64 real
+        frames of the bundled models. Releases the GIL while the engine runs.
 
         Raises:
             InvalidFrameError, UnknownClassError, MapRequiredError: as :meth:`predict`, for any frame.

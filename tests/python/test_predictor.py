@@ -228,8 +228,13 @@ def test_predict_batch_equals_predict_per_frame() -> None:
     for name in ("zara1", "apolloscape"):
         predictor = dgan.Predictor(name)
         first = scene_for(predictor.spec)
-        frames = [scene_for(predictor.spec, first.default_now + k * first.time_step).frame for k in range(5)]
-        frames.insert(2, dgan.Frame(np.zeros((0, predictor.spec.t_obs, 2))))  # an empty frame among them
+        # 5 real frames of up to 26 agents, three times over: more than one network call (256 agents at most), an
+        # empty frame among them and a frame of 300 agents that runs alone.
+        frames = [scene_for(predictor.spec, first.default_now + k * first.time_step).frame for k in range(5)] * 3
+        frames.insert(2, dgan.Frame(np.zeros((0, predictor.spec.t_obs, 2))))
+        big = np.cumsum(np.full((300, predictor.spec.t_obs, 2), 0.3), axis=1) + np.arange(300)[:, None, None] * 7.0
+        frames.insert(9, dgan.Frame(big, map=frames[0].map))
+        assert sum(len(f) for f in frames) > 2 * 256
         batch = predictor.predict_batch(frames, modes=5)
         assert len(batch) == len(frames)
         for frame, got in zip(frames, batch, strict=True):
