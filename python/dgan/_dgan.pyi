@@ -16,6 +16,7 @@ __all__ = [
     "__version__",
     "attention_graph",
     "available_execution_providers",
+    "check_headings",
     "frame_from_rows",
     "init_onnxruntime",
     "kinematic_prior",
@@ -126,6 +127,7 @@ def frame_from_rows(
 ) -> Frame: ...
 def preprocess(frame: Frame, spec_json: str) -> dict[str, Any]: ...
 def validate_spec(json: str) -> str: ...
+def check_headings(frame: Frame, dt_s: float) -> tuple[int, float, bool] | None: ...
 def kinematic_prior(
     trajectory: npt.NDArray[np.float32],
     trajectory_mask: npt.NDArray[np.float32],

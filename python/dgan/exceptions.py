@@ -9,6 +9,7 @@ from __future__ import annotations
 __all__ = [
     "ContractError",
     "DganError",
+    "HeadingWarning",
     "InferenceError",
     "InvalidFrameError",
     "InvalidMapError",
@@ -75,3 +76,11 @@ class RuntimeLibraryError(DganError, OSError):
 
 class InferenceError(DganError, RuntimeError):
     """ONNX Runtime failed while running a loaded model."""
+
+
+class HeadingWarning(UserWarning):
+    """A frame's measured headings do not follow its agents' motion (median disagreement over 45° among the agents
+    moving at 1 m/s or more), for a model that takes measured headings: most likely another convention (degrees,
+    compass bearings, the rear of the box). Every agent-centric frame is then turned by that much. Pass headings in
+    radians, counter-clockwise from the world x axis, along the direction of travel; or pass none (the engine then
+    takes the direction of motion). Issued once per :class:`~dgan.Predictor`."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,7 +15,7 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._runtime import onnxruntime_library as onnxruntime_library_path
-from dgan.exceptions import InvalidFrameError, InvalidSpecError, ModelNotFoundError
+from dgan.exceptions import HeadingWarning, InvalidFrameError, InvalidSpecError, ModelNotFoundError
 from dgan.frame import Frame, typename
 from dgan.spec import InputSpec
 
@@ -150,6 +151,7 @@ class Predictor:
         self._contract: dict[str, Any] = json.loads(self._predictor.contract_json)
         self._spec = InputSpec.from_dict(self._contract)
         self._modes = self._check_modes(modes)
+        self._heading_warned = False
 
     def _check_modes(self, modes: int | None) -> int:
         k = self.num_modes
@@ -207,7 +209,29 @@ class Predictor:
         """
         m = self._modes if modes is None else self._check_modes(modes)
         out = self._predictor.predict(_native(frame), m)
+        self._check_headings(frame)
         return self._prediction(out, frame)
+
+    def _check_headings(self, frame: Frame) -> None:
+        """Warns once (:class:`~dgan.exceptions.HeadingWarning`) if ``frame``'s measured headings, which this model
+        takes as they are, disagree with its agents' motion."""
+        if self._heading_warned or self._spec.heading != "measured":
+            return
+        check = _dgan.check_headings(frame._frame, self._spec.dt_s)
+        if check is None:
+            return
+        moving, median_deg, beyond_two_pi = check
+        if beyond_two_pi or (moving >= 3 and median_deg > 45.0):
+            self._heading_warned = True
+            why = "some exceed 2π, so they may be degrees; " if beyond_two_pi else ""
+            warnings.warn(
+                f"the frame's headings disagree with its agents' direction of motion by {median_deg:.0f}° (median "
+                f"over {moving} agents moving at ≥ 1 m/s); {why}{self.path.name} turns each agent's frame by its "
+                "heading. Pass headings in radians, counter-clockwise from the world x axis along the direction of "
+                "travel, or none (the engine then takes the direction of motion). Warned once per Predictor.",
+                HeadingWarning,
+                stacklevel=3,
+            )
 
     def _prediction(self, out: dict[str, Any], frame: Frame) -> Prediction:
         out["agent_ids"] = frame.agent_ids
@@ -226,6 +250,8 @@ class Predictor:
         if isinstance(frames, Frame) or not isinstance(frames, Sequence):
             raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {typename(frames)}")
         outs = self._predictor.predict_batch([_native(f) for f in frames], m)
+        for f in frames:
+            self._check_headings(f)
         return [self._prediction(o, f) for o, f in zip(outs, frames, strict=True)]
 
     def __repr__(self) -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -293,3 +294,44 @@ def test_eight_threads_with_maps_are_bit_identical_to_serial(zara1_frame: dgan.F
     for r in results:
         np.testing.assert_array_equal(r.trajectories, want.trajectories)
         np.testing.assert_array_equal(r.probabilities, want.probabilities)
+
+
+def test_headings_in_another_convention_are_warned_about_once() -> None:
+    from dgan.demo import scene_for
+
+    predictor = dgan.Predictor("hdmap")
+    frame = scene_for(predictor.spec).frame  # real Waymo headings, radians along the motion
+
+    def with_headings(h: np.ndarray) -> dgan.Frame:
+        return dgan.Frame(
+            frame.positions,
+            mask=frame.mask,
+            classes=list(frame.classes),
+            headings=h,
+            lengths=frame.lengths,
+            widths=frame.widths,
+            map=frame.map,
+            dt=frame.dt,
+        )
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        predictor.predict(frame)
+        predictor.predict(frame.without_map())
+        dgan.Predictor("apolloscape").predict(scene_for(dgan.Predictor("apolloscape").spec).frame)
+    for bad in (np.degrees(frame.headings), frame.headings + np.pi):
+        fresh = dgan.Predictor("hdmap")
+        with pytest.warns(exc.HeadingWarning, match="disagree with its agents' direction of motion"):
+            fresh.predict(with_headings(bad))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # once per predictor
+            fresh.predict_batch([with_headings(bad)] * 2)
+    # A model that takes headings from the motion ignores them, and says nothing.
+    apollo = dgan.Predictor("apolloscape")
+    f = scene_for(apollo.spec).frame
+    reversed_frame = dgan.Frame(f.positions, mask=f.mask, classes=list(f.classes), headings=f.headings + np.pi, dt=f.dt)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        a = apollo.predict(reversed_frame)
+    b = apollo.predict(dgan.Frame(f.positions, mask=f.mask, classes=list(f.classes), dt=f.dt))
+    np.testing.assert_allclose(a.trajectories, b.trajectories, atol=1e-5)

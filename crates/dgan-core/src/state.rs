@@ -126,6 +126,41 @@ pub fn traffic_states_with(frame: &Frame, dt_s: f64, source: HeadingSource) -> V
         .collect()
 }
 
+/// How well a frame's measured headings follow its agents' motion ([`check_headings`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadingCheck {
+    /// Agents with a measured heading moving at least [`MOTION_HEADING_MIN_SPEED_MPS`].
+    pub moving: usize,
+    /// Median angle in degrees between those agents' measured headings and their direction of motion.
+    pub median_error_deg: f64,
+    /// Whether some measured heading exceeds 2π in magnitude (degrees passed as radians, most likely).
+    pub beyond_two_pi: bool,
+}
+
+/// Compares a frame's measured headings with its agents' direction of motion, for a model that takes measured
+/// headings: headings in another convention (degrees, compass bearings, reversed) turn every agent-centric frame.
+/// `None` when no agent has a measured heading.
+pub fn check_headings(frame: &Frame, dt_s: f64) -> Option<HeadingCheck> {
+    let given: Vec<(usize, f64)> = frame.headings().iter().enumerate().filter_map(|(i, h)| h.map(|h| (i, h))).collect();
+    if given.is_empty() {
+        return None;
+    }
+    let states = traffic_states_with(frame, dt_s, HeadingSource::Motion);
+    let mut errors: Vec<f64> = given
+        .iter()
+        .filter(|(i, _)| states[*i].speed >= MOTION_HEADING_MIN_SPEED_MPS)
+        .map(|(i, h)| wrap_angle(h - states[*i].heading).abs().to_degrees())
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    let median_error_deg = match errors.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => errors[n / 2],
+        n => (errors[n / 2 - 1] + errors[n / 2]) / 2.0,
+    };
+    let beyond_two_pi = given.iter().any(|(_, h)| h.abs() > std::f64::consts::TAU + 1e-6);
+    Some(HeadingCheck { moving: errors.len(), median_error_deg, beyond_two_pi })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -192,5 +227,24 @@ mod tests {
         assert_eq!(headings(HeadingSource::MotionWhenMoving), vec![0.0, 1.0, up]);
         assert_eq!(headings(HeadingSource::Motion), vec![0.0, 0.0, up]);
         assert_eq!(traffic_states(&f, 1.0), traffic_states_with(&f, 1.0, HeadingSource::Measured));
+    }
+
+    #[test]
+    fn heading_checks() {
+        // Two agents drive +x at 2 m/s, one +y; a slow one and one without a heading do not count.
+        let speeds = [[2.0, 0.0], [2.0, 0.0], [0.0, 2.0], [0.1, 0.0], [2.0, 0.0]];
+        let p = Array3::from_shape_fn((5, 3, 2), |(i, t, d)| speeds[i][d] * t as f64 + 10.0 * i as f64);
+        let f =
+            |h: [f64; 5]| Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap().with_headings(&h).unwrap();
+        let up = std::f64::consts::FRAC_PI_2;
+        let ok = check_headings(&f([0.0, 0.05, up + 0.1, 3.0, f64::NAN]), 1.0).unwrap();
+        assert_eq!((ok.moving, ok.beyond_two_pi), (3, false));
+        assert!((ok.median_error_deg - 0.05f64.to_degrees()).abs() < 1e-9);
+        // Reversed headings, and degrees passed as radians.
+        let reversed = check_headings(&f([3.1, 3.1, -up, 0.0, f64::NAN]), 1.0).unwrap();
+        assert!(reversed.median_error_deg > 170.0);
+        assert!(check_headings(&f([0.0, 0.0, 90.0, 0.0, f64::NAN]), 1.0).unwrap().beyond_two_pi);
+        let none = Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap();
+        assert_eq!(check_headings(&none, 1.0), None);
     }
 }
