@@ -29,8 +29,13 @@ def training_log(run: Path) -> tuple[list[dict[str, str]], float, dict[str, str]
     """A run's epoch rows, its total training seconds and the row of the kept weights (``train.select``)."""
     rows = list(csv.DictReader((run / "log.csv").open()))
     cfg = json.loads((run / "config.json").read_text())["config"]
-    kept = rows[-1] if cfg["train"].get("select") == "last" else min(rows, key=lambda r: float(r["val_loss"]))
+    select = cfg["train"].get("select", "val_loss")
+    kept = rows[-1] if select == "last" else min(rows, key=lambda r: float(r[select]))
     return rows, sum(float(r["seconds"]) for r in rows), kept
+
+
+#: How a run's kept epoch was chosen (``train.select``), for the cards.
+KEPT = {"last": "the last", "val_loss": "lowest validation loss", "val_ade": "lowest validation top-1 ADE"}
 
 
 def slim_checkpoint(run: Path, out: Path) -> Path:
@@ -203,7 +208,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
   closest-anchor regression (α = {cfg["train"]["alpha"]}) plus β = {cfg["train"]["beta"]} times the error of the most
   probable mode. {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}
-  ({"the last" if cfg["train"].get("select") == "last" else "lowest validation loss"}),
+  ({KEPT[cfg["train"].get("select", "val_loss")]}),
   {seconds / 60:.1f} min on 2 CPU cores; seed {cfg["train"]["seed"]}; left-right mirroring.
 - **Test metrics** (engine, {metrics["unit"]}, {metrics["windows"]} windows; most probable class correct for
   {100 * metrics["class_accuracy"]:.1f}% of agents, since the class is an input as in the paper; mode-probability

@@ -45,9 +45,9 @@ class TrainConfig:
     seed: int = 0
     threads: int = 2
     max_train_windows: int = 0  # 0 = all; a positive number subsamples (quick tests)
-    # Which epoch's weights are kept as best.pt: "val_loss" (the lowest validation loss) or "last" (the end of the
-    # one-cycle schedule; for small data where the validation loss rises with the classifier's confidence while the
-    # validation errors keep falling).
+    # Which epoch's weights are kept as best.pt: "val_loss" (the lowest validation loss), "val_ade" (the lowest
+    # validation top-1 ADE) or "last" (the end of the one-cycle schedule; for small data where the validation loss
+    # rises with the classifier's confidence while the validation errors keep falling).
     select: str = "val_loss"
     # Map dropout: the share of target agents whose map crop is blanked (and flagged absent through map_present)
     # in each training batch. > 0 makes the model's map optional: it serves frames with and without a map.

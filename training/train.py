@@ -34,6 +34,9 @@ from training.datasets import DATASETS
 from training.loss import class_weights, decode_torch, dgan_loss
 from training.model import DGAN
 
+#: ``train.select`` → the validation figure whose lowest epoch is kept as ``best.pt``; ``"last"`` keeps the final one.
+SELECT_BY = {"val_loss": "val_loss", "val_ade": "val_ade"}
+
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
     d = cfg.data
@@ -244,8 +247,8 @@ def main(argv: list[str] | None = None) -> Path:
         except json.JSONDecodeError:
             overrides[key] = value
     cfg = Config.load(args.config, overrides)
-    if cfg.train.select not in ("val_loss", "last"):
-        raise ValueError(f"train.select must be 'val_loss' or 'last', got {cfg.train.select!r}")
+    if cfg.train.select not in (*SELECT_BY, "last"):
+        raise ValueError(f"train.select must be 'val_loss', 'val_ade' or 'last', got {cfg.train.select!r}")
     world = int(os.environ.get("WORLD_SIZE", "1"))
     rank = int(os.environ.get("RANK", "0"))
     if world > 1:
@@ -345,20 +348,22 @@ def main(argv: list[str] | None = None) -> Path:
                 wr.writeheader()
             wr.writerow(row)
         print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
+        key = SELECT_BY.get(cfg.train.select)  # None: keep the last epoch
+        improved = key is None or row[key] < best
+        best = row[key] if key is not None and improved else best
         state = {
             "model": model.state_dict(),
             "optimizer": opt.state_dict(),
             "scheduler": sched.state_dict(),
             "epoch": epoch,
-            "best": min(best, row["val_loss"]),
+            "best": best,
             "anchors": anchors_np,
             "class_of": class_of_np,
             "config": asdict(cfg),
             "rng": torch.get_rng_state(),
         }
         torch.save(state, out / "last.pt")
-        if cfg.train.select == "last" or row["val_loss"] < best:
-            best = row["val_loss"]
+        if improved:
             torch.save(state, out / "best.pt")
     if world > 1:
         dist.barrier()

@@ -215,7 +215,7 @@ def test_a_run_needs_a_known_weight_selection(tmp_path: Path) -> None:
     from training.train import main
 
     config = str(ROOT / "training" / "configs" / "hdmap.toml")
-    with pytest.raises(ValueError, match=r"train\.select must be 'val_loss' or 'last', got 'best'"):
+    with pytest.raises(ValueError, match=r"train\.select must be 'val_loss', 'val_ade' or 'last', got 'best'"):
         main(["--config", config, "--out", str(tmp_path), "--set", "train.select=best"])
 
 

@@ -195,6 +195,8 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
         "train.max_train_windows=24",
         "--set",
         "train.batch_windows=4",
+        "--set",
+        "train.select=val_ade",
     ]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     torchrun = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2"]
@@ -216,6 +218,9 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
     rows = list(csv.DictReader((out / "log.csv").open()))
     assert [r["epoch"] for r in rows] == ["1", "2"]
     assert np.isfinite(float(rows[-1]["val_min_ade20"]))
+    # best.pt holds the epoch of the lowest validation top-1 ADE (train.select = "val_ade").
+    kept = torch.load(out / "best.pt", weights_only=False)
+    assert kept["epoch"] + 1 == int(min(rows, key=lambda r: float(r["val_ade"]))["epoch"])
 
 
 def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
