@@ -34,8 +34,9 @@ from training.datasets import DATASETS
 from training.loss import class_weights, decode_torch, dgan_loss
 from training.model import DGAN
 
-#: ``train.select`` → the validation figure whose lowest epoch is kept as ``best.pt``; ``"last"`` keeps the final one.
-SELECT_BY = {"val_loss": "val_loss", "val_ade": "val_ade"}
+#: ``train.select``: the validation figure (a column of ``log.csv``) whose lowest epoch is kept as ``best.pt``, or
+#: ``"last"`` for the final epoch.
+SELECT = ("val_loss", "val_ade", "last")
 
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
@@ -247,7 +248,7 @@ def main(argv: list[str] | None = None) -> Path:
         except json.JSONDecodeError:
             overrides[key] = value
     cfg = Config.load(args.config, overrides)
-    if cfg.train.select not in (*SELECT_BY, "last"):
+    if cfg.train.select not in SELECT:
         raise ValueError(f"train.select must be 'val_loss', 'val_ade' or 'last', got {cfg.train.select!r}")
     world = int(os.environ.get("WORLD_SIZE", "1"))
     rank = int(os.environ.get("RANK", "0"))
@@ -348,7 +349,7 @@ def main(argv: list[str] | None = None) -> Path:
                 wr.writeheader()
             wr.writerow(row)
         print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
-        key = SELECT_BY.get(cfg.train.select)  # None: keep the last epoch
+        key = None if cfg.train.select == "last" else cfg.train.select
         improved = key is None or row[key] < best
         best = row[key] if key is not None and improved else best
         state = {

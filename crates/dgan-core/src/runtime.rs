@@ -401,7 +401,7 @@ impl Predictor {
                 group.push(p);
             }
             let end = start + group.len();
-            self.check_joined(&group, end - start)?;
+            self.check_joined(&group)?;
             out.extend(self.run_and_decode(&frames[start..end], group, modes)?);
             start = end;
         }
@@ -410,7 +410,8 @@ impl Predictor {
 
     /// Refuses a joined graph of several frames whose network inputs exceed `max_input_bytes`: all the agents, each
     /// padded to the largest degree of any of the frames.
-    fn check_joined(&self, pres: &[Preprocessed], frames: usize) -> Result<()> {
+    fn check_joined(&self, pres: &[Preprocessed]) -> Result<()> {
+        let frames = pres.len();
         let agents: usize = pres.iter().map(|p| p.poses.len()).sum();
         let degree = pres.iter().filter_map(|p| p.inputs.neighbors.as_ref().map(|nb| nb.index.ncols())).max();
         let bytes = Limits::input_bytes(&self.contract.input, agents, degree.unwrap_or(0));
