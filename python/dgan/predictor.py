@@ -240,7 +240,7 @@ class Predictor:
     def predict_batch(self, frames: Sequence[Frame], *, modes: int | None = None) -> list[Prediction]:
         """Predicts several frames: each preprocessed in parallel, consecutive frames' graphs joined (disjoint) into
         network calls of up to 256 agents (``dgan_core::runtime::BATCH_AGENTS_PER_CALL``). Equal to :meth:`predict`
-        on each frame, up to float rounding; 0.96–1.45× the throughput of a loop of :meth:`predict` for 64 real
+        on each frame, up to float rounding; 0.96–1.54× the throughput of a loop of :meth:`predict` for 64 real
         frames of the bundled models. Releases the GIL while the engine runs.
 
         Raises:

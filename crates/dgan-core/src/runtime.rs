@@ -68,7 +68,7 @@ pub fn init_onnxruntime(path: Option<&Path>) -> Result<PathBuf> {
 /// The most agents [`Predictor::predict_batch`] joins into one network call. Measured on 2 cores with the bundled
 /// models: 64 real frames (1,000–2,900 agents) joined into one call ran at 0.74–0.92× a loop of `predict` for
 /// three of them, since every agent is padded to the largest degree of any frame and the tensors outgrow the caches;
-/// calls of about 200 agents were the fastest (0.96–1.45× a loop).
+/// calls of about 200 agents were the fastest (0.96–1.54× a loop).
 pub const BATCH_AGENTS_PER_CALL: usize = 256;
 
 /// How a [`Predictor`] is built.
