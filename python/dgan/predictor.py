@@ -221,7 +221,10 @@ class Predictor:
         if check is None:
             return
         moving, median_deg, beyond_two_pi = check
-        if beyond_two_pi or (moving >= 3 and median_deg > 45.0):
+        # Headings that follow the motion are radians even when unwrapped past 2π (real logs hold such angles);
+        # beyond 2π alone is suspicious only when too few agents move to tell.
+        confirmed = moving >= 3
+        if (confirmed and median_deg > 45.0) or (beyond_two_pi and not confirmed):
             self._heading_warned = True
             why = "some exceed 2π, so they may be degrees; " if beyond_two_pi else ""
             warnings.warn(

@@ -319,6 +319,10 @@ def test_headings_in_another_convention_are_warned_about_once() -> None:
         predictor.predict(frame)
         predictor.predict(frame.without_map())
         dgan.Predictor("apolloscape").predict(scene_for(dgan.Predictor("apolloscape").spec).frame)
+    # Radians unwrapped past 2π (as some logs store them) still follow the motion: no warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        dgan.Predictor("hdmap").predict(with_headings(frame.headings + 4 * np.pi))
     for bad in (np.degrees(frame.headings), frame.headings + np.pi):
         fresh = dgan.Predictor("hdmap")
         with pytest.warns(exc.HeadingWarning, match="disagree with its agents' direction of motion"):

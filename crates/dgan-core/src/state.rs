@@ -133,7 +133,8 @@ pub struct HeadingCheck {
     pub moving: usize,
     /// Median angle in degrees between those agents' measured headings and their direction of motion.
     pub median_error_deg: f64,
-    /// Whether some measured heading exceeds 2π in magnitude (degrees passed as radians, most likely).
+    /// Whether some measured heading exceeds 2π in magnitude: degrees passed as radians, unless the agents moving
+    /// confirm the headings (logs also store radians unwrapped past 2π).
     pub beyond_two_pi: bool,
 }
 
