@@ -48,6 +48,12 @@ def slim_checkpoint(run: Path, out: Path) -> Path:
     return out
 
 
+def _threads(cfg: dict[str, Any]) -> str:
+    """The CPU threads a run trained on (its ``train.threads``)."""
+    n = int(cfg["train"].get("threads", 2))
+    return f"{n} CPU thread{'s' if n != 1 else ''}"
+
+
 def cv_row(metrics: dict[str, Any]) -> str:
     """The card's constant-velocity row: the better of the two variants on the same targets."""
     return (
@@ -112,7 +118,7 @@ training.
   Loss: the paper's hierarchical classification and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
   β = {cfg["train"]["beta"]} times the error of the most probable mode (see `docs/results.md`).
   One class (pedestrian). {contract_line(cfg, metrics)}
-- **Training**: {len(rows)} epochs, best at epoch {best["epoch"]}, {seconds / 60:.1f} min on 2 CPU cores; seed
+- **Training**: {len(rows)} epochs, best at epoch {best["epoch"]}, {seconds / 60:.1f} min on {_threads(cfg)}; seed
   {cfg["train"]["seed"]}; left-right mirroring.
 - **Test metrics** (engine, world metres, {metrics["windows"]} windows, {metrics["agents"]} agents):
 
@@ -209,7 +215,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
   probable mode. {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}
   ({KEPT[cfg["train"].get("select", "val_loss")]}),
-  {seconds / 60:.1f} min on 2 CPU cores; seed {cfg["train"]["seed"]}; left-right mirroring.
+  {seconds / 60:.1f} min on {_threads(cfg)}; seed {cfg["train"]["seed"]}; left-right mirroring.
 - **Test metrics** (engine, {metrics["unit"]}, {metrics["windows"]} windows; most probable class correct for
   {100 * metrics["class_accuracy"]:.1f}% of agents, since the class is an input as in the paper; mode-probability
   calibration error {metrics["calibration"]["ece"]:.3f}, see `docs/results.md`):

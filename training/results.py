@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import dgan
-from training import hdmap, multiclass, scorecard
+from training import calibration_study, hdmap, multiclass, scorecard
 from training.evaluate import evaluate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -90,7 +90,13 @@ def main_table(res: dict[str, dict[str, Any]]) -> str:
         "the runs they replaced (hotel 0.33/0.62 → 0.35/0.67 m, univ 0.55/1.21 → 0.58/1.27) and eth better "
         "(0.85/1.87 → 0.84/1.84): the validation split comes from the four training scenes, so an epoch that fits "
         "them better need not transfer to the held-out scene. A validation scene held out of training would measure "
-        "that; it is not in this protocol's splits."
+        "that; it is not in this protocol's splits. Then all five folds were trained again with the most probable "
+        "mode's error weighing 3 instead of 1 (`train.beta`), which was lower on every validation split (top-1 ADE "
+        "eth 0.406 → 0.397 m, hotel 0.421 → 0.407, univ 0.347 → 0.340, zara1 0.421 → 0.409, zara2 0.468 → 0.447; "
+        "standing pedestrians now at constant velocity's error there), and those runs are bundled. On the test "
+        "scenes hotel and zara1 improved (0.35/0.67 → 0.32/0.62, 0.42/0.92 → 0.40/0.86), eth, univ and zara2 fell "
+        "back (0.84/1.84 → 0.86/1.87, 0.58/1.27 → 0.59/1.31, 0.33/0.75 → 0.36/0.82) and the average stayed where it "
+        "was: between runs and settings the held-out scenes move by more than validation can rank."
     )
     return "\n".join(lines)
 
@@ -195,6 +201,7 @@ def main() -> None:
         scorecard=scorecard.table(tests),
         scorecard_summary=scorecard.summary(tests),
         calibration=scorecard.calibration_table(cals),
+        calibration_study=calibration_study.section(),
         table=main_table(res),
         ablations=ablation_table("zara1") or PREVIOUS_ABLATIONS,
         multiclass=multiclass.sections(multi),
@@ -316,6 +323,21 @@ T = 1. The reliability of a bin is how often a mode of that probability was the 
 {calibration}
 
 ![Reliability before and after the temperature](images/calibration.png)
+
+**Other calibration maps, tried.** One temperature leaves bins with p ≥ 0.3 more than 0.1 off even on the
+validation split it was fitted on, so richer maps were fitted there the same way (the best mode's likelihood) and
+measured on the test sets (`python -m training.calibration_study`): Platt scaling of each mode's p(k | c), and
+isotonic regression of the tempered probabilities (renormalised per class, three rounds). The worst gap in a bin with
+p ≥ 0.3 and at least 30 modes:
+
+{calibration_study}
+
+Isotonic regression closes the gaps on the ETH/UCY validation splits, but on the test sets it beats the temperature
+only for hotel and univ and is worse for eth, zara1, Stanford Drone, ApolloScape and both driving sets; Platt scaling
+is within 0.01 of the temperature or worse except for zara2. How often the most probable mode wins depends on the
+scene: of the pedestrians standing (under 0.2 m/s) at the last observed step, 3% (hotel) and 12% (zara2) move more
+than 0.3 m in the next 4.8 s in those test scenes, against 35% and 44% in the validation splits of the same folds.
+The bundled models keep the temperature.
 
 ## ETH/UCY, leave one scene out (8 observed, 12 predicted)
 
