@@ -1,6 +1,8 @@
 //! A model file is untrusted input: its exporter seals it with a SHA-256 digest of the whole file, written into
-//! the contract (`"weights_sha256"`), and the engine verifies it before ONNX Runtime reads a byte, so a corrupt or
-//! modified file is refused with [`DganError::ModelLoad`] instead of predicting kilometres off.
+//! the contract (`"weights_sha256"`), and the engine verifies it before ONNX Runtime sees a byte, so a corrupt or
+//! modified file is refused with [`DganError::ModelLoad`] instead of predicting kilometres off. The engine reads the
+//! file once ([`read_verified`]) and gives ONNX Runtime the very bytes it verified: a file replaced between the check
+//! and the load cannot slip through.
 //!
 //! The digest covers every byte of the file with the 64 hex characters of the digest itself set to `'0'`: sealing
 //! computes it over the file as exported (the contract holding 64 zeros) and writes it in place, so the file keeps
@@ -62,12 +64,17 @@ fn read(path: &Path) -> Result<Vec<u8>> {
 
 /// Verifies a sealed model file; returns its digest, or `None` for a file that declares none (contracts before 4).
 pub fn verify(path: &Path) -> Result<Option<String>> {
+    read_verified(path).map(|(_, digest)| digest)
+}
+
+/// Reads a model file once and verifies it: its bytes and its digest ([`verify`]).
+pub fn read_verified(path: &Path) -> Result<(Vec<u8>, Option<String>)> {
     let bytes = read(path)?;
     let at_path = |e: DganError| match e {
         DganError::ModelLoad { reason, .. } => DganError::ModelLoad { path: path.to_path_buf(), reason },
         other => other,
     };
-    let Some(offset) = digest_offset(&bytes).map_err(at_path)? else { return Ok(None) };
+    let Some(offset) = digest_offset(&bytes).map_err(at_path)? else { return Ok((bytes, None)) };
     let declared = String::from_utf8_lossy(&bytes[offset..offset + 64]).into_owned();
     let actual = file_digest(&bytes, offset);
     if declared != actual {
@@ -79,7 +86,7 @@ pub fn verify(path: &Path) -> Result<Option<String>> {
             ),
         });
     }
-    Ok(Some(actual))
+    Ok((bytes, Some(actual)))
 }
 
 /// Seals a model file in place: its contract must hold `"weights_sha256": "000…0"` (64 zeros), which becomes the
@@ -117,8 +124,10 @@ mod tests {
         let p = file(body.as_bytes());
         assert!(verify(&p).is_err(), "the placeholder is not the digest");
         let digest = seal(&p).unwrap();
-        assert_eq!(verify(&p).unwrap(), Some(digest));
+        assert_eq!(verify(&p).unwrap(), Some(digest.clone()));
         let sealed = std::fs::read(&p).unwrap();
+        // The bytes handed on are the ones verified.
+        assert_eq!(read_verified(&p).unwrap(), (sealed.clone(), Some(digest)));
         for i in 0..sealed.len() {
             let mut bad = sealed.clone();
             bad[i] ^= 0x01;

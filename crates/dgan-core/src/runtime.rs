@@ -210,7 +210,9 @@ fn check_modes(modes: usize) -> Result<()> {
     Ok(())
 }
 
-fn open_session(path: &Path, options: &PredictorOptions) -> Result<Session> {
+/// A session over the model's bytes (read and verified once, [`crate::integrity::read_verified`]); `path` names the
+/// file in errors.
+fn open_session(path: &Path, bytes: &[u8], options: &PredictorOptions) -> Result<Session> {
     let load_err = |e: ort::Error| DganError::ModelLoad { path: path.to_path_buf(), reason: e.to_string() };
     let builder_err = |e: ort::Error<ort::session::builder::SessionBuilder>| {
         DganError::RuntimeLibrary(format!("cannot configure the session: {e}"))
@@ -231,7 +233,7 @@ fn open_session(path: &Path, options: &PredictorOptions) -> Result<Session> {
             ))
         })?;
     }
-    builder.commit_from_file(path).map_err(load_err)
+    builder.commit_from_memory(bytes).map_err(load_err)
 }
 
 impl Predictor {
@@ -259,9 +261,10 @@ impl Predictor {
                 options.intra_threads
             )));
         }
-        let digest = crate::integrity::verify(&path)?; // before ONNX Runtime reads a byte of it
+        // Before ONNX Runtime sees a byte of it; the sessions are built from these very bytes.
+        let (bytes, digest) = crate::integrity::read_verified(&path)?;
         init_onnxruntime(options.onnxruntime_library.as_deref())?;
-        let session = open_session(&path, options)?;
+        let session = open_session(&path, &bytes, options)?;
         let json = session
             .metadata()
             .map_err(|e| DganError::Contract(format!("cannot read metadata: {e}")))?
@@ -271,11 +274,10 @@ impl Predictor {
                 // ONNX Runtime gives no value for metadata that is not valid UTF-8: tell that apart from none.
                 let key = format!("\"{METADATA_KEY}\"");
                 // As ONNX's protobuf stores a metadata entry's key: field 1, length, the key, then field 2 (value).
-                let raw = std::fs::read(&path).unwrap_or_default();
                 let mut entry = vec![0x0a, METADATA_KEY.len() as u8];
                 entry.extend_from_slice(METADATA_KEY.as_bytes());
                 entry.push(0x12);
-                let present = raw.windows(entry.len()).any(|w| w == entry.as_slice());
+                let present = bytes.windows(entry.len()).any(|w| w == entry.as_slice());
                 DganError::Contract(if present {
                     format!(
                         "{}: its {key} metadata cannot be read (not valid UTF-8, or damaged); export the model again",
@@ -325,7 +327,7 @@ impl Predictor {
         }
         let mut sessions = vec![Mutex::new(session)];
         for _ in 1..options.sessions {
-            sessions.push(Mutex::new(open_session(&path, options)?));
+            sessions.push(Mutex::new(open_session(&path, &bytes, options)?));
         }
         Ok(Self { sessions, next: AtomicUsize::new(0), contract, anchors, path, limits: options.limits })
     }
