@@ -643,6 +643,9 @@ def all_cases(tmp: Path) -> list[Case]:
 #: What an unclear message looks like: serde's positions, Python's internals.
 UNCLEAR = re.compile(r"at line \d+ column \d+|Traceback|object has no attribute|unhashable type|NoneType")
 CASES = all_cases(Path(tempfile.mkdtemp(prefix="dgan-hostile-")))
+#: A hang detector, not a speed claim (speed is measured by the benchmarks): what these inputs used to do was hang or
+#: run for minutes, while a loaded CI machine can stretch a normal call (a model load included) past a second or two.
+HANG_S = 30.0
 
 
 def test_the_battery_is_large_and_distinct() -> None:
@@ -666,7 +669,7 @@ def test_every_bad_input_is_a_typed_clear_error(
     assert isinstance(err, expected), f"{label}: expected {expected.__name__}, got {type(err).__name__}: {err}"
     assert re.search(message, str(err), flags=re.IGNORECASE), f"{label}: message {str(err)!r} lacks {message!r}"
     assert not UNCLEAR.search(str(err)), f"{label}: unclear message {str(err)!r}"
-    assert elapsed < 2.0, f"{label}: took {elapsed:.1f} s"
+    assert elapsed < HANG_S, f"{label}: took {elapsed:.1f} s"
 
 
 @pytest.mark.parametrize(
@@ -683,7 +686,7 @@ def test_every_bad_input_is_a_typed_clear_error(
 )
 def test_extreme_but_valid_geometry_predicts_in_bounded_time(label: str, elements: list[tuple[str, Any]]) -> None:
     """What used to hang the rasteriser or the simplifier: accepted (the values are finite and within ±10⁹ m) and
-    predicted in well under a second per agent."""
+    predicted without hanging (:data:`HANG_S`)."""
     p = dgan.Predictor("hdmap")
     started = time.perf_counter()
     scene = dgan.VectorMap(elements)
@@ -691,4 +694,4 @@ def test_extreme_but_valid_geometry_predicts_in_bounded_time(label: str, element
     pred = p.predict(frame)
     elapsed = time.perf_counter() - started
     assert np.all(np.isfinite(pred.trajectories))
-    assert elapsed < 2.0, f"{label}: {elapsed:.2f} s"
+    assert elapsed < HANG_S, f"{label}: {elapsed:.2f} s"
