@@ -445,7 +445,13 @@ the agents as blue boxes. `python -m training.results` redraws it.
   held-out Waymo excerpt its top mode erred 0.57 times as much as standing still, failing the project's check (at
   most 0.5, `tests/python/test_models.py`); since that excerpt is a held-out scene, this choice is disclosed here.
   Tried on validation and not kept: a class-balanced
-  loss (`train.class_balance = 0.5`: top-1 0.967 m against 0.940, its cyclists 0.483 against 0.469). *Not tried*:
+  loss (`train.class_balance = 0.5`: top-1 0.967 m against 0.940, its cyclists 0.483 against 0.469). A
+  constant-turn-rate prior, measured as physics alone on the validation scenes (`python -m training.prior_study`),
+  is worse than constant velocity for every class: vehicles 2.15/5.37 m turning at the engine's estimated yaw rate,
+  1.97/4.87 at half of it and 2.63/6.65 keeping the estimated acceleration too, against 1.91/4.69 (ApolloScape's
+  validation recordings likewise: vehicles 2.68/4.96, 2.62/4.77 and 6.05/13.22 against 2.63/4.77). Yaw rate and
+  acceleration estimated from a few noisy steps extrapolate worse than the direction of motion alone, so no model was
+  trained on such a prior. *Not tried*:
   more driving data (only the mini sets are shared), map augmentation, a smaller map encoder, several seeds.
 """
 
