@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
+from training.config import DataConfig
 from training.data import cached_windows
 
 Arr = npt.NDArray[np.float64]
@@ -50,7 +51,7 @@ def study(root: Path) -> dict[str, dict[str, dict[str, tuple[float, float]]]]:
     out: dict[str, dict[str, dict[str, tuple[float, float]]]] = {}
     for model, dataset in MODELS:
         spec = dgan.Predictor(model).spec
-        cache = Path("~/.cache/dgan/windows").expanduser()
+        cache = Path(DataConfig().cache_dir).expanduser()
         w = cached_windows(dataset, root, "val", spec, cache, progress=False)
         t = w.target
         traj, mask, state, future = w.trajectory[t], w.trajectory_mask[t], w.state[t], w.future[t]
