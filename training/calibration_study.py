@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Callable
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +31,7 @@ import dgan
 from training import metrics
 from training.data import iter_windows
 from training.datasets import DATASETS, recordings
-from training.evaluate import calibration, untempered
+from training.evaluate import calibration, per_class_normalised, rows_of, untempered
 from training.scorecard import worst_gap
 
 #: (bundled model, dataset, ETH/UCY fold, test datasets).
@@ -55,16 +54,8 @@ class Modes:
         pk, pc, mc, best = [], [], [], []
         for rec in recordings(dataset, root, split, fold, with_map=use_map):
             for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
-                full = predictor.predict(w.frame(info, spec.t_obs, with_map=use_map))
                 t = w.target
-                pred = replace(
-                    full,
-                    agent_ids=full.agent_ids[t],
-                    trajectories=full.trajectories[t],
-                    probabilities=full.probabilities[t],
-                    class_probabilities=full.class_probabilities[t],
-                    mode_classes=full.mode_classes[t],
-                )
+                pred = rows_of(predictor.predict(w.frame(info, spec.t_obs, with_map=use_map)), t)
                 rows = np.arange(len(pred.probabilities))[:, None]
                 pcm = pred.class_probabilities[rows, pred.mode_classes]
                 pk.append(untempered(pred, temperature) / np.maximum(pcm, 1e-300))
@@ -83,15 +74,6 @@ class Modes:
         hit = np.zeros(q.shape, dtype=bool)
         hit[np.arange(len(self.best)), self.best] = True
         return calibration((q * self.pc).ravel(), hit.ravel())
-
-
-def per_class_normalised(w: np.ndarray, mc: np.ndarray) -> np.ndarray:
-    """Non-negative weights ``w`` normalised to sum to 1 within each class's modes of each agent."""
-    out = np.zeros_like(w)
-    for c in np.unique(mc):
-        sel = mc == c
-        out = np.where(sel, w / np.maximum(np.where(sel, w, 0.0).sum(axis=1, keepdims=True), 1e-300), out)
-    return out
 
 
 def tempered(pk: np.ndarray, mc: np.ndarray, t: float) -> np.ndarray:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -110,15 +111,7 @@ def evaluate(
             cvs = {
                 k: v / unit for k, v in metrics.constant_velocity_variants(obs, obs_mask, spec.t_f, spec.dt_s).items()
             }
-            sub = dgan.Prediction(
-                pred.agent_ids[t],
-                pred.trajectories[t] / unit,
-                pred.probabilities[t],
-                pred.class_probabilities[t],
-                pred.mode_classes[t],
-                pred.edges,
-                pred.classes,
-            )
+            sub = rows_of(pred, t, unit)
             for k, v in agent_metrics(sub, gt, cvs).items():
                 per.setdefault(k, []).append(v)
             labels.append(w.label[t])
@@ -150,6 +143,19 @@ def evaluate(
     return out
 
 
+def rows_of(pred: dgan.Prediction, rows: np.ndarray, unit: float = 1.0) -> dgan.Prediction:
+    """The prediction of some agents only (``rows``: a mask or indices of the frame's rows), trajectories divided by
+    ``unit`` (metres per unit of the dataset)."""
+    return replace(
+        pred,
+        agent_ids=pred.agent_ids[rows],
+        trajectories=pred.trajectories[rows] / unit,
+        probabilities=pred.probabilities[rows],
+        class_probabilities=pred.class_probabilities[rows],
+        mode_classes=pred.mode_classes[rows],
+    )
+
+
 def untempered(pred: dgan.Prediction, temperature: float) -> np.ndarray:
     """``(N, M)`` the mode probabilities the model would give at temperature 1, from those at ``temperature``
     (all K modes needed): p(k | c) at T is softmax(l / T), so p(k | c) at 1 is proportional to p(k | c)^T."""
@@ -159,11 +165,17 @@ def untempered(pred: dgan.Prediction, temperature: float) -> np.ndarray:
     rows = np.arange(len(prob))[:, None]
     pc = pred.class_probabilities[rows, pred.mode_classes]
     pk = (prob / np.maximum(pc, 1e-300)) ** temperature
-    out = np.zeros_like(prob)
-    for c in range(pred.class_probabilities.shape[1]):
-        sel = pred.mode_classes == c
-        norm = np.where(sel, pk, 0.0).sum(axis=1, keepdims=True)
-        out = np.where(sel, pc * pk / np.maximum(norm, 1e-300), out)
+    out: np.ndarray = pc * per_class_normalised(pk, pred.mode_classes)
+    return out
+
+
+def per_class_normalised(w: np.ndarray, mode_classes: np.ndarray) -> np.ndarray:
+    """Non-negative weights ``w (N, M)`` normalised to sum to 1 over each agent's modes of each class."""
+    out = np.zeros_like(w)
+    for c in np.unique(mode_classes):
+        sel = mode_classes == c
+        norm = np.where(sel, w, 0.0).sum(axis=1, keepdims=True)
+        out = np.where(sel, w / np.maximum(norm, 1e-300), out)
     return out
 
 

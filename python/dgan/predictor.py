@@ -220,11 +220,8 @@ class Predictor:
         check = _dgan.check_headings(frame._frame, self._spec.dt_s)
         if check is None:
             return
-        moving, median_deg, beyond_two_pi = check
-        # Headings that follow the motion are radians even when unwrapped past 2π (real logs hold such angles);
-        # beyond 2π alone is suspicious only when too few agents move to tell.
-        confirmed = moving >= 3
-        if (confirmed and median_deg > 45.0) or (beyond_two_pi and not confirmed):
+        moving, median_deg, beyond_two_pi, disagrees = check
+        if disagrees:
             self._heading_warned = True
             why = "some exceed 2π, so they may be degrees; " if beyond_two_pi else ""
             warnings.warn(

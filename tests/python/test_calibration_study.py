@@ -13,6 +13,7 @@ pytest.importorskip("sklearn")
 pytest.importorskip("scipy")
 
 from training import calibration_study as cs
+from training.evaluate import per_class_normalised
 
 
 def synthetic(n: int, temperature: float, seed: int = 0) -> cs.Modes:
@@ -20,7 +21,7 @@ def synthetic(n: int, temperature: float, seed: int = 0) -> cs.Modes:
     model at T = 1 gives when the true temperature is ``temperature``)."""
     rng = np.random.default_rng(seed)
     mc = np.tile(np.array([0, 0, 0, 1, 1]), (n, 1))
-    pk = cs.per_class_normalised(rng.dirichlet(np.ones(5) * 0.7, size=n), mc)
+    pk = per_class_normalised(rng.dirichlet(np.ones(5) * 0.7, size=n), mc)
     true = cs.tempered(pk, mc, temperature)
     pc = np.where(mc == 0, 1.0, 0.0)  # every agent of class 0
     best = np.array([rng.choice(3, p=row[:3] / row[:3].sum()) for row in true])

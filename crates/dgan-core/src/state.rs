@@ -126,6 +126,11 @@ pub fn traffic_states_with(frame: &Frame, dt_s: f64, source: HeadingSource) -> V
         .collect()
 }
 
+/// The moving agents [`HeadingCheck::disagrees`] needs to judge headings by the motion.
+pub const HEADING_CHECK_MIN_MOVING: usize = 3;
+/// The median disagreement, in degrees, above which [`HeadingCheck::disagrees`].
+pub const HEADING_CHECK_MAX_MEDIAN_DEG: f64 = 45.0;
+
 /// How well a frame's measured headings follow its agents' motion ([`check_headings`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HeadingCheck {
@@ -136,6 +141,19 @@ pub struct HeadingCheck {
     /// Whether some measured heading exceeds 2π in magnitude: degrees passed as radians, unless the agents moving
     /// confirm the headings (logs also store radians unwrapped past 2π).
     pub beyond_two_pi: bool,
+}
+
+impl HeadingCheck {
+    /// Whether the headings are most likely in another convention: enough moving agents to judge and a median
+    /// disagreement over [`HEADING_CHECK_MAX_MEDIAN_DEG`], or, with too few to judge, values beyond 2π. Headings
+    /// that follow the motion are radians even when unwrapped past 2π.
+    pub fn disagrees(&self) -> bool {
+        if self.moving >= HEADING_CHECK_MIN_MOVING {
+            self.median_error_deg > HEADING_CHECK_MAX_MEDIAN_DEG
+        } else {
+            self.beyond_two_pi
+        }
+    }
 }
 
 /// Compares a frame's measured headings with its agents' direction of motion, for a model that takes measured
@@ -239,12 +257,24 @@ mod tests {
             |h: [f64; 5]| Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap().with_headings(&h).unwrap();
         let up = std::f64::consts::FRAC_PI_2;
         let ok = check_headings(&f([0.0, 0.05, up + 0.1, 3.0, f64::NAN]), 1.0).unwrap();
-        assert_eq!((ok.moving, ok.beyond_two_pi), (3, false));
+        assert_eq!((ok.moving, ok.beyond_two_pi, ok.disagrees()), (3, false, false));
         assert!((ok.median_error_deg - 0.05f64.to_degrees()).abs() < 1e-9);
         // Reversed headings, and degrees passed as radians.
         let reversed = check_headings(&f([3.1, 3.1, -up, 0.0, f64::NAN]), 1.0).unwrap();
-        assert!(reversed.median_error_deg > 170.0);
-        assert!(check_headings(&f([0.0, 0.0, 90.0, 0.0, f64::NAN]), 1.0).unwrap().beyond_two_pi);
+        assert!(reversed.median_error_deg > 170.0 && reversed.disagrees());
+        let degrees = check_headings(&f([0.0, 0.0, 90.0, 0.0, f64::NAN]), 1.0).unwrap();
+        assert!(degrees.beyond_two_pi);
+        // ... which the motion judges: 0° is 0 rad, so two of the three moving agents agree and the median holds.
+        assert!(!degrees.disagrees());
+        let all_degrees = check_headings(&f([180.0, 180.0, 90.0, 0.0, f64::NAN]), 1.0).unwrap();
+        assert!(all_degrees.beyond_two_pi && all_degrees.disagrees());
+        // Radians unwrapped past 2π that follow the motion: beyond 2π, yet confirmed by the three moving agents.
+        let tau = std::f64::consts::TAU;
+        let unwrapped = check_headings(&f([2.0 * tau, 2.0 * tau, up + tau, 0.0, f64::NAN]), 1.0).unwrap();
+        assert!(unwrapped.beyond_two_pi && !unwrapped.disagrees());
+        // Too few moving agents to judge: beyond 2π alone decides.
+        let slow = |h: f64| HeadingCheck { moving: 2, median_error_deg: 0.0, beyond_two_pi: h > tau };
+        assert!(slow(90.0).disagrees() && !slow(1.0).disagrees());
         let none = Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap();
         assert_eq!(check_headings(&none, 1.0), None);
     }
