@@ -231,11 +231,32 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 """
 
 
-def bundle(run: Path, name: str, data_root: Path) -> dict[str, Any]:
+def ensemble_line(runs: list[Path], predictor: dgan.Predictor) -> str:
+    """The card's line for a model that is the consensus of several runs."""
+    seeds = [json.loads((r / "config.json").read_text())["config"]["train"]["seed"] for r in runs]
+    return (
+        f"- **Ensemble**: the consensus of {len(runs)} runs of this configuration, seeds "
+        f"{', '.join(map(str, seeds))} (`training.ensemble`): its most probable mode of each class is the mean of "
+        f"the runs' most probable modes, its other modes are seed {seeds[0]}'s. Weights stored as float16; "
+        f"temperature {float(predictor.contract.get('temperature', 1.0)):.3f}, fitted on validation for the "
+        f"consensus. The training line above is seed {seeds[0]}'s run. A prediction runs all {len(runs)} networks.\n"
+    )
+
+
+def bundle(runs: list[Path], name: str, data_root: Path) -> dict[str, Any]:
+    """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
+    weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card."""
+    run = runs[0]
     cfg = json.loads((run / "config.json").read_text())["config"]
     dataset = cfg["data"].get("dataset", "ethucy")
     MODELS.mkdir(parents=True, exist_ok=True)
-    slim_checkpoint(run, CHECKPOINTS / f"{name}.pt")
+    if len(runs) > 1:
+        from training.ensemble import calibrate, ensemble_checkpoint
+
+        ensemble_checkpoint(runs, CHECKPOINTS / f"{name}.pt", half=True)
+        calibrate(CHECKPOINTS / f"{name}.pt", data_root)
+    else:
+        slim_checkpoint(run, CHECKPOINTS / f"{name}.pt")
     if dataset == "ethucy":
         description = (
             f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "
@@ -254,6 +275,8 @@ def bundle(run: Path, name: str, data_root: Path) -> dict[str, Any]:
     if dataset == "ethucy" and predictor.spec.map is not None and predictor.spec.map.optional:
         metrics["without_map"] = evaluate(predictor, dataset, data_root, fold, with_map=False)
     text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
+    if len(runs) > 1:
+        text = text.replace("- **Test metrics**", ensemble_line(runs, predictor) + "- **Test metrics**", 1)
     (MODELS / f"{name}.md").write_text(text)
     (run / "metrics.json").write_text(json.dumps(metrics, indent=2))
     return metrics
@@ -270,7 +293,9 @@ def reexport(name: str) -> Path:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("run", type=Path, nargs="?")
+    ap.add_argument(
+        "run", type=Path, nargs="*", help="a run folder, or several runs of one configuration (an ensemble)"
+    )
     ap.add_argument("--name")
     ap.add_argument("--data-root", type=Path, default=Path("../shared/data"))
     ap.add_argument("--reexport", nargs="+", metavar="MODEL", help="export bundled models again from their checkpoints")
@@ -279,8 +304,8 @@ def main() -> None:
         for name in a.reexport:
             print(reexport(name))
         return
-    if a.run is None or a.name is None:
-        ap.error("give a run folder and --name (or --reexport MODEL ...)")
+    if not a.run or a.name is None:
+        ap.error("give a run folder (or several) and --name (or --reexport MODEL ...)")
     print(json.dumps(bundle(a.run, a.name, a.data_root.expanduser()), indent=2))
 
 

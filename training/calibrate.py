@@ -11,7 +11,6 @@ import torch
 import dgan
 from training.data import Windows
 from training.loss import mode_probabilities
-from training.model import DGAN
 
 #: The temperatures tried, log-spaced.
 GRID = np.exp(np.linspace(np.log(0.05), np.log(20.0), 121))
@@ -19,7 +18,7 @@ GRID = np.exp(np.linspace(np.log(0.05), np.log(20.0), 121))
 
 @torch.no_grad()
 def best_mode_logits(
-    model: DGAN, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, batch: int = 64
+    model: torch.nn.Module, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, batch: int = 64
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """For every target of ``w``: class logits, anchor logits and the index of its best mode (smallest ADE)."""
     from training.train import forward_inputs, prepared_batch, windows_with_targets
@@ -52,7 +51,7 @@ def best_mode_nll(
 
 
 def fit_temperature(
-    model: DGAN, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor
+    model: torch.nn.Module, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor
 ) -> tuple[float, float, float]:
     """The temperature of smallest best-mode NLL on ``w``; also the NLL at T = 1 and at the fitted T."""
     cl, al, best = best_mode_logits(model, w, spec, anchors)

@@ -15,7 +15,7 @@ import torch
 import dgan
 from dgan import _dgan
 from training.config import Config
-from training.model import DGAN
+from training.model import DGAN, ConsensusEnsemble
 
 OUTPUTS = ["class_logits", "anchor_logits", "offsets"]
 #: The inputs of an exported model (contract 3, the padded neighbour layout), in ``DGAN.forward_padded``'s order.
@@ -31,12 +31,30 @@ INPUTS = (
 )
 
 
-def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config, float]:
+def load_checkpoint(
+    path: Path,
+) -> tuple[DGAN | ConsensusEnsemble, dgan.InputSpec, np.ndarray, np.ndarray, Config, float]:
     """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor, the config and the
-    temperature fitted on validation after training (1 for a checkpoint without one)."""
+    temperature fitted on validation after training (1 for a checkpoint without one). An ensemble's checkpoint
+    (``training.ensemble``) holds its members' checkpoints: its anchors and config are its first member's."""
+    ckpt = torch.load(path, weights_only=False)
+    if "members" in ckpt:
+        members = [_member(m) for m in ckpt["members"]]
+        first = members[0]
+        for other in members[1:]:
+            if other[1].to_json() != first[1].to_json() or not np.array_equal(other[3], first[3]):
+                raise ValueError(f"{path}: the ensemble's members take different inputs or classes")
+        tables = [torch.from_numpy(np.asarray(m[2], dtype=np.float32)) for m in members]
+        ensemble = ConsensusEnsemble([m[0] for m in members], tables, len(first[1].classes)).eval()
+        return ensemble, first[1], first[2], first[3], first[4], float(ckpt.get("temperature", 1.0))
+    model, spec, anchors, class_of, cfg = _member(ckpt)
+    return model, spec, anchors, class_of, cfg, float(ckpt.get("temperature", 1.0))
+
+
+def _member(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
+    """One trained network of a checkpoint: the model (eval mode), spec, anchors, class of each anchor, config."""
     from training.train import build_model, input_spec
 
-    ckpt = torch.load(path, weights_only=False)
     cfg = Config.from_dict(
         {"name": ckpt["config"]["name"], **{k: ckpt["config"][k] for k in ("data", "model", "train")}}
     )
@@ -47,7 +65,7 @@ def load_checkpoint(path: Path) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.nd
     anchors = np.asarray(ckpt["anchors"])
     # Checkpoints from before multi-class training have one class and no class_of.
     class_of = np.asarray(ckpt.get("class_of", np.zeros(len(anchors), np.int64)))
-    return model, spec, anchors, class_of, cfg, float(ckpt.get("temperature", 1.0))
+    return model, spec, anchors, class_of, cfg
 
 
 def contract(
@@ -117,7 +135,7 @@ def example_inputs(spec: dgan.InputSpec, n: int = 3) -> tuple[torch.Tensor, ...]
 
 
 def export_model(
-    model: DGAN,
+    model: DGAN | ConsensusEnsemble,
     spec: dgan.InputSpec,
     anchors: np.ndarray,
     class_of: np.ndarray,
@@ -157,12 +175,37 @@ def export_model(
         dynamo=False,
     )
     m = onnx.load(str(path))
+    store_half(m)
     meta = contract(spec, anchors, class_of, name, description, temperature)
     onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(meta)})
     onnx.save(m, str(path))
     seal(path)
     dgan.Predictor(path)  # the engine checks the contract and the seal
     return path
+
+
+def store_half(m: onnx.ModelProto) -> int:
+    """Stores every float32 weight of the graph whose values are all float16 numbers (a checkpoint rounded by
+    ``training.ensemble``'s ``half``) as float16, cast back to float32 by a Cast node that ONNX Runtime folds when
+    the session starts: half the file, the same arithmetic. Returns how many weights it stored so."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    g = m.graph
+    kept, casts = [], []
+    for init in g.initializer:
+        a = numpy_helper.to_array(init) if init.data_type == TensorProto.FLOAT else None
+        if a is None or a.size < 16 or not np.array_equal(a.astype(np.float16).astype(np.float32), a):
+            kept.append(init)
+            continue
+        kept.append(numpy_helper.from_array(a.astype(np.float16), f"{init.name}__f16"))
+        casts.append(helper.make_node("Cast", [f"{init.name}__f16"], [init.name], to=TensorProto.FLOAT))
+    if casts:
+        del g.initializer[:]
+        g.initializer.extend(kept)
+        nodes = list(g.node)
+        del g.node[:]
+        g.node.extend(casts + nodes)
+    return len(casts)
 
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:

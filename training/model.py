@@ -271,9 +271,56 @@ class DGAN(nn.Module):
 class PaddedDGAN(nn.Module):
     """A trained :class:`DGAN` whose ``forward`` takes the padded neighbour layout: what the exporter traces."""
 
-    def __init__(self, model: DGAN) -> None:
+    def __init__(self, model: DGAN | ConsensusEnsemble) -> None:
         super().__init__()
         self.model = model
 
     def forward(self, *inputs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         return self.model.forward_padded(*inputs)
+
+
+class ConsensusEnsemble(nn.Module):
+    """Several :class:`DGAN` runs of one configuration (seeds) as one network under the same contract: the first
+    member's outputs, except that in every class's block of anchors its most probable mode is replaced by the mean of
+    every member's most probable mode of that class (each member's anchor + offset, in the agent frame relative to
+    the kinematic prior, which the members share). The engine ranks modes within a class by the anchor logits, which
+    stay the first member's, so its top mode per class is that consensus; the other modes are the first member's.
+
+    Averaging the members' most probable futures cancels much of the run-to-run spread (``training.seed_study``).
+    """
+
+    anchors: Tensor
+
+    def __init__(self, members: list[nn.Module], anchors: list[Tensor], classes: int) -> None:
+        super().__init__()
+        if not members or len(members) != len(anchors):
+            raise ValueError("an ensemble needs one anchor set per member, and at least one member")
+        shape = anchors[0].shape
+        if any(a.shape != shape for a in anchors) or shape[0] % classes:
+            raise ValueError(f"every member needs the same anchors per class; got shapes {[a.shape for a in anchors]}")
+        self.members = nn.ModuleList(members)
+        self.classes, self.per_class = classes, shape[0] // classes
+        # (M, C, Kc, T, 2): anchors grouped by class, as the contract stores them.
+        self.register_buffer("anchors", torch.stack([a.reshape(classes, self.per_class, *shape[1:]) for a in anchors]))
+
+    def combine(self, outs: list[tuple[Tensor, Tensor, Tensor]]) -> tuple[Tensor, Tensor, Tensor]:
+        cl0, al0, off0 = outs[0]
+        n, c, kc = al0.shape[0], self.classes, self.per_class
+        tail = off0.shape[2:]
+        tops = []
+        for m, (_, al, off) in enumerate(outs):
+            best = al.reshape(n, c, kc).argmax(-1)  # (N, C)
+            modes = self.anchors[m].unsqueeze(0) + off.reshape(n, c, kc, *tail)
+            tops.append(modes.gather(2, best[:, :, None, None, None].expand(n, c, 1, *tail)).squeeze(2))
+        consensus = torch.stack(tops).mean(0)  # (N, C, T, 2)
+        best0 = al0.reshape(n, c, kc).argmax(-1)
+        chosen = (torch.arange(kc, device=al0.device) == best0.unsqueeze(-1)).to(off0.dtype)[..., None, None]
+        off = off0.reshape(n, c, kc, *tail)
+        replaced = off * (1 - chosen) + (consensus.unsqueeze(2) - self.anchors[0].unsqueeze(0)) * chosen
+        return cl0, al0, replaced.reshape(off0.shape)
+
+    def forward(self, *inputs: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
+        return self.combine([m(*inputs) for m in self.members])
+
+    def forward_padded(self, *inputs: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
+        return self.combine([m.forward_padded(*inputs) for m in self.members])  # type: ignore[operator]

@@ -18,6 +18,7 @@ import dgan
 from training.config import Config
 from training.export import export_model, load_checkpoint
 from training.loss import class_weights, closest_anchor, decode_torch, dgan_loss
+from training.model import DGAN
 from training.train import INPUTS, build_model, input_spec
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -135,6 +136,17 @@ def test_every_bundled_model_has_a_checkpoint() -> None:
     assert set(dgan.models.list()) <= {p.stem for p in CHECKPOINTS.glob("*.pt")}
 
 
+def randomised_batch_norm(model: DGAN) -> DGAN:
+    """``model`` with random BatchNorm running statistics (fresh ones are 0 and 1, which would hide their export)."""
+    for m in model.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            assert m.running_mean is not None
+            assert m.running_var is not None
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+    return model
+
+
 @pytest.mark.parametrize(
     ("config", "variant"),
     [
@@ -156,13 +168,7 @@ def test_fresh_exports_match_pytorch(config: str, variant: dict[str, object], tm
     k = k_c * len(spec.classes)
     class_of = np.repeat(np.arange(len(spec.classes)), k_c)
     anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (k, spec.t_f, 2)), axis=1).astype(np.float32)
-    model = build_model(cfg, spec, k).eval()
-    for m in model.modules():
-        if isinstance(m, torch.nn.BatchNorm2d):
-            assert m.running_mean is not None
-            assert m.running_var is not None
-            m.running_mean.uniform_(-0.5, 0.5)
-            m.running_var.uniform_(0.5, 2.0)
+    model = randomised_batch_norm(build_model(cfg, spec, k).eval())
     path = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "fresh", temperature=1.7)
     predictor = dgan.Predictor(path)
     assert predictor.classes == spec.classes
