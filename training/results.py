@@ -156,19 +156,25 @@ def main() -> None:
         from training.train import main as train
 
         for s in SCENES:
-            run = ROOT / "runs" / f"ethucy_{s}"
-            train(
-                [
-                    "--config",
-                    str(ROOT / "training" / "configs" / f"ethucy_{s}.toml"),
-                    "--out",
-                    str(run),
-                    "--set",
-                    f"data.root={root}",
-                    "--no-export",
-                ]
-            )
-            bundle([run], s, root)
+            runs = []
+            for seed in ENSEMBLE_SEEDS["ethucy"]:
+                run = ROOT / "runs" / f"ethucy_{s}_s{seed}"
+                cfg = str(ROOT / "training" / "configs" / f"ethucy_{s}.toml")
+                train(
+                    [
+                        "--config",
+                        cfg,
+                        "--out",
+                        str(run),
+                        "--set",
+                        f"data.root={root}",
+                        "--set",
+                        f"train.seed={seed}",
+                        "--no-export",
+                    ]
+                )
+                runs.append(run)
+            bundle(runs, s, root)
     if a.train_multiclass:
         train_multiclass(root)
     if a.train_hdmap:
@@ -275,14 +281,15 @@ def train_multiclass(root: Path) -> None:
                 bundle([run], ds, root)
 
 
-#: The seeds of the HD-map ensembles' members, chosen on the validation scenes: the consensus of the first five
-#: runs by seed (0.870 m top-1 ADE) was below each of 14 single runs (0.871–0.971 m; `docs/seed_study.json`), at
-#: five times one network's cost; 14 runs gave 0.842 m at 14 times.
-HDMAP_SEEDS = (0, 1, 2, 3, 4)
+#: The seeds of each bundled ensemble's members (``training.ensemble``), chosen on validation (`docs/seed_study.json`).
+#: HD map: the consensus of the first five runs by seed (top-1 ADE 0.870 m) was below each of 14 single runs
+#: (0.871–0.971 m), at five times one network's cost (14 runs: 0.842 m). ETH/UCY: three runs, 3–4% below their
+#: members on the hotel and univ validation splits.
+ENSEMBLE_SEEDS = {"hdmap": (0, 1, 2, 3, 4), "ethucy": (0, 1, 2)}
 
 
 def train_hdmap(root: Path) -> None:
-    """Trains the HD-map model with and without its map, one run per seed of :data:`HDMAP_SEEDS`; bundles the first
+    """Trains the HD-map model with and without its map, one run per seed of :data:`ENSEMBLE_SEEDS`; bundles the first
     configuration's consensus as ``hdmap`` and keeps the second's as ``training/checkpoints/baselines/hdmap-nomap.pt``.
     """
     from training.bundle import bundle
@@ -292,7 +299,7 @@ def train_hdmap(root: Path) -> None:
     runs: dict[str, list[Path]] = {}
     for config in ("hdmap", "hdmap_nomap"):
         cfg = str(ROOT / "training" / "configs" / f"{config}.toml")
-        for seed in HDMAP_SEEDS:
+        for seed in ENSEMBLE_SEEDS["hdmap"]:
             run = ROOT / "runs" / f"{config}_s{seed}"
             args = ["--set", f"data.root={root}", "--set", f"train.seed={seed}", "--no-export"]
             train(["--config", cfg, "--out", str(run), *args])

@@ -208,6 +208,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--data-root", type=Path, default=Path("../shared/data"))
     ap.add_argument("--jobs", type=int, default=2, help="sets measured at once")
     ap.add_argument("--out", type=Path, help="write every figure here (JSON)")
+    ap.add_argument("--update", action="store_true", help="keep the other groups already in --out")
     ap.add_argument("--classes", default="vehicle,all", help="classes printed (comma-separated)")
     a = ap.parse_args(argv)
     missing = [str(r) for r in a.runs if not (r / "best.pt").is_file() and not (r / "model.onnx").is_file()]
@@ -215,7 +216,8 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"not training runs (no best.pt or model.onnx): {', '.join(missing)}")
     result = study(a.runs, a.data_root.expanduser(), a.jobs)
     if a.out:
-        a.out.write_text(json.dumps(result, indent=1))
+        kept = json.loads(a.out.read_text()) if a.update and a.out.is_file() else {}
+        a.out.write_text(json.dumps(kept | result, indent=1))
     for cls in a.classes.split(","):
         print(f"\n{cls}:\n{markdown(result, cls)}")
     for name, g in result.items():

@@ -25,7 +25,7 @@ def test_five_leave_one_out_models_are_bundled() -> None:
         card = dgan.models.card(name)
         assert f"test scene {name}" in card
         assert "non-commercial" in card
-        assert dgan.models.path(name).stat().st_size < 5_000_000
+        assert dgan.models.path(name).stat().st_size < size_limit(card)
 
 
 @pytest.mark.parametrize(
