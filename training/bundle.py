@@ -236,10 +236,11 @@ def ensemble_line(runs: list[Path], predictor: dgan.Predictor) -> str:
     seeds = [json.loads((r / "config.json").read_text())["config"]["train"]["seed"] for r in runs]
     return (
         f"- **Ensemble**: the consensus of {len(runs)} runs of this configuration, seeds "
-        f"{', '.join(map(str, seeds))} (`training.ensemble`): its most probable mode of each class is the mean of "
-        f"the runs' most probable modes, its other modes are seed {seeds[0]}'s. Weights stored as float16; "
-        f"temperature {float(predictor.contract.get('temperature', 1.0)):.3f}, fitted on validation for the "
-        f"consensus. The training line above is seed {seeds[0]}'s run. A prediction runs all {len(runs)} networks.\n"
+        f"{', '.join(map(str, seeds))} (`training.ensemble`): its most probable mode (of the agent's most probable "
+        f"class) is the mean of the runs' most probable modes, its other modes are seed {seeds[0]}'s. Weights "
+        f"stored as float16; temperature {float(predictor.contract.get('temperature', 1.0)):.3f}, fitted on "
+        f"validation for the consensus. The training line above is seed {seeds[0]}'s run. A prediction runs all "
+        f"{len(runs)} networks.\n"
     )
 
 

@@ -4,9 +4,10 @@
 
 Each RUN is a ``training.train`` output folder (its ``best.pt``). The model keeps the contract of a single run: the
 engine runs it unchanged, with every member inside one ONNX graph (so a call costs about the members' count times one
-network). Its most probable mode of each class is the mean of the members' most probable modes; the other modes are
-the first member's. The temperature is fitted anew on the validation split (``--no-calibrate`` keeps the first
-member's), since the consensus mode is the best mode more often than any one member's top mode.
+network). Its most probable mode (of the agent's most probable class) is the mean of the members' most probable
+modes; the other modes are the first member's. The temperature is fitted anew on the validation split
+(``--no-calibrate`` keeps the first member's), since the consensus mode is the best mode more often than any one
+member's top mode.
 """
 
 from __future__ import annotations

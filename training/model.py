@@ -281,10 +281,11 @@ class PaddedDGAN(nn.Module):
 
 class ConsensusEnsemble(nn.Module):
     """Several :class:`DGAN` runs of one configuration (seeds) as one network under the same contract: the first
-    member's outputs, except that in every class's block of anchors its most probable mode is replaced by the mean of
-    every member's most probable mode of that class (each member's anchor + offset, in the agent frame relative to
-    the kinematic prior, which the members share). The engine ranks modes within a class by the anchor logits, which
-    stay the first member's, so its top mode per class is that consensus; the other modes are the first member's.
+    member's outputs, except that in the block of anchors of the agent's most probable class (by the first member's
+    class logits) its most probable mode is replaced by the mean of every member's most probable mode of that class
+    (each member's anchor + offset, in the agent frame relative to the kinematic prior, which the members share). The
+    engine ranks modes within a class by the anchor logits, which stay the first member's, so its top mode of that
+    class is the consensus; the other modes are the first member's.
 
     Averaging the members' most probable futures cancels much of the run-to-run spread (``training.seed_study``).
     """
@@ -314,7 +315,13 @@ class ConsensusEnsemble(nn.Module):
             tops.append(modes.gather(2, best[:, :, None, None, None].expand(n, c, 1, *tail)).squeeze(2))
         consensus = torch.stack(tops).mean(0)  # (N, C, T, 2)
         best0 = al0.reshape(n, c, kc).argmax(-1)
-        chosen = (torch.arange(kc, device=al0.device) == best0.unsqueeze(-1)).to(off0.dtype)[..., None, None]
+        # Only in the block of the most probable class (the class is an input, so p(c) is all but one-hot there):
+        # the other blocks keep the first member's modes, which vary continuously with the inputs, while a block's
+        # top anchor can switch between near-equal logits.
+        top_class = cl0.argmax(-1, keepdim=True)  # (N, 1)
+        in_block = torch.arange(c, device=al0.device) == top_class  # (N, C)
+        at_top = torch.arange(kc, device=al0.device) == best0.unsqueeze(-1)  # (N, C, Kc)
+        chosen = (at_top & in_block.unsqueeze(-1)).to(off0.dtype)[..., None, None]
         off = off0.reshape(n, c, kc, *tail)
         replaced = off * (1 - chosen) + (consensus.unsqueeze(2) - self.anchors[0].unsqueeze(0)) * chosen
         return cl0, al0, replaced.reshape(off0.shape)
