@@ -18,7 +18,7 @@ import torch
 
 import dgan
 from training.evaluate import evaluate
-from training.export import export_checkpoint
+from training.export import SLIM_KEYS, export_checkpoint
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "python" / "dgan" / "models"
@@ -42,9 +42,7 @@ def slim_checkpoint(run: Path, out: Path) -> Path:
     """Keeps what export and the parity test need of a run's best checkpoint (no optimizer state)."""
     ckpt = torch.load(run / "best.pt", weights_only=False)
     out.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(
-        {k: ckpt[k] for k in ("model", "anchors", "class_of", "config", "epoch", "temperature") if k in ckpt}, out
-    )
+    torch.save({k: ckpt[k] for k in SLIM_KEYS if k in ckpt}, out)
     return out
 
 

@@ -19,10 +19,7 @@ from typing import Any
 
 import torch
 
-from training.export import export_model, load_checkpoint
-
-#: What an ensemble's checkpoint keeps of each member (``training.bundle.slim_checkpoint``'s keys).
-MEMBER_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature")
+from training.export import SLIM_KEYS, export_checkpoint, load_checkpoint
 
 
 def ensemble_checkpoint(runs: list[Path], out: Path, half: bool = False) -> Path:
@@ -32,7 +29,7 @@ def ensemble_checkpoint(runs: list[Path], out: Path, half: bool = False) -> Path
     members: list[dict[str, Any]] = []
     for run in runs:
         ckpt = torch.load(run / "best.pt", weights_only=False)
-        member = {k: ckpt[k] for k in MEMBER_KEYS if k in ckpt}
+        member = {k: ckpt[k] for k in SLIM_KEYS if k in ckpt}
         if half:
             member["model"] = {k: v.half() if v.is_floating_point() else v for k, v in member["model"].items()}
         members.append(member)
@@ -81,9 +78,8 @@ def main(argv: list[str] | None = None) -> Path:
         if not a.no_calibrate:
             t, before, after = calibrate(ckpt, a.data_root, progress=True)
             print(f"temperature {t:.3f}: validation best-mode NLL {before:.4f} -> {after:.4f}")
-        model, spec, anchors, class_of, _, temperature = load_checkpoint(ckpt)
         description = a.description or f"Consensus of {len(a.runs)} runs: {', '.join(r.name for r in a.runs)}"
-        path = export_model(model, spec, anchors, class_of, a.out, a.name, description, temperature)
+        path = export_checkpoint(ckpt, a.out, a.name, description)
     print(f"exported {path}")
     return path
 

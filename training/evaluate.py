@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,39 @@ from training.datasets import DATASETS, recordings
 
 #: Edges of the probability bins of the reliability diagram.
 CALIBRATION_BINS = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
+
+
+@dataclass
+class Scored:
+    """One window's targets as every accuracy table scores them: the frame the model is given, the target rows, and
+    the targets' truth ``(n, T_f, 2)``, constant-velocity variants ``{name: (n, 1, T_f, 2)}`` (both in the dataset's
+    unit) and labels."""
+
+    frame: dgan.Frame
+    target: np.ndarray
+    unit: float
+    truth: np.ndarray
+    cvs: dict[str, np.ndarray]
+    label: np.ndarray
+
+
+def scored_windows(
+    spec: dgan.InputSpec, dataset: str, root: Path, split: str, fold: str = "", with_map: bool = True
+) -> Iterator[Scored]:
+    """Every window of a split, built as for training (``iter_windows``), with its targets' truth and constant
+    velocity; ``with_map=False`` (or a spec without a map) gives frames without their map."""
+    info = DATASETS[dataset]
+    use_map = with_map and spec.map is not None
+    for rec in recordings(dataset, root, split, fold, with_map=use_map):
+        for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
+            t = w.target
+            unit = rec.unit_m
+            obs, obs_mask = w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs]
+            cvs = {
+                k: v / unit for k, v in metrics.constant_velocity_variants(obs, obs_mask, spec.t_f, spec.dt_s).items()
+            }
+            truth = w.positions[t, spec.t_obs :] / unit
+            yield Scored(w.frame(info, spec.t_obs, with_map=use_map), t, unit, truth, cvs, w.label[t])
 
 
 def agent_metrics(pred: dgan.Prediction, gt: np.ndarray, cvs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -100,27 +134,19 @@ def evaluate(
     windows = 0
     model_classes = list(predictor.classes)
     use_map = with_map and spec.map is not None
-    for rec in recordings(dataset, data_root, split, fold, with_map=use_map):
-        for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
-            windows += 1
-            pred = predictor.predict(w.frame(info, spec.t_obs, with_map=use_map))
-            t = w.target
-            unit = rec.unit_m
-            gt = w.positions[t, spec.t_obs :] / unit
-            obs, obs_mask = w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs]
-            cvs = {
-                k: v / unit for k, v in metrics.constant_velocity_variants(obs, obs_mask, spec.t_f, spec.dt_s).items()
-            }
-            sub = rows_of(pred, t, unit)
-            for k, v in agent_metrics(sub, gt, cvs).items():
-                per.setdefault(k, []).append(v)
-            labels.append(w.label[t])
-            classes.append(np.array([model_classes.index(info.label_class[k]) for k in w.label[t]]))
-            pred_class.append(sub.class_probabilities.argmax(axis=1))
-            ade_all = metrics.displacement(sub.trajectories, gt).mean(axis=2)  # (n, K)
-            mode_p.append(sub.probabilities.ravel())
-            mode_p_raw.append(untempered(sub, temperature).ravel())
-            mode_hit.append((ade_all == ade_all.min(axis=1, keepdims=True)).ravel())
+    for sw in scored_windows(spec, dataset, data_root, split, fold, with_map):
+        windows += 1
+        pred = predictor.predict(sw.frame)
+        sub = rows_of(pred, sw.target, sw.unit)
+        for k, v in agent_metrics(sub, sw.truth, sw.cvs).items():
+            per.setdefault(k, []).append(v)
+        labels.append(sw.label)
+        classes.append(np.array([model_classes.index(info.label_class[k]) for k in sw.label]))
+        pred_class.append(sub.class_probabilities.argmax(axis=1))
+        ade_all = metrics.displacement(sub.trajectories, sw.truth).mean(axis=2)  # (n, K)
+        mode_p.append(sub.probabilities.ravel())
+        mode_p_raw.append(untempered(sub, temperature).ravel())
+        mode_hit.append((ade_all == ade_all.min(axis=1, keepdims=True)).ravel())
     flat = {k: np.concatenate(v) for k, v in per.items()}
     label = np.concatenate(labels)
     klass = np.concatenate(classes)

@@ -18,6 +18,8 @@ from training.config import Config
 from training.model import DGAN, ConsensusEnsemble
 
 OUTPUTS = ["class_logits", "anchor_logits", "offsets"]
+#: What a bundled checkpoint keeps of a run's ``best.pt`` (export and the parity test need no optimizer state).
+SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature")
 #: The inputs of an exported model (contract 3, the padded neighbour layout), in ``DGAN.forward_padded``'s order.
 INPUTS = (
     "trajectory",

@@ -308,13 +308,14 @@ class ConsensusEnsemble(nn.Module):
         cl0, al0, off0 = outs[0]
         n, c, kc = al0.shape[0], self.classes, self.per_class
         tail = off0.shape[2:]
-        tops = []
+        tops, bests = [], []
         for m, (_, al, off) in enumerate(outs):
             best = al.reshape(n, c, kc).argmax(-1)  # (N, C)
             modes = self.anchors[m].unsqueeze(0) + off.reshape(n, c, kc, *tail)
             tops.append(modes.gather(2, best[:, :, None, None, None].expand(n, c, 1, *tail)).squeeze(2))
+            bests.append(best)
         consensus = torch.stack(tops).mean(0)  # (N, C, T, 2)
-        best0 = al0.reshape(n, c, kc).argmax(-1)
+        best0 = bests[0]
         # Only in the block of the most probable class (the class is an input, so p(c) is all but one-hot there):
         # the other blocks keep the first member's modes, which vary continuously with the inputs, while a block's
         # top anchor can switch between near-equal logits.

@@ -31,8 +31,8 @@ import numpy as np
 import dgan
 from training import metrics
 from training.config import Config
-from training.data import iter_windows
-from training.datasets import DATASETS, recordings
+from training.datasets import DATASETS
+from training.evaluate import scored_windows
 from training.train import run_name
 
 #: The test sets of a training dataset (the driving models are also measured on Argoverse 2, never trained on).
@@ -81,20 +81,15 @@ def top1_on(group: Group, split: str, dataset: str, with_map: bool, root: Path) 
     """Every member's top-1 trajectory ``(M, n, T, 2)`` on the targets of a split, the truth ``(n, T, 2)``, constant
     velocity's variants ``{name: (n, 1, T, 2)}`` and the targets' classes ``(n,)``."""
     predictors = [dgan.Predictor(exported(r)[0]) for r in group.runs]
-    spec, info = predictors[0].spec, DATASETS[dataset]
-    use_map = with_map and spec.map is not None
     tops, truth, classes = [], [], []
     cvs: dict[str, list[np.ndarray]] = {}
-    for rec in recordings(dataset, root, split, group.fold, with_map=use_map):
-        for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
-            t = w.target
-            frame = w.frame(info, spec.t_obs, with_map=use_map)
-            tops.append(np.stack([p.predict(frame).trajectories[t, 0] for p in predictors]) / rec.unit_m)
-            truth.append(w.positions[t, spec.t_obs :] / rec.unit_m)
-            obs, mask = w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs]
-            for k, v in metrics.constant_velocity_variants(obs, mask, spec.t_f, spec.dt_s).items():
-                cvs.setdefault(k, []).append(v / rec.unit_m)
-            classes.append(np.array([info.label_class[k] for k in w.label[t]]))
+    info = DATASETS[dataset]
+    for sw in scored_windows(predictors[0].spec, dataset, root, split, group.fold, with_map):
+        tops.append(np.stack([p.predict(sw.frame).trajectories[sw.target, 0] for p in predictors]) / sw.unit)
+        truth.append(sw.truth)
+        for k, v in sw.cvs.items():
+            cvs.setdefault(k, []).append(v)
+        classes.append(np.array([info.label_class[k] for k in sw.label]))
     return {
         "top1": np.concatenate(tops, axis=1),
         "truth": np.concatenate(truth),
