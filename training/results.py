@@ -98,7 +98,7 @@ def main_table(res: dict[str, dict[str, Any]]) -> str:
         "back (0.84/1.84 → 0.86/1.87, 0.58/1.27 → 0.59/1.31, 0.33/0.75 → 0.36/0.82) and the average stayed where it "
         "was: between runs and settings the held-out scenes move by more than validation can rank. Then each fold "
         "became the consensus of three runs (seeds 0–2, `training.ensemble`: its most probable mode is the mean of "
-        "the runs' most probable modes), 2–4% below its runs on every validation split (docs/seed_study.json); on "
+        "the runs' most probable modes), 3.3–4.4% below its runs on every validation split (docs/seed_study.json); on "
         "the test scenes every fold improved on the single run before it (eth 0.86/1.87 → 0.80/1.72 m, hotel "
         "0.32/0.62 → 0.31/0.58, univ 0.59/1.31 → 0.53/1.17, zara1 0.40/0.86 → 0.38/0.81, zara2 0.36/0.82 → "
         "0.31/0.70)."
@@ -287,8 +287,8 @@ def train_multiclass(root: Path) -> None:
 
 #: The seeds of each bundled ensemble's members (``training.ensemble``), chosen on validation (`docs/seed_study.json`).
 #: HD map: the consensus of the first five runs by seed (top-1 ADE 0.870 m) was below each of 14 single runs
-#: (0.871–0.971 m), at five times one network's cost (14 runs: 0.842 m). ETH/UCY: three runs, 3–4% below their
-#: members on the hotel and univ validation splits. ApolloScape: three runs, 2.8% below its members on validation.
+#: (0.871–0.971 m), at five times one network's cost (14 runs: 0.842 m). ETH/UCY: three runs, 3.3–4.4% below their
+#: members on every fold's validation split. ApolloScape: three runs, 2.8% below its members on validation.
 ENSEMBLE_SEEDS = {"hdmap": (0, 1, 2, 3, 4), "ethucy": (0, 1, 2), "apolloscape": (0, 1, 2)}
 
 
