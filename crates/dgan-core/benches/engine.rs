@@ -31,6 +31,12 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+/// The crate's folder: `CARGO_MANIFEST_DIR` as cargo sets it when it runs this (the compile-time value as a fallback),
+/// so that a binary reused from a checkout elsewhere still finds the repository.
+fn manifest_dir() -> PathBuf {
+    std::env::var_os("CARGO_MANIFEST_DIR").map_or_else(|| env!("CARGO_MANIFEST_DIR").into(), Into::into)
+}
+
 fn scene(n: usize) -> (Vec<[f64; 2]>, Vec<f64>) {
     let mut rng = ChaCha8Rng::seed_from_u64(n as u64);
     let side = (n as f64 * 100.0).sqrt();
@@ -126,7 +132,7 @@ fn load_model(bench: &str, path: &str) -> Option<Predictor> {
         eprintln!("{bench} bench skipped: set ORT_DYLIB_PATH to the onnxruntime wheel's libonnxruntime.so.*");
         return None;
     }
-    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..").join(path);
+    let model = manifest_dir().join("../..").join(path);
     Some(Predictor::load(&model).unwrap_or_else(|e| panic!("{} does not load: {e}", model.display())))
 }
 
@@ -140,7 +146,7 @@ fn bench_predict(c: &mut Criterion) {
 
 /// The real Waymo frame of `tests/fixtures/waymo_frame.json` (written by `make_waymo_frame.py`).
 fn waymo_frame() -> Frame {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/waymo_frame.json");
+    let path = manifest_dir().join("../../tests/fixtures/waymo_frame.json");
     let text = std::fs::read_to_string(&path).expect("waymo_frame.json is readable");
     let v: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
     let floats = |key: &str| -> Vec<f64> {
@@ -210,7 +216,7 @@ fn replay(base: TimeBase, ticks: &[(f64, Vec<(i64, Detection)>)]) -> usize {
 
 fn bench_tracker(c: &mut Criterion) {
     let mut g = c.benchmark_group("tracker");
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../python/dgan/data/zara1/frames_5430_5620.txt");
+    let path = manifest_dir().join("../../python/dgan/data/zara1/frames_5430_5620.txt");
     let text = std::fs::read_to_string(path).expect("the bundled zara1 excerpt");
     let mut by_tick: std::collections::BTreeMap<i64, Vec<(i64, Detection)>> = Default::default();
     for line in text.lines() {

@@ -58,3 +58,10 @@ pub use runtime::{
     available_execution_providers, init_onnxruntime, ExecutionProvider, Prediction, Predictor, PredictorOptions,
 };
 pub use spec::{GraphLayout, HeadingSource, InputSpec, MapSpec};
+
+/// The crate's folder as cargo gives it to the running test (`CARGO_MANIFEST_DIR` at run time; the compile-time
+/// value only as a fallback), so that a test binary reused from a checkout elsewhere still finds the repository.
+#[cfg(test)]
+pub(crate) fn manifest_dir() -> std::path::PathBuf {
+    std::env::var_os("CARGO_MANIFEST_DIR").map_or_else(|| env!("CARGO_MANIFEST_DIR").into(), Into::into)
+}

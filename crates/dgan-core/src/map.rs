@@ -381,7 +381,7 @@ mod tests {
 
     #[test]
     fn reads_images_from_files() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../python/dgan/data/scenes/zara1/rgb.jpg");
+        let path = crate::manifest_dir().join("../../python/dgan/data/scenes/zara1/rgb.jpg");
         let ident = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let m = RasterMap::from_file(&path, ident).unwrap();
         assert_eq!(m.image().dim(), (576, 720, 3));

@@ -4,9 +4,15 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+/// The crate's folder as cargo gives it to the running test (`CARGO_MANIFEST_DIR` at run time; the compile-time
+/// value only as a fallback), so that a test binary reused from a checkout elsewhere still finds the repository.
+pub fn manifest_dir() -> PathBuf {
+    std::env::var_os("CARGO_MANIFEST_DIR").map_or_else(|| env!("CARGO_MANIFEST_DIR").into(), Into::into)
+}
+
 /// The repository's `tests/fixtures` folder.
 pub fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures").join(name)
+    manifest_dir().join("../../tests/fixtures").join(name)
 }
 
 /// The ONNX Runtime library: `ORT_DYLIB_PATH`, else the one in the onnxruntime wheel of `$DGAN_PYTHON` (or
