@@ -17,6 +17,7 @@ from typing import Any
 import torch
 
 import dgan
+from training.calibrate import calibrate_checkpoint
 from training.evaluate import evaluate
 from training.export import SLIM_KEYS, export_checkpoint
 
@@ -250,12 +251,12 @@ def bundle(runs: list[Path], name: str, data_root: Path) -> dict[str, Any]:
     dataset = cfg["data"].get("dataset", "ethucy")
     MODELS.mkdir(parents=True, exist_ok=True)
     if len(runs) > 1:
-        from training.ensemble import calibrate, ensemble_checkpoint
+        from training.ensemble import ensemble_checkpoint
 
         ensemble_checkpoint(runs, CHECKPOINTS / f"{name}.pt", half=True)
-        calibrate(CHECKPOINTS / f"{name}.pt", data_root)
     else:
         slim_checkpoint(run, CHECKPOINTS / f"{name}.pt")
+    print(f"{name}: {calibrate_checkpoint(CHECKPOINTS / f'{name}.pt', data_root)}", flush=True)
     if dataset == "ethucy":
         description = (
             f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "

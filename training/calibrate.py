@@ -1,9 +1,15 @@
 """Calibration of the mode probabilities: one temperature T of the anchor logits, p(k | c) = softmax(logits / T),
-fitted on a validation split by the likelihood of the best mode (the mode closest to the ground truth by ADE, the
-event the reliability diagram of :mod:`training.evaluate` counts). The engine applies it in decoding (contract 2).
+fitted on a validation split. The event is the best mode (the mode closest to the ground truth by ADE, which the
+reliability diagram of :mod:`training.evaluate` counts). Two proper scores are minimised over a grid of T: the best
+mode's negative log-likelihood and the Brier score of the best-mode indicator (which weighs the probable modes more);
+of the two temperatures, the one whose validation reliability is closer in the bins the must-show checks (p ≥ 0.3,
+at least 30 modes: :func:`training.scorecard.worst_gap`) is kept. The engine applies it in decoding (contract 2).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -46,15 +52,101 @@ def best_mode_nll(
     temperature: float,
 ) -> float:
     """Mean −log p(best mode) at one temperature."""
-    p = mode_probabilities(class_logits, anchor_logits, class_of, temperature)
+    return best_mode_log_loss(mode_probabilities(class_logits, anchor_logits, class_of, temperature), best)
+
+
+def best_mode_log_loss(p: torch.Tensor, best: torch.Tensor) -> float:
+    """Mean −log p(best mode) of mode probabilities ``p (N, K)``."""
     return float(-torch.log(p[torch.arange(len(best)), best].clamp_min(1e-12)).mean())
+
+
+def best_mode_brier(p: torch.Tensor, best: torch.Tensor) -> float:
+    """Mean Brier score Σ_k (p_k − [k is the best mode])² of mode probabilities ``p (N, K)``."""
+    hit = torch.zeros_like(p)
+    hit[torch.arange(len(best)), best] = 1.0
+    return float(((p - hit) ** 2).sum(dim=1).mean())
+
+
+def reliability_gap(p: torch.Tensor, best: torch.Tensor) -> float:
+    """The worst |frequency − probability| of a checked reliability bin (``training.scorecard.worst_gap``); infinite
+    when no bin qualifies, so that a temperature cannot pass by leaving no mode at p ≥ 0.3."""
+    from training.evaluate import calibration
+    from training.scorecard import worst_gap
+
+    hit = torch.zeros_like(p, dtype=torch.bool)
+    hit[torch.arange(len(best)), best] = True
+    gap, at = worst_gap(calibration(p.double().numpy().ravel(), hit.numpy().ravel()))
+    return gap if at == at else float("inf")
+
+
+@dataclass(frozen=True)
+class TemperatureFit:
+    """The kept temperature, the score it minimised (``"nll"`` or ``"brier"``), the validation best-mode NLL at
+    T = 1 and at it, and the worst checked reliability gap on validation at T = 1 and at it."""
+
+    temperature: float
+    objective: str
+    nll_before: float
+    nll_after: float
+    gap_before: float
+    gap_after: float
+
+    def __str__(self) -> str:
+        return (
+            f"temperature {self.temperature:.3f} (by {self.objective}): validation best-mode NLL "
+            f"{self.nll_before:.4f} -> {self.nll_after:.4f}, worst reliability gap {self.gap_before:.3f} -> "
+            f"{self.gap_after:.3f}"
+        )
 
 
 def fit_temperature(
     model: torch.nn.Module, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor
-) -> tuple[float, float, float]:
-    """The temperature of smallest best-mode NLL on ``w``; also the NLL at T = 1 and at the fitted T."""
+) -> TemperatureFit:
+    """The temperature of smallest best-mode NLL on ``w`` and the one of smallest Brier score; keeps the one whose
+    worst checked reliability gap on ``w`` is smaller (the NLL's on a tie)."""
     cl, al, best = best_mode_logits(model, w, spec, anchors)
-    nll = [best_mode_nll(cl, al, best, class_of, float(t)) for t in GRID]
-    i = int(np.argmin(nll))
-    return float(GRID[i]), best_mode_nll(cl, al, best, class_of, 1.0), float(nll[i])
+    return choose_temperature(cl, al, best, class_of)
+
+
+def choose_temperature(
+    cl: torch.Tensor, al: torch.Tensor, best: torch.Tensor, class_of: torch.Tensor
+) -> TemperatureFit:
+    """:func:`fit_temperature` given class logits ``cl (N, C)``, anchor logits ``al (N, K)``, the best modes
+    ``best (N,)`` and each anchor's class ``class_of (K,)``."""
+    nll, brier = [], []
+    for t in GRID:
+        p = mode_probabilities(cl, al, class_of, float(t))
+        nll.append(best_mode_log_loss(p, best))
+        brier.append(best_mode_brier(p, best))
+    candidates = {"nll": int(np.argmin(nll)), "brier": int(np.argmin(brier))}
+    gaps = {
+        k: reliability_gap(mode_probabilities(cl, al, class_of, float(GRID[i])), best) for k, i in candidates.items()
+    }
+    objective = "brier" if gaps["brier"] < gaps["nll"] else "nll"
+    i = candidates[objective]
+    at_one = mode_probabilities(cl, al, class_of, 1.0)
+    return TemperatureFit(
+        float(GRID[i]),
+        objective,
+        best_mode_nll(cl, al, best, class_of, 1.0),
+        nll[i],
+        reliability_gap(at_one, best),
+        gaps[objective],
+    )
+
+
+def calibrate_checkpoint(path: Path, data_root: Path | None = None, progress: bool = False) -> TemperatureFit:
+    """Fits the temperature of the checkpoint at ``path`` (one run's or an ensemble's, ``training.ensemble``) on its
+    configuration's validation split (under ``data_root`` if given) and stores it there."""
+    from training.export import load_checkpoint
+    from training.train import load_windows
+
+    model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
+    if data_root is not None:
+        cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
+    val = load_windows(cfg, spec, "val", progress)
+    found = fit_temperature(model, val, spec, torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long())
+    ckpt = torch.load(path, weights_only=False)
+    ckpt["temperature"] = found.temperature
+    torch.save(ckpt, path)
+    return found

@@ -4,9 +4,13 @@
 
 Every bundled model's probabilities p(k | c) at temperature 1 are collected on its validation split and on its test
 set(s) with the engine. Each family below is fitted on the validation split alone, by the likelihood of the best
-mode (the mode of smallest ADE, the event the reliability diagram counts), then applied to the test set:
+mode (the mode of smallest ADE, the event the reliability diagram counts; the Brier score where said), then
+applied to the test set:
 
-- ``temperature``: p(k | c) ∝ p^(1/T), what the models carry (contract 2);
+- ``temperature``: p(k | c) ∝ p^(1/T), what the models carry (contract 2), T fitted by the best mode's likelihood;
+- ``temperature_brier``: the same map with T fitted by the Brier score of the best-mode indicator instead (the
+  bundled models carry whichever of these two temperatures is closer on the validation split's checked bins,
+  ``training.calibrate``);
 - ``platt``: p(k | c) ∝ sigmoid(a · logit p + b), two parameters per model;
 - ``isotonic``: a monotone step map of the tempered p, fitted by isotonic regression and renormalised per class,
   three rounds (as many parameters as the validation split allows).
@@ -70,6 +74,12 @@ class Modes:
         """Mean −log probability of the best mode, given calibrated p(k | c) ``q``."""
         return float(-np.log(np.maximum((q * self.pc)[np.arange(len(self.best)), self.best], 1e-12)).mean())
 
+    def brier(self, q: np.ndarray) -> float:
+        """Mean Brier score of the best-mode indicator, given calibrated p(k | c) ``q``."""
+        hit = np.zeros(q.shape)
+        hit[np.arange(len(self.best)), self.best] = 1.0
+        return float((((q * self.pc) - hit) ** 2).sum(axis=1).mean())
+
     def reliability(self, q: np.ndarray) -> dict[str, Any]:
         hit = np.zeros(q.shape, dtype=bool)
         hit[np.arange(len(self.best)), self.best] = True
@@ -94,6 +104,9 @@ def fit(family: str, val: Modes) -> Fitted:
     if family == "temperature":
         t = float(np.exp(minimize(lambda x: val.nll(tempered(val.pk, val.mc, np.exp(x[0]))), [0.0]).x[0]))
         return lambda pk, mc: tempered(pk, mc, t)
+    if family == "temperature_brier":
+        t = float(np.exp(minimize(lambda x: val.brier(tempered(val.pk, val.mc, np.exp(x[0]))), [0.0]).x[0]))
+        return lambda pk, mc: tempered(pk, mc, t)
     if family == "platt":
         a, b = minimize(lambda x: val.nll(platt(val.pk, val.mc, x[0], x[1])), [1.0, 0.0], method="Nelder-Mead").x
         return lambda pk, mc: platt(pk, mc, a, b)
@@ -115,7 +128,7 @@ def fit(family: str, val: Modes) -> Fitted:
     return apply
 
 
-FAMILIES = ("temperature", "platt", "isotonic")
+FAMILIES = ("temperature", "temperature_brier", "platt", "isotonic")
 
 
 def study(root: Path) -> dict[str, Any]:

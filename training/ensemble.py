@@ -6,8 +6,8 @@ Each RUN is a ``training.train`` output folder (its ``best.pt``). The model keep
 engine runs it unchanged, with every member inside one ONNX graph (so a call costs about the members' count times one
 network). Its most probable mode (of the agent's most probable class) is the mean of the members' most probable
 modes; the other modes are the first member's. The temperature is fitted anew on the validation split
-(``--no-calibrate`` keeps the first member's), since the consensus mode is the best mode more often than any one
-member's top mode.
+(``training.calibrate``; ``--no-calibrate`` keeps the first member's), since the consensus mode is the best mode more
+often than any one member's top mode.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from typing import Any
 
 import torch
 
+from training.calibrate import calibrate_checkpoint
 from training.export import SLIM_KEYS, export_checkpoint, load_checkpoint
 
 
@@ -40,25 +41,6 @@ def ensemble_checkpoint(runs: list[Path], out: Path, half: bool = False) -> Path
     return out
 
 
-def calibrate(path: Path, data_root: Path | None = None, progress: bool = False) -> tuple[float, float, float]:
-    """Fits the ensemble's temperature on its validation split and stores it in the checkpoint at ``path``; returns
-    it with the validation best-mode NLL at T = 1 and at it."""
-    from dataclasses import replace
-
-    from training.calibrate import fit_temperature
-    from training.train import load_windows
-
-    model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
-    if data_root is not None:
-        cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
-    val = load_windows(cfg, spec, "val", progress)
-    found = fit_temperature(model, val, spec, torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long())
-    ckpt = torch.load(path, weights_only=False)
-    ckpt["temperature"] = found[0]
-    torch.save(ckpt, path)
-    return found
-
-
 def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=Path)
@@ -76,8 +58,7 @@ def main(argv: list[str] | None = None) -> Path:
     with tempfile.TemporaryDirectory() as tmp:
         ckpt = ensemble_checkpoint(a.runs, a.checkpoint or Path(tmp) / "ensemble.pt", a.half)
         if not a.no_calibrate:
-            t, before, after = calibrate(ckpt, a.data_root, progress=True)
-            print(f"temperature {t:.3f}: validation best-mode NLL {before:.4f} -> {after:.4f}")
+            print(calibrate_checkpoint(ckpt, a.data_root, progress=True))
         description = a.description or f"Consensus of {len(a.runs)} runs: {', '.join(r.name for r in a.runs)}"
         path = export_checkpoint(ckpt, a.out, a.name, description)
     print(f"exported {path}")

@@ -221,11 +221,11 @@ def calibrate(
 
     ckpt = torch.load(path, weights_only=False)
     model.load_state_dict(ckpt["model"])
-    temperature, before, after = fit_temperature(model, val, spec, anchors, class_of)
-    ckpt["temperature"] = temperature
+    found = fit_temperature(model, val, spec, anchors, class_of)
+    ckpt["temperature"] = found.temperature
     torch.save(ckpt, path)
-    print(f"temperature {temperature:.3f}: validation best-mode NLL {before:.4f} -> {after:.4f}", flush=True)
-    return temperature
+    print(found, flush=True)
+    return found.temperature
 
 
 def main(argv: list[str] | None = None) -> Path:

@@ -47,9 +47,17 @@ def test_a_fitted_temperature_calibrates_the_best_mode() -> None:
         f = cs.fit(family, val)
         assert val.nll(f(val.pk, val.mc)) < val.nll(val.pk)  # the data were drawn at T = 2, not 1
         assert test.reliability(f(test.pk, test.mc))["ece"] < raw["ece"]
-    # The temperature family recovers the temperature the data were drawn at.
-    q = cs.fit("temperature", val)(val.pk, val.mc)
-    np.testing.assert_allclose(q, cs.tempered(val.pk, val.mc, 2.0), atol=0.05)
+    # Both temperature fits (likelihood and Brier score) recover the temperature the data were drawn at.
+    for family in ("temperature", "temperature_brier"):
+        q = cs.fit(family, val)(val.pk, val.mc)
+        np.testing.assert_allclose(q, cs.tempered(val.pk, val.mc, 2.0), atol=0.05)
+
+
+def test_the_brier_score_is_lowest_for_the_true_probabilities() -> None:
+    m = synthetic(4000, 2.0, seed=3)
+    scores = {t: m.brier(cs.tempered(m.pk, m.mc, t)) for t in (1.0, 2.0, 4.0)}
+    assert scores[2.0] < scores[1.0]
+    assert scores[2.0] < scores[4.0]
 
 
 def test_section_renders_the_study(tmp_path: Path) -> None:
