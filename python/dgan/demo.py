@@ -34,8 +34,6 @@ WAYMO_FILE = DATA / "waymo" / "tfrecord-00005-of-00150_2bd577a009790706.json.gz"
 ZARA1_SECONDS_PER_FRAME = 0.04
 #: The Waymo scene's 10 Hz steps per model step (the hdmap model runs at 5 Hz).
 WAYMO_EVERY = 2
-#: Colour of each class in the pictures.
-CLASS_COLOURS = {"vehicle": "deepskyblue", "cyclist": "lime", "pedestrian": "yellow"}
 
 Arr = npt.NDArray[Any]
 
@@ -177,81 +175,24 @@ def scene_for(spec: InputSpec, now: float | None = None) -> DemoScene:
 
 
 def draw(scene: DemoScene, pred: Prediction, out: Path, title: str) -> Path:
-    try:
-        import matplotlib
+    """The scene's picture (``dgan.plot`` over its image, else its map) with the observed paths, the true futures and
+    the predicted modes, written to ``out``."""
+    import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        from matplotlib.patches import Polygon
-    except ImportError as e:
-        raise DganError("the demo's picture needs matplotlib: pip install matplotlib") from e
-    frame = scene.frame
-    h = scene.world_to_pixel
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
 
-    def px(p: Arr) -> Any:
-        if h is None:
-            return p
-        q = np.c_[p, np.ones(len(p))] @ h.T
-        return q[:, :2] / q[:, 2:]
+    from dgan.viz import plot
 
-    if scene.image is not None:
-        hgt, wid = scene.image.shape[:2]
-        size = (wid / max(hgt, wid) * 11 + 1.5, hgt / max(hgt, wid) * 11)
-        fig, ax = plt.subplots(figsize=size, dpi=100)
-        ax.imshow(scene.image)
-    else:
-        fig, ax = plt.subplots(figsize=(11, 9), dpi=100)
-        ax.set_facecolor("0.15")
-        ax.set_aspect("equal")
-    cmap = plt.get_cmap("cool")
-    modes = pred.trajectories.shape[1]
-    box_xy: list[Arr] = []
-    for i, pid in enumerate(frame.ids):
-        cls = frame.classes[i]
-        colour = CLASS_COLOURS[cls]
-        hist = frame.positions[i][frame.mask[i]]
-        obs = px(hist)
-        box_xy.append(hist)
-        ax.plot(obs[:, 0], obs[:, 1], "--", color=colour, lw=1.6)
-        for m in reversed(range(modes)):
-            pr = pred.probabilities[i, m]
-            tr = px(np.vstack([hist[-1:], pred.trajectories[i, m]]))
-            ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / 0.5)), lw=1.0 + 3 * pr, alpha=0.9)
-            box_xy.append(pred.trajectories[i, m])
-        fut = scene.futures.get(int(pid))
-        if fut is not None and len(fut):
-            gt = px(np.vstack([hist[-1:], fut]))
-            ax.plot(gt[:, 0], gt[:, 1], "-", color="red", lw=1.8)
-            box_xy.append(fut)
-        if scene.headings is not None:  # the agent's measured box at t_obs
-            yaw = scene.headings.get(int(pid), 0.0)
-            c, s = np.cos(yaw), np.sin(yaw)
-            half = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [frame.lengths[i] / 2, frame.widths[i] / 2]
-            corners = hist[-1] + half @ np.array([[c, s], [-s, c]])
-            ax.add_patch(Polygon(px(corners), closed=True, fc=colour, ec="white", lw=0.6, alpha=0.8))
-        else:
-            ax.plot(*obs[-1], "o", color=colour, ms=5, mec="black")
-    if h is None:
-        pts = np.vstack(box_xy)
-        lo, hi = pts.min(axis=0) - 5, pts.max(axis=0) + 5
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-    else:
-        assert scene.image is not None
-        ax.set_xlim(0, scene.image.shape[1])
-        ax.set_ylim(scene.image.shape[0], 0)
-        ax.set_axis_off()
-    sm = plt.cm.ScalarMappable(cmap=cmap, norm=matplotlib.colors.Normalize(0, 0.5))
-    fig.colorbar(sm, ax=ax, fraction=0.03, pad=0.01, label="mode probability (≥ 0.5 saturates)")
-    for cls in sorted(set(frame.classes)):
-        ax.plot([], [], "--", color=CLASS_COLOURS[cls], label=f"observed {cls}")
-    ax.plot([], [], "-", color="red", label="ground truth")
-    ax.plot([], [], "-", color=cmap(0.9), label="predicted modes")
-    ax.legend(loc="lower left")
-    ax.set_title(title)
-    fig.tight_layout()
+    fig = plot(
+        scene.frame,
+        pred,
+        ground_truth=scene.futures,
+        title=title,
+        image=scene.image,
+        world_to_pixel=scene.world_to_pixel,
+        headings=scene.headings,
+    )
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)
     plt.close(fig)
@@ -283,6 +224,7 @@ def draw_crop(scene: DemoScene, predictor: Predictor, pred: Prediction, out: Pat
     import matplotlib.pyplot as plt
 
     from dgan.spec import preprocess, to_agent_frame
+    from dgan.viz import MODE_COLOURS, SATURATION
 
     spec = predictor.spec
     assert spec.map is not None
@@ -302,11 +244,11 @@ def draw_crop(scene: DemoScene, predictor: Predictor, pred: Prediction, out: Pat
     hist = scene.frame.positions[i][scene.frame.mask[i]]
     h = px(hist)
     ax.plot(h[:, 0], h[:, 1], "--", color="orange", lw=2, label="observed")
-    cmap = plt.get_cmap("cool")
+    cmap = plt.get_cmap(MODE_COLOURS)
     for k in reversed(range(pred.trajectories.shape[1])):
         tr = px(np.vstack([hist[-1:], pred.trajectories[i, k]]))
         pr = pred.probabilities[i, k]
-        ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / 0.5)), lw=1 + 3 * pr)
+        ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / SATURATION)), lw=1 + 3 * pr)
     fut = scene.futures.get(pid)
     if fut is not None and len(fut):
         g = px(np.vstack([hist[-1:], fut]))

@@ -21,6 +21,8 @@ from dgan.predictor import Prediction
 CLASS_COLOURS = {"vehicle": "deepskyblue", "cyclist": "limegreen", "pedestrian": "orange"}
 #: Mode probability at which the colour scale saturates.
 SATURATION = 0.5
+#: The colour map of the mode probabilities.
+MODE_COLOURS = "viridis"
 
 Arr = npt.NDArray[Any]
 
@@ -73,6 +75,32 @@ def _map_under(scene_map: RasterMap | VectorMap, lo: Arr, hi: Arr) -> tuple[Arr,
     return render_map(scene_map, (lo + hi) / 2, float(max(hi - lo)))
 
 
+def _homography(world_to_pixel: npt.ArrayLike | None) -> Arr | None:
+    if world_to_pixel is None:
+        return None
+    h = np.asarray(world_to_pixel, dtype=np.float64)
+    if h.shape != (3, 3) or not np.isfinite(h).all() or abs(np.linalg.det(h)) < 1e-12:
+        raise InvalidMapError(f"world_to_pixel must be an invertible 3×3 homography, got shape {h.shape}")
+    return h
+
+
+def _to_pixels(points: Arr, h: Arr | None) -> Arr:
+    """``(P, 2)`` world points through the homography ``h`` (unchanged without one)."""
+    if h is None:
+        return points
+    q = np.c_[points, np.ones(len(points))] @ h.T
+    out: Arr = q[:, :2] / q[:, 2:]
+    return out
+
+
+def _box(centre: Arr, yaw: float, length: float, width: float) -> Arr:
+    """The four corners of a ``length`` × ``width`` box at ``centre`` heading ``yaw`` (world frame)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    half = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]]) * [length / 2, width / 2]
+    out: Arr = centre + half @ np.array([[c, s], [-s, c]])
+    return out
+
+
 def plot(
     frame: Frame,
     prediction: Prediction,
@@ -83,8 +111,11 @@ def plot(
     ax: Any = None,
     title: str | None = None,
     margin_m: float = 5.0,
+    image: npt.ArrayLike | None = None,
+    world_to_pixel: npt.ArrayLike | None = None,
+    headings: Mapping[Any, float] | None = None,
 ) -> Any:
-    """A matplotlib figure of a prediction, axes in world metres.
+    """A matplotlib figure of a prediction, axes in world metres (or in the pixels of ``image``).
 
     Args:
         frame: the frame that was predicted (its observed paths are drawn dashed, coloured by class).
@@ -97,19 +128,33 @@ def plot(
         ax: a matplotlib Axes to draw on (a new figure if None).
         title: the axes' title.
         margin_m: metres of margin around the drawn paths.
+        image: a picture of the scene, ``(H, W)`` or ``(H, W, 3|4)``, drawn underneath instead of a map, with every
+            path taken into its pixels by ``world_to_pixel`` (a camera view, a drone video's frame).
+        world_to_pixel: the ``3 × 3`` homography from world metres to the pixels of ``image``; needed with it.
+        headings: agent id → heading (rad, world frame) at the last observed step: the agent is drawn as its
+            ``length`` × ``width`` box instead of a dot.
 
     Returns:
         The matplotlib Figure.
 
     Raises:
         InvalidFrameError: the prediction does not belong to the frame (other agents, other count).
+        InvalidMapError: ``image`` without an invertible ``world_to_pixel``, or an image that is not a picture.
         DganError: matplotlib is not installed.
     """
     plt = _pyplot()
     from matplotlib.colors import Normalize
+    from matplotlib.patches import Polygon
 
     if not isinstance(frame, Frame) or not isinstance(prediction, Prediction):
         raise InvalidFrameError("plot takes a dgan.Frame and its dgan.Prediction")
+    h = _homography(world_to_pixel)
+    picture = None if image is None else np.asarray(image)
+    if picture is not None and (h is None or picture.ndim not in (2, 3) or min(picture.shape[:2]) < 1):
+        raise InvalidMapError(
+            "image needs world_to_pixel (the 3×3 homography from world metres to its pixels) and a (H, W) or "
+            f"(H, W, 3|4) array, got shape {picture.shape}" + ("" if h is not None else " and no world_to_pixel")
+        )
     n = len(frame)
     if len(prediction) != n or not np.array_equal(np.asarray(prediction.agent_ids), np.asarray(frame.agent_ids)):
         raise InvalidFrameError(f"the prediction ({len(prediction)} agents) is not of this frame ({n} agents)")
@@ -131,41 +176,59 @@ def plot(
     drawn = [*pts, *prediction.trajectories[:, :m].reshape(-1, t_f, 2)]
     drawn += [t[np.isfinite(t).all(axis=1)] for t in truth if t is not None]
     lo, hi = _bounds(drawn, margin_m)
-    if ax is None:  # sized to the scene's aspect, 8 inches high or 12 wide at most
+    if ax is None and picture is not None:  # the picture's aspect, 11 inches on its longer side
+        rows, cols = picture.shape[:2]
+        size = (cols / max(rows, cols) * 11 + 1.6, rows / max(rows, cols) * 11)
+        fig, ax = plt.subplots(figsize=size, dpi=100, layout="constrained")
+    elif ax is None:  # sized to the scene's aspect, 8 inches high or 12 wide at most
         aspect = float(np.clip((hi[0] - lo[0]) / (hi[1] - lo[1]), 0.3, 3.0))
-        w, h = (12.0, 12.0 / aspect) if aspect > 1.4 else (8.0 * aspect, 8.0)
-        fig, ax = plt.subplots(figsize=(max(w, 4.0) + 1.6, max(h, 3.0)), dpi=100, layout="constrained")
+        w, ht = (12.0, 12.0 / aspect) if aspect > 1.4 else (8.0 * aspect, 8.0)
+        fig, ax = plt.subplots(figsize=(max(w, 4.0) + 1.6, max(ht, 3.0)), dpi=100, layout="constrained")
     else:
         fig = ax.figure
     scene_map = frame.map if map is None else map
-    if scene_map is not None:
-        image, extent = _map_under(scene_map, lo, hi)
-        ax.imshow(image, extent=extent, origin="upper", interpolation="nearest", zorder=0)
+    if picture is not None:
+        ax.imshow(picture, zorder=0)
+    elif scene_map is not None:
+        rendered, extent = _map_under(scene_map, lo, hi)
+        ax.imshow(rendered, extent=extent, origin="upper", interpolation="nearest", zorder=0)
     else:
         ax.set_facecolor("0.96")
-    cmap = plt.get_cmap("viridis")
+    cmap = plt.get_cmap(MODE_COLOURS)
+    ids = frame.agent_ids.tolist()
     for i in range(n):
         cls = frame.classes[i]
         colour = CLASS_COLOURS.get(cls, "white")
         hist = pts[i]
-        ax.plot(hist[:, 0], hist[:, 1], "--", color=colour, lw=1.6, zorder=3)
-        ax.plot(*hist[-1], "o", color=colour, ms=5, mec="black", zorder=5)
+        obs = _to_pixels(hist, h)
+        ax.plot(obs[:, 0], obs[:, 1], "--", color=colour, lw=1.6, zorder=3)
+        yaw = None if headings is None else headings.get(ids[i])
+        if yaw is not None and len(hist):
+            corners = _box(hist[-1], float(yaw), float(frame.lengths[i]), float(frame.widths[i]))
+            ax.add_patch(Polygon(_to_pixels(corners, h), closed=True, fc=colour, ec="white", lw=0.6, alpha=0.8))
+        else:
+            ax.plot(*obs[-1], "o", color=colour, ms=5, mec="black", zorder=5)
         for k in reversed(range(m)):
             pr = float(prediction.probabilities[i, k])
-            tr = np.vstack([hist[-1:], prediction.trajectories[i, k]])
+            tr = _to_pixels(np.vstack([hist[-1:], prediction.trajectories[i, k]]), h)
             ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / SATURATION)), lw=0.8 + 3 * pr, zorder=4)
         if truth[i] is not None:
             t = truth[i]
             assert t is not None
             t = t[np.isfinite(t).all(axis=1)]
             if len(t):
-                g = np.vstack([hist[-1:], t])
+                g = _to_pixels(np.vstack([hist[-1:], t]), h)
                 ax.plot(g[:, 0], g[:, 1], "-", color="red", lw=1.6, zorder=4)
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
+    if picture is not None:
+        ax.set_xlim(-0.5, picture.shape[1] - 0.5)
+        ax.set_ylim(picture.shape[0] - 0.5, -0.5)
+        ax.set_axis_off()
+    else:
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=Normalize(0, SATURATION))
     fig.colorbar(sm, ax=ax, fraction=0.035, pad=0.01, label=f"mode probability (≥ {SATURATION:g} saturates)")
     for cls in sorted(set(frame.classes)):

@@ -13,7 +13,7 @@ from conftest import zara1_records
 
 import dgan
 from dgan import exceptions as exc
-from dgan.demo import waymo_scene
+from dgan.demo import waymo_scene, zara1_scene
 from dgan.viz import log_rerun, render_map
 
 matplotlib.use("Agg")
@@ -69,6 +69,51 @@ def test_plot_a_vector_map_scene_and_errors(tmp_path: Path) -> None:
         dgan.plot(scene.frame, other_pred)
     with pytest.raises(exc.InvalidFrameError, match="ground_truth"):
         dgan.plot(other, other_pred, ground_truth=np.zeros((2, 12, 2)))
+
+
+def test_plot_over_a_picture_through_its_homography_with_boxes() -> None:
+    p = dgan.Predictor("zara1", modes=2)
+    scene = zara1_scene(p.spec.t_obs, p.spec.t_f, None)
+    assert scene.image is not None
+    assert scene.world_to_pixel is not None
+    pred = p.predict(scene.frame)
+    frame = scene.frame
+    headings = {a: 0.5 for a in frame.agent_ids.tolist()}
+    fig = dgan.plot(
+        frame,
+        pred,
+        ground_truth=scene.futures,
+        image=scene.image,
+        world_to_pixel=scene.world_to_pixel,
+        headings=headings,
+    )
+    ax = fig.axes[0]
+    rows, cols = scene.image.shape[:2]
+    assert ax.get_xlim() == pytest.approx((-0.5, cols - 0.5))
+    assert ax.get_ylim() == pytest.approx((rows - 0.5, -0.5))
+    assert len(ax.images) == 1  # the picture, not the map
+    # The first line is agent 0's observed path, in the picture's pixels.
+    hist = frame.positions[0][frame.mask[0]]
+    q = np.c_[hist, np.ones(len(hist))] @ np.asarray(scene.world_to_pixel).T
+    np.testing.assert_allclose(ax.lines[0].get_xydata(), q[:, :2] / q[:, 2:], atol=1e-9)
+    # One box an agent, centred on its last observed position.
+    assert len(ax.patches) == len(frame)
+    corners = ax.patches[0].get_xy()[:4]
+    centre = np.r_[hist[-1], 1.0] @ np.asarray(scene.world_to_pixel).T
+    np.testing.assert_allclose(corners.mean(axis=0), centre[:2] / centre[2], atol=1e-6)
+
+
+def test_plot_refuses_a_picture_without_a_homography() -> None:
+    frame, pred, _ = zara1()
+    picture = np.zeros((10, 10, 3))
+    with pytest.raises(exc.InvalidMapError, match="world_to_pixel"):
+        dgan.plot(frame, pred, image=picture)
+    with pytest.raises(exc.InvalidMapError, match="invertible"):
+        dgan.plot(frame, pred, image=picture, world_to_pixel=np.zeros((3, 3)))
+    with pytest.raises(exc.InvalidMapError, match="invertible"):
+        dgan.plot(frame, pred, image=picture, world_to_pixel=np.eye(2))
+    with pytest.raises(exc.InvalidMapError, match=r"\(H, W\)"):
+        dgan.plot(frame, pred, image=np.zeros(5), world_to_pixel=np.eye(3))
 
 
 def test_rerun_recording(tmp_path: Path) -> None:
