@@ -84,26 +84,31 @@ def class_table(dataset: str, res: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|---|",
     ]
 
-    def row(group: str, n: int, model: str, r: dict[str, Any], bold: bool = False) -> str:
+    keys = [a for a, _ in METRICS] + ["brier_min_fde20"]
+
+    def row(group: str, n: int, model: str, r: dict[str, Any], other: dict[str, Any] | None = None) -> str:
+        """A model's row; a cell is bold where it is lower than ``other``'s (the row it is compared with)."""
         cells = [fmt(r, a, b) for a, b in METRICS] + [f"{r['brier_min_fde20']:.2f}"]
-        if bold:
-            cells = [f"**{c}**" for c in cells]
+        if other is not None:
+            cells = [f"**{c}**" if r[k] < other[k] else c for c, k in zip(cells, keys, strict=True)]
         return f"| {group} | {n} | {model} | " + " | ".join(cells) + " |"
+
+    def pair(group: str, n: int, m: dict[str, Any], p: dict[str, Any] | None, per_name: str) -> None:
+        lines.append(row(group, n, "DGAN, one model for all classes", m, p))
+        if p is not None:
+            lines.append(row("", n, per_name, p, m))
 
     for cls in info.classes:
         if cls not in multi["by_class"]:
             continue
         m = multi["by_class"][cls]
-        lines.append(row(cls, m["agents"], "DGAN, one model for all classes", m, bold=True))
-        if cls in per:
-            lines.append(row("", m["agents"], f"DGAN trained on {cls}s only", per[cls]))
+        pair(cls, m["agents"], m, per.get(cls), f"DGAN trained on {cls}s only")
         lines.append(
             f"| | {m['agents']} | constant velocity ({m['cv_variant']}) | {fmt(m, 'cv_ade', 'cv_fde')} | | | |"
         )
-    lines.append(row("**all**", multi["agents"], "DGAN, one model for all classes", multi, bold=True))
     present = [per[c] for c in info.classes if c in per and c in multi["by_class"]]
-    if len(present) == len(multi["by_class"]):
-        lines.append(row("", multi["agents"], "DGAN per-class models, each on its class", combined(present)))
+    whole = combined(present) if len(present) == len(multi["by_class"]) else None
+    pair("**all**", multi["agents"], multi, whole, "DGAN per-class models, each on its class")
     cv = f"constant velocity ({multi['cv_variant']})"
     lines.append(f"| | {multi['agents']} | {cv} | {fmt(multi, 'cv_ade', 'cv_fde')} | | | |")
     return "\n".join(lines)

@@ -278,22 +278,35 @@ def calibrations(
 
 def train_multiclass(root: Path) -> None:
     """Trains each multi-class model and its per-class baselines, bundles the multi-class models and keeps the
-    baselines' slim checkpoints (``training/checkpoints/baselines``)."""
+    baselines' checkpoints (``training/checkpoints/baselines``). A baseline has as many runs as its multi-class
+    model (:data:`ENSEMBLE_SEEDS`), kept as their consensus when there are several, so the two are compared alike."""
     from training.bundle import bundle, slim_checkpoint
+    from training.calibrate import calibrate_checkpoint
+    from training.ensemble import ensemble_checkpoint
     from training.train import main as train
 
     for ds in multiclass.MULTICLASS_DATASETS:
         config = ["--config", str(ROOT / "training" / "configs" / f"{ds}.toml"), "--set", f"data.root={root}"]
+        seeds = ENSEMBLE_SEEDS.get(ds, (0,))
         members = []
-        for seed in ENSEMBLE_SEEDS.get(ds, (0,)):
+        for seed in seeds:
             run = ROOT / "runs" / f"{ds}_s{seed}"
             train([*config, "--out", str(run), "--set", f"train.seed={seed}", "--no-export"])
             members.append(run)
         bundle(members, ds, root)
-        for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines: one run each
-            run = ROOT / "runs" / f"{ds}-{cls}"
-            train([*config, "--out", str(run), "--no-export", "--set", f"data.target_class={cls}"])
-            slim_checkpoint(run, multiclass.BASELINES / f"{ds}-{cls}.pt")
+        for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines
+            runs = []
+            for seed in seeds:
+                run = ROOT / "runs" / f"{ds}-{cls}_s{seed}"
+                args = ["--set", f"data.target_class={cls}", "--set", f"train.seed={seed}", "--no-export"]
+                train([*config, "--out", str(run), *args])
+                runs.append(run)
+            path = multiclass.BASELINES / f"{ds}-{cls}.pt"
+            if len(runs) > 1:
+                ensemble_checkpoint(runs, path, half=True)
+                calibrate_checkpoint(path, root)
+            else:
+                slim_checkpoint(run, path)
 
 
 #: The seeds of each bundled ensemble's members (``training.ensemble``), chosen on validation (`docs/seed_study.json`).
@@ -459,7 +472,12 @@ that probability was the best of the K modes (smallest ADE), and the small numbe
   improved from 1.30 to 1.18 m. On the test recordings the single model went from 23% behind constant velocity on
   top-1 ADE to 2% ahead (vehicles and pedestrians ahead, cyclists still 5% behind). As the consensus of three runs
   (seeds 0–2, 2.8% below its runs on the validation recordings) it is 7% ahead and ahead for every class (cyclists
-  4%); the per-class baselines are single runs, so the comparison with them now leans further to the single model.
+  4%). The per-class baselines are now the consensus of the same three seeds too, so the two are compared alike.
+  Compared so, **the per-class models are ahead on top-1 for every class** (vehicles 1.78 against 1.82 m, cyclists
+  1.34 against 1.44, pedestrians 0.83 against 0.85; as single runs they had been behind on vehicles, 1.94 m). The
+  single model is level or ahead on best of 5 and 20 for vehicles and cyclists. So on ApolloScape the paper's claim
+  holds for best of K but not for top-1; the bundled model stays the single one, which serves every class in one
+  call.
   Tried on the validation recordings and not kept: β = 3 and 10 anchors per class (before), and a class-balanced loss
   (`train.class_balance` 0.5 and 1: top-1 2.12 and 2.17 m against 2.05–2.07 m, its cyclists within seed noise); with
   the current headings, three seeds each, against 2.08/3.78 m: β = 3 again (2.06/3.75, within 1%, its cyclists 1.73
