@@ -132,7 +132,10 @@ def relative(
     cells = []
     for name, key in metrics:
         rel = 100 * (mine[key] - other[key]) / other[key]
-        cells.append(f"{name} {worse if rel > 0 else better} by {abs(rel):.1f}%")
+        if abs(rel) < 0.05:
+            cells.append(f"{name} level")
+        else:
+            cells.append(f"{name} {worse if rel > 0 else better} by {abs(rel):.1f}%")
     return ", ".join(cells)
 
 

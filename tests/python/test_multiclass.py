@@ -39,3 +39,8 @@ def test_the_lower_of_the_single_and_the_per_class_model_is_bold() -> None:
         assert "| 0.60/1.20 |" in own
     whole = next(line for line in table.splitlines() if "per-class models, each on its class" in line)
     assert "| **0.90/1.80** |" in whole
+
+
+def test_relative_says_level_below_a_twentieth_of_a_percent() -> None:
+    text = multiclass.relative({"a": 1.0003, "b": 1.2}, {"a": 1.0, "b": 1.0}, (("x", "a"), ("y", "b")), "worse better")
+    assert text == "x level, y worse by 20.0%"
