@@ -18,6 +18,7 @@ import os
 import random
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -228,7 +229,8 @@ def calibrate(
     return found.temperature
 
 
-def main(argv: list[str] | None = None) -> Path:
+def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Config]:
+    """The command line and the configuration it names, with its ``--set`` overrides (JSON values, else strings)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--config", required=True)
     ap.add_argument("--out", required=True)
@@ -239,7 +241,6 @@ def main(argv: list[str] | None = None) -> Path:
         "--stop-after", type=int, default=0, metavar="EPOCH", help="stop after this epoch (as if preempted)"
     )
     args = ap.parse_args(argv)
-
     overrides: dict[str, Any] = {}
     for item in args.set:
         key, _, value = item.partition("=")
@@ -250,6 +251,92 @@ def main(argv: list[str] | None = None) -> Path:
     cfg = Config.load(args.config, overrides)
     if cfg.train.select not in SELECT:
         raise ValueError(f"train.select must be 'val_loss', 'val_ade' or 'last', got {cfg.train.select!r}")
+    return args, cfg
+
+
+def optimiser(cfg: Config, model: torch.nn.Module) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.OneCycleLR]:
+    """AdamW under a one-cycle schedule over the configured epochs."""
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
+    # OneCycleLR divides by pct_start * total - 1, which is 0 at exactly 10 epochs: nudge only that case.
+    pct = 0.1 if abs(0.1 * cfg.train.epochs - 1.0) > 1e-9 else 0.15
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.train.lr, total_steps=cfg.train.epochs, pct_start=pct)
+    return opt, sched
+
+
+def resume(
+    ckpt: dict[str, Any] | None,
+    model: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    sched: torch.optim.lr_scheduler.OneCycleLR,
+) -> tuple[int, float]:
+    """Restores a run from its last checkpoint (weights, optimiser, schedule, random state); the epoch to start at
+    and the best selection score so far (0 and infinity for a new run)."""
+    if ckpt is None:
+        return 0, float("inf")
+    model.load_state_dict(ckpt["model"])
+    opt.load_state_dict(ckpt["optimizer"])
+    sched.load_state_dict(ckpt["scheduler"])
+    torch.set_rng_state(ckpt["rng"])
+    return int(ckpt["epoch"]) + 1, float(ckpt["best"])
+
+
+def epoch_batches(windows: np.ndarray, cfg: Config, epoch: int, rank: int, world: int) -> list[np.ndarray]:
+    """This process's batches of one epoch: the windows shuffled by the epoch's seed, split among the processes, as
+    many on every process."""
+    order = np.random.default_rng(cfg.train.seed + epoch).permutation(windows)
+    batches = [order[i : i + cfg.train.batch_windows] for i in range(0, len(order), cfg.train.batch_windows)]
+    batches = batches[rank::world]
+    if world > 1:  # equal step counts on every rank
+        steps = torch.tensor(len(batches))
+        dist.all_reduce(steps, op=dist.ReduceOp.MIN)
+        batches = batches[: int(steps)]
+    return batches
+
+
+def train_epoch(
+    net: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    batches: Iterable[np.ndarray],
+    train: Windows,
+    spec: dgan.InputSpec,
+    anchors: torch.Tensor,
+    class_of: torch.Tensor,
+    cfg: Config,
+    weight_of_class: torch.Tensor | None,
+    rng: np.random.Generator,
+) -> dict[str, float]:
+    """One pass over ``batches`` of training windows (mirrored at random, maps dropped at the configured rate); the
+    summed loss and its classification and regression parts."""
+    totals = {"loss": 0.0, "cls": 0.0, "reg": 0.0}
+    for idx in batches:
+        flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
+        b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout, rng)
+        loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg, weight_of_class)
+        opt.zero_grad()
+        loss.backward()  # type: ignore[no-untyped-call]
+        torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
+        opt.step()
+        totals["loss"] += float(loss.detach())
+        totals["cls"] += parts["cls"]
+        totals["reg"] += parts["reg"]
+        if hasattr(batches, "set_postfix"):
+            batches.set_postfix(loss=f"{float(loss.detach()):.3f}")
+    return totals
+
+
+def log_row(path: Path, row: dict[str, Any], first: bool) -> None:
+    """Appends an epoch's row to the CSV log (a new log with its header for the first epoch) and prints it."""
+    new = not path.exists() or first
+    with path.open("w" if new else "a", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=list(row))
+        if new:
+            wr.writeheader()
+        wr.writerow(row)
+    print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
+
+
+def main(argv: list[str] | None = None) -> Path:
+    args, cfg = parse_args(argv)
     world = int(os.environ.get("WORLD_SIZE", "1"))
     rank = int(os.environ.get("RANK", "0"))
     if world > 1:
@@ -266,12 +353,10 @@ def main(argv: list[str] | None = None) -> Path:
     train = load_windows(cfg, spec, "train", bars)
     val = load_windows(cfg, spec, "val", bars)
 
-    if args.resume and (out / "last.pt").is_file():
-        ckpt = torch.load(out / "last.pt", weights_only=False)
-        anchors_np, class_of_np = ckpt["anchors"], ckpt["class_of"]
-    else:
-        ckpt = None
-        anchors_np, class_of_np = fit_anchors(cfg, train, spec, len(spec.classes))
+    ckpt = torch.load(out / "last.pt", weights_only=False) if args.resume and (out / "last.pt").is_file() else None
+    anchors_np, class_of_np = (
+        (ckpt["anchors"], ckpt["class_of"]) if ckpt is not None else fit_anchors(cfg, train, spec, len(spec.classes))
+    )
     if cfg.data.target_class:
         restrict_targets(train, spec, cfg.data.target_class)
         restrict_targets(val, spec, cfg.data.target_class)
@@ -282,17 +367,8 @@ def main(argv: list[str] | None = None) -> Path:
         train_classes = torch.from_numpy(train.class_index[train.target]).long()
         weight_of_class = class_weights(train_classes, len(spec.classes), cfg.train.class_balance)
     model = build_model(cfg, spec, len(anchors))
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.train.lr, weight_decay=cfg.train.weight_decay)
-    # OneCycleLR divides by pct_start * total - 1, which is 0 at exactly 10 epochs: nudge only that case.
-    pct = 0.1 if abs(0.1 * cfg.train.epochs - 1.0) > 1e-9 else 0.15
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=cfg.train.lr, total_steps=cfg.train.epochs, pct_start=pct)
-    start_epoch, best = 0, float("inf")
-    if ckpt is not None:
-        model.load_state_dict(ckpt["model"])
-        opt.load_state_dict(ckpt["optimizer"])
-        sched.load_state_dict(ckpt["scheduler"])
-        start_epoch, best = ckpt["epoch"] + 1, ckpt["best"]
-        torch.set_rng_state(ckpt["rng"])
+    opt, sched = optimiser(cfg, model)
+    start_epoch, best = resume(ckpt, model, opt, sched)
     net: torch.nn.Module = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
 
     if show:
@@ -306,7 +382,6 @@ def main(argv: list[str] | None = None) -> Path:
         )
     from tqdm import tqdm
 
-    log_path = out / "log.csv"
     rng = np.random.default_rng(cfg.train.seed)
     windows = windows_with_targets(train)
     if cfg.train.max_train_windows:
@@ -314,27 +389,9 @@ def main(argv: list[str] | None = None) -> Path:
     last_epoch = min(cfg.train.epochs, args.stop_after) if args.stop_after else cfg.train.epochs
     for epoch in range(start_epoch, last_epoch):
         t0 = time.perf_counter()
-        order = np.random.default_rng(cfg.train.seed + epoch).permutation(windows)
-        batches = [order[i : i + cfg.train.batch_windows] for i in range(0, len(order), cfg.train.batch_windows)]
-        batches = batches[rank::world]
-        if world > 1:  # equal step counts on every rank
-            steps = torch.tensor(len(batches))
-            dist.all_reduce(steps, op=dist.ReduceOp.MIN)
-            batches = batches[: int(steps)]
-        totals = {"loss": 0.0, "cls": 0.0, "reg": 0.0}
+        batches = epoch_batches(windows, cfg, epoch, rank, world)
         bar = tqdm(batches, desc=f"epoch {epoch + 1}/{cfg.train.epochs}", disable=not bars, leave=False)
-        for idx in bar:
-            flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
-            b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout, rng)
-            loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg, weight_of_class)
-            opt.zero_grad()
-            loss.backward()  # type: ignore[no-untyped-call]
-            torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
-            opt.step()
-            totals["loss"] += float(loss)
-            totals["cls"] += parts["cls"]
-            totals["reg"] += parts["reg"]
-            bar.set_postfix(loss=f"{float(loss):.3f}")
+        totals = train_epoch(net, opt, bar, train, spec, anchors, class_of, cfg, weight_of_class, rng)
         sched.step()
         if not show:
             continue
@@ -342,26 +399,14 @@ def main(argv: list[str] | None = None) -> Path:
         row.update(validate(model, val, spec, anchors, class_of, cfg))
         row["lr"] = sched.get_last_lr()[0]
         row["seconds"] = time.perf_counter() - t0
-        new = not log_path.exists() or epoch == 0
-        with log_path.open("w" if new else "a", newline="") as f:
-            wr = csv.DictWriter(f, fieldnames=list(row))
-            if new:
-                wr.writeheader()
-            wr.writerow(row)
-        print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
+        log_row(out / "log.csv", row, epoch == 0)
         key = None if cfg.train.select == "last" else cfg.train.select
         improved = key is None or row[key] < best
         best = row[key] if key is not None and improved else best
         state = {
-            "model": model.state_dict(),
-            "optimizer": opt.state_dict(),
-            "scheduler": sched.state_dict(),
-            "epoch": epoch,
-            "best": best,
-            "anchors": anchors_np,
-            "class_of": class_of_np,
-            "config": asdict(cfg),
-            "rng": torch.get_rng_state(),
+            **{"model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict()},
+            **{"epoch": epoch, "best": best, "anchors": anchors_np, "class_of": class_of_np},
+            **{"config": asdict(cfg), "rng": torch.get_rng_state()},
         }
         torch.save(state, out / "last.pt")
         if improved:
