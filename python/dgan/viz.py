@@ -101,6 +101,72 @@ def _box(centre: Arr, yaw: float, length: float, width: float) -> Arr:
     return out
 
 
+def _truths(
+    frame: Frame, ground_truth: Mapping[Any, npt.ArrayLike] | npt.ArrayLike | None, t_f: int
+) -> list[Arr | None]:
+    """Each row's true future up to ``t_f`` steps, from an ``(N, T, 2)`` array or an id → ``(T, 2)`` mapping."""
+    n = len(frame)
+    truth: list[Arr | None] = [None] * n
+    if ground_truth is None:
+        return truth
+    if isinstance(ground_truth, Mapping):
+        for i, a in enumerate(frame.agent_ids.tolist()):
+            if a in ground_truth:
+                truth[i] = np.asarray(ground_truth[a], dtype=np.float64).reshape(-1, 2)[:t_f]
+        return truth
+    gt = np.asarray(ground_truth, dtype=np.float64)
+    if gt.ndim != 3 or gt.shape[0] != n or gt.shape[2] != 2:
+        raise InvalidFrameError(f"ground_truth must have shape (N={n}, T, 2), got {gt.shape}")
+    return [gt[i, :t_f] for i in range(n)]
+
+
+def _new_axes(plt: Any, picture: Arr | None, lo: Arr, hi: Arr) -> Any:
+    """Axes sized to the picture (11 inches on its longer side) or to the scene's aspect (8 inches high or 12 wide at
+    most), with room for the colour bar."""
+    if picture is not None:
+        rows, cols = picture.shape[:2]
+        size = (cols / max(rows, cols) * 11 + 1.6, rows / max(rows, cols) * 11)
+    else:
+        aspect = float(np.clip((hi[0] - lo[0]) / (hi[1] - lo[1]), 0.3, 3.0))
+        w, ht = (12.0, 12.0 / aspect) if aspect > 1.4 else (8.0 * aspect, 8.0)
+        size = (max(w, 4.0) + 1.6, max(ht, 3.0))
+    _, ax = plt.subplots(figsize=size, dpi=100, layout="constrained")
+    return ax
+
+
+def _draw_agent(
+    ax: Any,
+    cmap: Any,
+    h: Arr | None,
+    cls: str,
+    hist: Arr,
+    modes: list[Arr],
+    probabilities: Arr,
+    truth: Arr | None,
+    box: tuple[float, float, float] | None,
+) -> None:
+    """One agent: its observed path dashed in its class's colour, a dot (or its ``(yaw, length, width)`` box) at the
+    last observed step, its modes coloured and thickened by probability (most probable on top), its truth in red."""
+    from matplotlib.patches import Polygon
+
+    colour = CLASS_COLOURS.get(cls, "white")
+    obs = _to_pixels(hist, h)
+    ax.plot(obs[:, 0], obs[:, 1], "--", color=colour, lw=1.6, zorder=3)
+    if box is not None:
+        corners = _to_pixels(_box(hist[-1], *box), h)
+        ax.add_patch(Polygon(corners, closed=True, fc=colour, ec="white", lw=0.6, alpha=0.8))
+    else:
+        ax.plot(*obs[-1], "o", color=colour, ms=5, mec="black", zorder=5)
+    for path, pr in reversed(list(zip(modes, probabilities.tolist(), strict=True))):
+        tr = _to_pixels(path, h)
+        ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / SATURATION)), lw=0.8 + 3 * pr, zorder=4)
+    if truth is not None:
+        t = truth[np.isfinite(truth).all(axis=1)]
+        if len(t):
+            g = _to_pixels(np.vstack([hist[-1:], t]), h)
+            ax.plot(g[:, 0], g[:, 1], "-", color="red", lw=1.6, zorder=4)
+
+
 def plot(
     frame: Frame,
     prediction: Prediction,
@@ -144,7 +210,6 @@ def plot(
     """
     plt = _pyplot()
     from matplotlib.colors import Normalize
-    from matplotlib.patches import Polygon
 
     if not isinstance(frame, Frame) or not isinstance(prediction, Prediction):
         raise InvalidFrameError("plot takes a dgan.Frame and its dgan.Prediction")
@@ -161,31 +226,14 @@ def plot(
     t_f = prediction.trajectories.shape[2]
     m_all = prediction.trajectories.shape[1]
     m = m_all if modes is None else int(np.clip(modes, 1, m_all))
-    truth: list[Arr | None] = [None] * n
-    if ground_truth is not None:
-        if isinstance(ground_truth, Mapping):
-            for i, a in enumerate(frame.agent_ids.tolist()):
-                if a in ground_truth:
-                    truth[i] = np.asarray(ground_truth[a], dtype=np.float64).reshape(-1, 2)[:t_f]
-        else:
-            gt = np.asarray(ground_truth, dtype=np.float64)
-            if gt.ndim != 3 or gt.shape[0] != n or gt.shape[2] != 2:
-                raise InvalidFrameError(f"ground_truth must have shape (N={n}, T, 2), got {gt.shape}")
-            truth = [gt[i, :t_f] for i in range(n)]
+    truth = _truths(frame, ground_truth, t_f)
     pts = [frame.positions[i][frame.mask[i]] for i in range(n)]
     drawn = [*pts, *prediction.trajectories[:, :m].reshape(-1, t_f, 2)]
     drawn += [t[np.isfinite(t).all(axis=1)] for t in truth if t is not None]
     lo, hi = _bounds(drawn, margin_m)
-    if ax is None and picture is not None:  # the picture's aspect, 11 inches on its longer side
-        rows, cols = picture.shape[:2]
-        size = (cols / max(rows, cols) * 11 + 1.6, rows / max(rows, cols) * 11)
-        fig, ax = plt.subplots(figsize=size, dpi=100, layout="constrained")
-    elif ax is None:  # sized to the scene's aspect, 8 inches high or 12 wide at most
-        aspect = float(np.clip((hi[0] - lo[0]) / (hi[1] - lo[1]), 0.3, 3.0))
-        w, ht = (12.0, 12.0 / aspect) if aspect > 1.4 else (8.0 * aspect, 8.0)
-        fig, ax = plt.subplots(figsize=(max(w, 4.0) + 1.6, max(ht, 3.0)), dpi=100, layout="constrained")
-    else:
-        fig = ax.figure
+    if ax is None:
+        ax = _new_axes(plt, picture, lo, hi)
+    fig = ax.figure
     scene_map = frame.map if map is None else map
     if picture is not None:
         ax.imshow(picture, zorder=0)
@@ -197,28 +245,10 @@ def plot(
     cmap = plt.get_cmap(MODE_COLOURS)
     ids = frame.agent_ids.tolist()
     for i in range(n):
-        cls = frame.classes[i]
-        colour = CLASS_COLOURS.get(cls, "white")
-        hist = pts[i]
-        obs = _to_pixels(hist, h)
-        ax.plot(obs[:, 0], obs[:, 1], "--", color=colour, lw=1.6, zorder=3)
         yaw = None if headings is None else headings.get(ids[i])
-        if yaw is not None and len(hist):
-            corners = _box(hist[-1], float(yaw), float(frame.lengths[i]), float(frame.widths[i]))
-            ax.add_patch(Polygon(_to_pixels(corners, h), closed=True, fc=colour, ec="white", lw=0.6, alpha=0.8))
-        else:
-            ax.plot(*obs[-1], "o", color=colour, ms=5, mec="black", zorder=5)
-        for k in reversed(range(m)):
-            pr = float(prediction.probabilities[i, k])
-            tr = _to_pixels(np.vstack([hist[-1:], prediction.trajectories[i, k]]), h)
-            ax.plot(tr[:, 0], tr[:, 1], "-", color=cmap(min(1.0, pr / SATURATION)), lw=0.8 + 3 * pr, zorder=4)
-        if truth[i] is not None:
-            t = truth[i]
-            assert t is not None
-            t = t[np.isfinite(t).all(axis=1)]
-            if len(t):
-                g = _to_pixels(np.vstack([hist[-1:], t]), h)
-                ax.plot(g[:, 0], g[:, 1], "-", color="red", lw=1.6, zorder=4)
+        box = None if yaw is None or not len(pts[i]) else (float(yaw), float(frame.lengths[i]), float(frame.widths[i]))
+        paths = [np.vstack([pts[i][-1:], prediction.trajectories[i, k]]) for k in range(m)]
+        _draw_agent(ax, cmap, h, frame.classes[i], pts[i], paths, prediction.probabilities[i, :m], truth[i], box)
     if picture is not None:
         ax.set_xlim(-0.5, picture.shape[1] - 0.5)
         ax.set_ylim(picture.shape[0] - 0.5, -0.5)
