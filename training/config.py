@@ -30,6 +30,11 @@ class DataConfig:
     prior_window_s: float = 0.0
     # Where agents' headings come from (dgan.InputSpec.heading): "measured", "motion_when_moving" or "motion".
     heading: str = "measured"
+    # ETH/UCY only: pedestrians of other sources added to the training windows (training.datasets.PEDESTRIAN_SOURCES,
+    # comma-separated; their training splits only, resampled to 0.4 s, without maps), at windows ending at every
+    # extra_stride-th step.
+    extra_pedestrians: str = ""
+    extra_stride: int = 3
 
 
 @dataclass(frozen=True)

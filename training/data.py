@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
-from training.datasets import DATASETS, DatasetInfo, Recording, recordings, source_files
+from training.datasets import DATASETS, DatasetInfo, Recording, pedestrian_recordings, recordings, source_files
 
 Arr = npt.NDArray[Any]
 
@@ -222,6 +222,63 @@ def build_windows(
     )
 
 
+def concat_windows(parts: Sequence[Windows]) -> Windows:
+    """Several window sets as one: agent and edge pointers and file indices shifted, files listed in order. Their
+    maps must all be present or all absent."""
+    if not parts:
+        raise ValueError("concat_windows needs at least one window set")
+    if len({p.map is None for p in parts}) > 1:
+        raise ValueError("window sets with and without map crops cannot be concatenated")
+    agent_ptr, edge_ptr, window_file = [np.zeros(1, np.int64)], [np.zeros(1, np.int64)], []
+    agents = edges = files = 0
+    for p in parts:
+        agent_ptr.append(p.agent_ptr[1:] + agents)
+        edge_ptr.append(p.edge_ptr[1:] + edges)
+        window_file.append(p.window_file + files)
+        agents, edges, files = agents + int(p.agent_ptr[-1]), edges + int(p.edge_ptr[-1]), files + len(p.files)
+    rows = [*("trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "future", "target")]
+    rows += ["class_index", "origin", "heading", "window_frame"]
+    return Windows(
+        map=None if parts[0].map is None else np.concatenate([p.map for p in parts if p.map is not None]),
+        agent_ptr=np.concatenate(agent_ptr),
+        edge_ptr=np.concatenate(edge_ptr),
+        window_file=np.concatenate(window_file),
+        files=[f for p in parts for f in p.files],
+        **{k: np.concatenate([getattr(p, k) for p in parts]) for k in rows},
+    )
+
+
+def _cached(
+    cache_dir: Path, stem: str, spec: dgan.InputSpec, files: list[Path], stride: int, version: str, build: Any
+) -> Windows:
+    """The windows cached under ``cache_dir`` by content (the spec, the source files' names and sizes, the stride
+    and the builder's ``version``), built by ``build()`` and saved when absent."""
+    key = hashlib.sha256(
+        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, version]).encode()
+    ).hexdigest()[:16]
+    path = cache_dir / f"{stem}_{key}.npz"
+    if path.is_file():
+        return Windows.load(path)
+    w: Windows = build()
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    w.save(path)
+    return w
+
+
+def cached_pedestrian_windows(
+    source: str, data_root: Path, spec: dgan.InputSpec, cache_dir: Path, stride: int = 3, progress: bool = True
+) -> Windows:
+    """The windows of ``source``'s training pedestrians for an ETH/UCY model (``pedestrian_recordings``, at the
+    model's time base), cached under ``cache_dir`` by content."""
+
+    def build() -> Windows:
+        recs = pedestrian_recordings(source, data_root, spec.dt_s)
+        return build_windows(recs, DATASETS["ethucy"], spec, stride, progress)
+
+    files = source_files(source, data_root, "train")
+    return _cached(cache_dir, f"pedestrians_{source}", spec, files, stride, "pedestrians-v1", build)
+
+
 def cached_windows(
     dataset: str,
     data_root: Path,
@@ -234,16 +291,10 @@ def cached_windows(
 ) -> Windows:
     """``build_windows`` for one split of a dataset (``fold``: the held-out ETH/UCY scene), cached under
     ``cache_dir`` by content."""
+
+    def build() -> Windows:
+        recs = recordings(dataset, data_root, split, fold, with_map=spec.map is not None)
+        return build_windows(recs, DATASETS[dataset], spec, stride, progress)
+
     files = source_files(dataset, data_root, split, fold)
-    key = hashlib.sha256(
-        json.dumps([spec.to_json(), [(f.name, f.stat().st_size) for f in files], stride, "v7"]).encode()
-    ).hexdigest()[:16]
-    path = cache_dir / f"{dataset}{'_' + fold if fold else ''}_{split}_{key}.npz"
-    if path.is_file():
-        return Windows.load(path)
-    info = DATASETS[dataset]
-    recs = recordings(dataset, data_root, split, fold, with_map=spec.map is not None)
-    w = build_windows(recs, info, spec, stride, progress)
-    cache_dir.mkdir(parents=True, exist_ok=True)
-    w.save(path)
-    return w
+    return _cached(cache_dir, f"{dataset}{'_' + fold if fold else ''}_{split}", spec, files, stride, "v7", build)

@@ -294,6 +294,69 @@ def sdd_recording(path: Path, root: Path, with_map: bool = True) -> Recording:
     )
 
 
+# ---- Pedestrians of other sources, for the ETH/UCY models -----------------------------------------------------------
+
+#: Sources whose pedestrians can join the ETH/UCY training windows (``data.extra_pedestrians``).
+PEDESTRIAN_SOURCES = ("sdd",)
+
+
+def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
+    """``rec`` (steps ``dt_from_s`` apart) on a grid of steps ``dt_to_s`` apart: each agent's position at a new step
+    is interpolated linearly between its rows at the two old steps around it, and the new step is left out where the
+    agent lacks either of them (no interpolation across gaps). Per-row headings and sizes are not carried."""
+    ratio = dt_to_s / dt_from_s
+    steps, agents, xys, labels = [], [], [], []
+    for agent in np.unique(rec.agent):
+        sel = np.flatnonzero(rec.agent == agent)
+        old, xy = rec.step[sel], rec.xy[sel]
+        new = np.arange(np.ceil(old[0] / ratio - 1e-9), np.floor(old[-1] / ratio + 1e-9) + 1).astype(np.int64)
+        t = new * ratio
+        lo = np.clip(np.searchsorted(old, np.floor(t + 1e-9), side="right") - 1, 0, len(old) - 1)
+        hi = np.clip(lo + 1, 0, len(old) - 1)
+        frac = t - old[lo]
+        exact = np.abs(frac) < 1e-9
+        ok = exact | ((old[hi] - old[lo] == 1) & (frac > 0) & (frac < 1))
+        w = np.where(exact, 0.0, frac)[:, None]
+        steps.append(new[ok])
+        agents.append(np.full(int(ok.sum()), agent))
+        xys.append(((1 - w) * xy[lo] + w * xy[hi])[ok])
+        labels.append(np.full(int(ok.sum()), rec.label[sel[0]]))
+    if not steps:
+        return replace(rec, heading=None, length=None, width=None, now_steps=None)
+    return Recording.sorted(
+        name=rec.name,
+        step=np.concatenate(steps),
+        agent=np.concatenate(agents),
+        xy=np.concatenate(xys),
+        label=np.concatenate(labels),
+        unit_m=rec.unit_m,
+        map=rec.map,
+    )
+
+
+def pedestrian_recordings(source: str, root: Path, dt_s: float) -> list[Recording]:
+    """The pedestrians of ``source``'s training split, in metres, resampled to ``dt_s`` and labelled with ETH/UCY's one
+    label, without their maps (a model whose map is optional sees a blank crop for them, as under map dropout). The
+    source's other agents are left out: the ETH/UCY models know only pedestrians."""
+    if source not in PEDESTRIAN_SOURCES:
+        raise ValueError(f"unknown pedestrian source {source!r}; known: {', '.join(PEDESTRIAN_SOURCES)}")
+    info = DATASETS[source]
+    pedestrian = info.labels.index("Pedestrian")
+    out = []
+    for path in sdd_files(root, "train"):
+        rec = sdd_recording(path, root, with_map=False)
+        keep = rec.label == pedestrian
+        only = Recording.sorted(
+            name=f"{source}:{rec.name}",
+            step=rec.step[keep],
+            agent=rec.agent[keep],
+            xy=rec.xy[keep],
+            label=np.zeros(int(keep.sum()), np.int64),
+        )
+        out.append(resampled(only, info.dt_s, dt_s))
+    return out
+
+
 # ---- ApolloScape ---------------------------------------------------------------------------------------------------
 
 

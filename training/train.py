@@ -30,7 +30,7 @@ import torch.distributed as dist
 import dgan
 from training.anchors import kmeans_anchors
 from training.config import Config
-from training.data import Windows, cached_windows
+from training.data import Windows, cached_pedestrian_windows, cached_windows, concat_windows
 from training.datasets import DATASETS
 from training.loss import class_weights, decode_torch, dgan_loss
 from training.model import DGAN
@@ -76,11 +76,18 @@ def run_name(cfg: Config) -> str:
 
 
 def load_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> Windows:
-    """A split's cached windows."""
+    """A split's cached windows; for training, with the pedestrians of ``data.extra_pedestrians`` (ETH/UCY only)."""
     d = cfg.data
     fold = d.scene if d.dataset == "ethucy" else ""
-    cache = Path(d.cache_dir).expanduser()
-    return cached_windows(d.dataset, Path(d.root).expanduser(), split, spec, cache, fold, d.window_stride, progress)
+    cache, root = Path(d.cache_dir).expanduser(), Path(d.root).expanduser()
+    sources = [s.strip() for s in d.extra_pedestrians.split(",") if s.strip()]
+    if sources and d.dataset != "ethucy":
+        raise ValueError(f"data.extra_pedestrians is for the ETH/UCY models, not {d.dataset!r}")
+    own = cached_windows(d.dataset, root, split, spec, cache, fold, d.window_stride, progress)
+    if not sources or split != "train":
+        return own
+    extra = [cached_pedestrian_windows(s, root, spec, cache, d.extra_stride, progress) for s in sources]
+    return concat_windows([own, *extra])
 
 
 def restrict_targets(w: Windows, spec: dgan.InputSpec, target_class: str) -> None:

@@ -238,3 +238,38 @@ def test_hdmap_needs_10_hz_sources(tmp_path: Path) -> None:
     path.write_bytes(pickle.dumps({"tracks": {"a": track}, "map_features": {}, "metadata": meta}))
     with pytest.raises(ValueError, match=r"slow\.pkl: expected 10 Hz states, got a step of 0\.5 s"):
         hdmap_recordings(path)
+
+
+def test_resampling_interpolates_and_never_bridges_a_gap() -> None:
+    from training.datasets import resampled
+
+    # Agent 0 walks 1 m per old step (1/3 s) over steps 0..12; agent 1 is missing at old step 4.
+    steps = np.r_[np.arange(13), [0, 1, 2, 3, 5, 6]]
+    agents = np.r_[np.zeros(13, np.int64), np.ones(6, np.int64)]
+    xy = np.c_[steps.astype(float), agents * 10.0]
+    rec = Recording.sorted(name="r", step=steps, agent=agents, xy=xy, label=np.zeros(len(steps), np.int64))
+    out = resampled(rec, 1 / 3, 0.4)
+    walker = out.agent == 0
+    np.testing.assert_array_equal(out.step[walker], np.arange(11))  # 0.4 s steps up to 4.0 s (old step 12)
+    np.testing.assert_allclose(out.xy[walker, 0], 1.2 * np.arange(11))  # positions on the line, interpolated
+    # Agent 1: new steps at old 0, 1.2, 2.4, 3.6, 4.8, 6.0; 3.6 and 4.8 need old step 4, which is missing.
+    other = out.agent == 1
+    np.testing.assert_array_equal(out.step[other], [0, 1, 2, 5])
+    np.testing.assert_allclose(out.xy[other, 0], [0.0, 1.2, 2.4, 6.0])
+
+
+def test_other_sources_pedestrians_join_the_ethucy_time_base() -> None:
+    from training.datasets import pedestrian_recordings
+
+    root = shared_data("sdd")
+    recs = pedestrian_recordings("sdd", root, 0.4)
+    assert len(recs) == len(source_files("sdd", root, "train"))  # the training split only
+    rec = recs[0]
+    assert rec.map is None
+    assert (rec.label == 0).all()  # ETH/UCY's one label
+    # Consecutive 0.4 s steps of one agent are at most a few metres apart (metres, not pixels).
+    a = rec.agent == rec.agent[0]
+    gaps = np.diff(rec.step[a]) == 1
+    assert (np.linalg.norm(np.diff(rec.xy[a], axis=0), axis=1)[gaps] < 5.0).all()
+    with pytest.raises(ValueError, match="unknown pedestrian source"):
+        pedestrian_recordings("apolloscape", root, 0.4)

@@ -7,6 +7,7 @@ import csv
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -242,6 +243,28 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
     assert kept["epoch"] + 1 == int(min(rows, key=lambda r: float(r["val_ade"]))["epoch"])
 
 
+def test_concatenated_windows_batch_as_their_parts() -> None:
+    from training.data import cached_windows, concat_windows
+
+    root = data_root()
+    cfg = Config.load(CONFIG)
+    spec = input_spec(cfg)
+    cache = Path(cfg.data.cache_dir).expanduser()
+    val = cached_windows("ethucy", root, "val", spec, cache, fold="zara1", progress=False)
+    both = concat_windows([val, val])
+    assert both.num_windows == 2 * val.num_windows
+    assert both.files == val.files * 2
+    n = val.num_windows
+    for w in (0, n - 1):
+        a, b = val.batch([w]), both.batch([n + w])
+        assert a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    np.testing.assert_array_equal(both.window_file[n:], val.window_file + len(val.files))
+    with pytest.raises(ValueError, match="with and without map"):
+        concat_windows([val, replace(val, map=None)])
+
+
 def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
     from training.anchors import kmeans_anchors
     from training.datasets import recordings, split_files
@@ -257,3 +280,8 @@ def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
         input_spec(Config.load(CONFIG, {"data.dataset": "kitti"}))
     with pytest.raises(ValueError, match="3 futures cannot make 20 anchors"):
         kmeans_anchors(np.zeros((3, 12, 2)), 20)
+    from training.train import load_windows
+
+    sdd = Config.load(ROOT / "training" / "configs" / "sdd.toml", {"data.extra_pedestrians": "sdd"})
+    with pytest.raises(ValueError, match="for the ETH/UCY models"):
+        load_windows(replace(sdd, data=replace(sdd.data, root=str(data_root()))), input_spec(sdd), "train", False)
