@@ -93,6 +93,29 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
+def _extra_sources(cfg: dict[str, Any]) -> list[str]:
+    return [x.strip() for x in str(cfg["data"].get("extra_pedestrians", "")).split(",") if x.strip()]
+
+
+def extra_data_line(cfg: dict[str, Any]) -> str:
+    """The card's words on other sources' pedestrians in training (``data.extra_pedestrians``), if any."""
+    if "sdd" not in _extra_sources(cfg):
+        return ""
+    stride = cfg["data"].get("extra_stride", 3)
+    return (
+        "\n  Also trained on the pedestrians of Stanford Drone's 30 training videos (none of its test videos), "
+        f"resampled to 0.4 s, in metres, without a map, in windows ending at steps divisible by {stride} "
+        "(`data.extra_pedestrians`)."
+    )
+
+
+def extra_licence_line(cfg: dict[str, Any]) -> str:
+    """The card's licence words for other sources' pedestrians in training, if any."""
+    if "sdd" not in _extra_sources(cfg):
+        return ""
+    return "\n  Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016."
+
+
 def card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
     rows, seconds, best = training_log(run)
     scene = cfg["data"]["scene"]
@@ -108,7 +131,7 @@ training.
 - **Data**: ETH/UCY in the Social-GAN layout (metres, 0.4 s steps). Trained on the train split of {others}; the best
   epoch chosen on their val split. Each scene's semantic mask, colourised (`dgan.scenes.MASK_PALETTE`), is the raster
   map: {cfg["data"]["map_height_px"]}×{cfg["data"]["map_width_px"]} px crops at {cfg["data"]["map_resolution_m"]} m/px,
-  heading-aligned. Use it on new frames of a scene with `dgan.scene_map("{scene}")`.
+  heading-aligned. Use it on new frames of a scene with `dgan.scene_map("{scene}")`.{extra_data_line(cfg)}
 - **Protocol**: 8 observed steps (3.2 s), 12 predicted (4.8 s); every start frame; all agents seen at t_obs are in the
   graph; targets are the agents present at all 20 steps, in windows with at least two of them.
 - **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP, map CNN (ResNet-style, width
@@ -127,7 +150,7 @@ training.
 {nomap_row(metrics)}{cv_row(metrics)}
 
 - **Licence**: the weights are derived from ETH (BIWI) and UCY data, which are for **non-commercial research use
-  only**. Cite Pellegrini et al. 2009 and Lerner et al. 2007.
+  only**. Cite Pellegrini et al. 2009 and Lerner et al. 2007.{extra_licence_line(cfg)}
 - **Reproduce**: `python -m training.results --train` (all five folds) or
   `python -m training.train --config training/configs/ethucy_{scene}.toml --out runs/ethucy_{scene}`.
 """
