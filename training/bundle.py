@@ -18,6 +18,7 @@ import torch
 
 import dgan
 from training.calibrate import calibrate_checkpoint
+from training.datasets import pedestrian_sources
 from training.evaluate import evaluate
 from training.export import SLIM_KEYS, export_checkpoint
 
@@ -93,13 +94,9 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
-def _extra_sources(cfg: dict[str, Any]) -> list[str]:
-    return [x.strip() for x in str(cfg["data"].get("extra_pedestrians", "")).split(",") if x.strip()]
-
-
 def extra_data_line(cfg: dict[str, Any]) -> str:
     """The card's words on other sources' pedestrians in training (``data.extra_pedestrians``), if any."""
-    if "sdd" not in _extra_sources(cfg):
+    if "sdd" not in pedestrian_sources(str(cfg["data"].get("extra_pedestrians", ""))):
         return ""
     stride = cfg["data"].get("extra_stride", 3)
     return (
@@ -111,7 +108,7 @@ def extra_data_line(cfg: dict[str, Any]) -> str:
 
 def extra_licence_line(cfg: dict[str, Any]) -> str:
     """The card's licence words for other sources' pedestrians in training, if any."""
-    if "sdd" not in _extra_sources(cfg):
+    if "sdd" not in pedestrian_sources(str(cfg["data"].get("extra_pedestrians", ""))):
         return ""
     return "\n  Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016."
 

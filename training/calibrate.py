@@ -128,7 +128,7 @@ def choose_temperature(
     return TemperatureFit(
         float(GRID[i]),
         objective,
-        best_mode_nll(cl, al, best, class_of, 1.0),
+        best_mode_log_loss(at_one, best),
         nll[i],
         reliability_gap(at_one, best),
         gaps[objective],

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -249,7 +249,13 @@ def concat_windows(parts: Sequence[Windows]) -> Windows:
 
 
 def _cached(
-    cache_dir: Path, stem: str, spec: dgan.InputSpec, files: list[Path], stride: int, version: str, build: Any
+    cache_dir: Path,
+    stem: str,
+    spec: dgan.InputSpec,
+    files: list[Path],
+    stride: int,
+    version: str,
+    build: Callable[[], Windows],
 ) -> Windows:
     """The windows cached under ``cache_dir`` by content (the spec, the source files' names and sizes, the stride
     and the builder's ``version``), built by ``build()`` and saved when absent."""
@@ -259,7 +265,7 @@ def _cached(
     path = cache_dir / f"{stem}_{key}.npz"
     if path.is_file():
         return Windows.load(path)
-    w: Windows = build()
+    w = build()
     cache_dir.mkdir(parents=True, exist_ok=True)
     w.save(path)
     return w

@@ -300,6 +300,15 @@ def sdd_recording(path: Path, root: Path, with_map: bool = True) -> Recording:
 PEDESTRIAN_SOURCES = ("sdd",)
 
 
+def pedestrian_sources(names: str) -> list[str]:
+    """The sources named by ``data.extra_pedestrians`` (comma-separated; empty for none), each checked."""
+    sources = [s.strip() for s in names.split(",") if s.strip()]
+    unknown = [s for s in sources if s not in PEDESTRIAN_SOURCES]
+    if unknown:
+        raise ValueError(f"unknown pedestrian source(s) {unknown}; known: {', '.join(PEDESTRIAN_SOURCES)}")
+    return sources
+
+
 def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
     """``rec`` (steps ``dt_from_s`` apart) on a grid of steps ``dt_to_s`` apart: each agent's position at a new step
     is interpolated linearly between its rows at the two old steps around it, and the new step is left out where the
@@ -338,8 +347,7 @@ def pedestrian_recordings(source: str, root: Path, dt_s: float) -> list[Recordin
     """The pedestrians of ``source``'s training split, in metres, resampled to ``dt_s`` and labelled with ETH/UCY's one
     label, without their maps (a model whose map is optional sees a blank crop for them, as under map dropout). The
     source's other agents are left out: the ETH/UCY models know only pedestrians."""
-    if source not in PEDESTRIAN_SOURCES:
-        raise ValueError(f"unknown pedestrian source {source!r}; known: {', '.join(PEDESTRIAN_SOURCES)}")
+    pedestrian_sources(source)
     info = DATASETS[source]
     pedestrian = info.labels.index("Pedestrian")
     out = []

@@ -18,7 +18,6 @@ import os
 import random
 import sys
 import time
-from collections.abc import Iterable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -31,7 +30,7 @@ import dgan
 from training.anchors import kmeans_anchors
 from training.config import Config
 from training.data import Windows, cached_pedestrian_windows, cached_windows, concat_windows
-from training.datasets import DATASETS
+from training.datasets import DATASETS, pedestrian_sources
 from training.loss import class_weights, decode_torch, dgan_loss
 from training.model import DGAN
 
@@ -80,7 +79,7 @@ def load_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) 
     d = cfg.data
     fold = d.scene if d.dataset == "ethucy" else ""
     cache, root = Path(d.cache_dir).expanduser(), Path(d.root).expanduser()
-    sources = [s.strip() for s in d.extra_pedestrians.split(",") if s.strip()]
+    sources = pedestrian_sources(d.extra_pedestrians)
     if sources and d.dataset != "ethucy":
         raise ValueError(f"data.extra_pedestrians is for the ETH/UCY models, not {d.dataset!r}")
     own = cached_windows(d.dataset, root, split, spec, cache, fold, d.window_stride, progress)
@@ -303,7 +302,7 @@ def epoch_batches(windows: np.ndarray, cfg: Config, epoch: int, rank: int, world
 def train_epoch(
     net: torch.nn.Module,
     opt: torch.optim.Optimizer,
-    batches: Iterable[np.ndarray],
+    bar: Any,
     train: Windows,
     spec: dgan.InputSpec,
     anchors: torch.Tensor,
@@ -312,10 +311,10 @@ def train_epoch(
     weight_of_class: torch.Tensor | None,
     rng: np.random.Generator,
 ) -> dict[str, float]:
-    """One pass over ``batches`` of training windows (mirrored at random, maps dropped at the configured rate); the
-    summed loss and its classification and regression parts."""
+    """One pass over the batches of training windows that the tqdm ``bar`` iterates (mirrored at random, maps dropped
+    at the configured rate); the summed loss and its classification and regression parts."""
     totals = {"loss": 0.0, "cls": 0.0, "reg": 0.0}
-    for idx in batches:
+    for idx in bar:
         flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
         b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout, rng)
         loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg, weight_of_class)
@@ -326,8 +325,7 @@ def train_epoch(
         totals["loss"] += float(loss.detach())
         totals["cls"] += parts["cls"]
         totals["reg"] += parts["reg"]
-        if hasattr(batches, "set_postfix"):
-            batches.set_postfix(loss=f"{float(loss.detach()):.3f}")
+        bar.set_postfix(loss=f"{float(loss.detach()):.3f}")
     return totals
 
 

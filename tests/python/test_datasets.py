@@ -273,3 +273,12 @@ def test_other_sources_pedestrians_join_the_ethucy_time_base() -> None:
     assert (np.linalg.norm(np.diff(rec.xy[a], axis=0), axis=1)[gaps] < 5.0).all()
     with pytest.raises(ValueError, match="unknown pedestrian source"):
         pedestrian_recordings("apolloscape", root, 0.4)
+
+
+def test_extra_pedestrian_sources_are_parsed_and_checked() -> None:
+    from training.datasets import pedestrian_sources
+
+    assert pedestrian_sources("") == []
+    assert pedestrian_sources(" sdd , ") == ["sdd"]
+    with pytest.raises(ValueError, match=r"unknown pedestrian source\(s\) \['kitti'\]"):
+        pedestrian_sources("sdd,kitti")
