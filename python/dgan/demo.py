@@ -184,13 +184,16 @@ def draw(scene: DemoScene, pred: Prediction, out: Path, title: str) -> Path:
 
     from dgan.viz import plot
 
+    picture = None
+    if scene.image is not None and scene.world_to_pixel is not None:
+        picture = RasterMap(scene.image, scene.world_to_pixel)
     fig = plot(
         scene.frame,
         pred,
+        map=picture,
         ground_truth=scene.futures,
         title=title,
-        image=scene.image,
-        world_to_pixel=scene.world_to_pixel,
+        in_pixels=picture is not None,
         headings=scene.headings,
     )
     out.parent.mkdir(parents=True, exist_ok=True)

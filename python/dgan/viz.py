@@ -75,15 +75,6 @@ def _map_under(scene_map: RasterMap | VectorMap, lo: Arr, hi: Arr) -> tuple[Arr,
     return render_map(scene_map, (lo + hi) / 2, float(max(hi - lo)))
 
 
-def _homography(world_to_pixel: npt.ArrayLike | None) -> Arr | None:
-    if world_to_pixel is None:
-        return None
-    h = np.asarray(world_to_pixel, dtype=np.float64)
-    if h.shape != (3, 3) or not np.isfinite(h).all() or abs(np.linalg.det(h)) < 1e-12:
-        raise InvalidMapError(f"world_to_pixel must be an invertible 3×3 homography, got shape {h.shape}")
-    return h
-
-
 def _to_pixels(points: Arr, h: Arr | None) -> Arr:
     """``(P, 2)`` world points through the homography ``h`` (unchanged without one)."""
     if h is None:
@@ -177,11 +168,10 @@ def plot(
     ax: Any = None,
     title: str | None = None,
     margin_m: float = 5.0,
-    image: npt.ArrayLike | None = None,
-    world_to_pixel: npt.ArrayLike | None = None,
+    in_pixels: bool = False,
     headings: Mapping[Any, float] | None = None,
 ) -> Any:
-    """A matplotlib figure of a prediction, axes in world metres (or in the pixels of ``image``).
+    """A matplotlib figure of a prediction, axes in world metres (or in the pixels of a raster map's image).
 
     Args:
         frame: the frame that was predicted (its observed paths are drawn dashed, coloured by class).
@@ -194,9 +184,8 @@ def plot(
         ax: a matplotlib Axes to draw on (a new figure if None).
         title: the axes' title.
         margin_m: metres of margin around the drawn paths.
-        image: a picture of the scene, ``(H, W)`` or ``(H, W, 3|4)``, drawn underneath instead of a map, with every
-            path taken into its pixels by ``world_to_pixel`` (a camera view, a drone video's frame).
-        world_to_pixel: the ``3 × 3`` homography from world metres to the pixels of ``image``; needed with it.
+        in_pixels: draw the map (a :class:`RasterMap`: a camera view, a drone video's frame) as its own image, with
+            every path taken into its pixels by the map's world → pixel homography, instead of north-up in metres.
         headings: agent id → heading (rad, world frame) at the last observed step: the agent is drawn as its
             ``length`` × ``width`` box instead of a dot.
 
@@ -205,7 +194,7 @@ def plot(
 
     Raises:
         InvalidFrameError: the prediction does not belong to the frame (other agents, other count).
-        InvalidMapError: ``image`` without an invertible ``world_to_pixel``, or an image that is not a picture.
+        InvalidMapError: ``in_pixels`` without a raster map to draw.
         DganError: matplotlib is not installed.
     """
     plt = _pyplot()
@@ -213,13 +202,13 @@ def plot(
 
     if not isinstance(frame, Frame) or not isinstance(prediction, Prediction):
         raise InvalidFrameError("plot takes a dgan.Frame and its dgan.Prediction")
-    h = _homography(world_to_pixel)
-    picture = None if image is None else np.asarray(image)
-    if picture is not None and (h is None or picture.ndim not in (2, 3) or min(picture.shape[:2]) < 1):
-        raise InvalidMapError(
-            "image needs world_to_pixel (the 3×3 homography from world metres to its pixels) and a (H, W) or "
-            f"(H, W, 3|4) array, got shape {picture.shape}" + ("" if h is not None else " and no world_to_pixel")
-        )
+    scene_map = frame.map if map is None else map
+    picture, h = None, None
+    if in_pixels:
+        if not isinstance(scene_map, RasterMap):
+            kind = type(scene_map).__name__
+            raise InvalidMapError(f"in_pixels draws a RasterMap in its own pixels; the map is {kind}")
+        picture, h = scene_map.image, scene_map.world_to_pixel
     n = len(frame)
     if len(prediction) != n or not np.array_equal(np.asarray(prediction.agent_ids), np.asarray(frame.agent_ids)):
         raise InvalidFrameError(f"the prediction ({len(prediction)} agents) is not of this frame ({n} agents)")
@@ -234,7 +223,6 @@ def plot(
     if ax is None:
         ax = _new_axes(plt, picture, lo, hi)
     fig = ax.figure
-    scene_map = frame.map if map is None else map
     if picture is not None:
         ax.imshow(picture, zorder=0)
     elif scene_map is not None:

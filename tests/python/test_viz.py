@@ -79,19 +79,13 @@ def test_plot_over_a_picture_through_its_homography_with_boxes() -> None:
     pred = p.predict(scene.frame)
     frame = scene.frame
     headings = {a: 0.5 for a in frame.agent_ids.tolist()}
-    fig = dgan.plot(
-        frame,
-        pred,
-        ground_truth=scene.futures,
-        image=scene.image,
-        world_to_pixel=scene.world_to_pixel,
-        headings=headings,
-    )
+    camera = dgan.RasterMap(scene.image, scene.world_to_pixel)
+    fig = dgan.plot(frame, pred, map=camera, ground_truth=scene.futures, in_pixels=True, headings=headings)
     ax = fig.axes[0]
     rows, cols = scene.image.shape[:2]
     assert ax.get_xlim() == pytest.approx((-0.5, cols - 0.5))
     assert ax.get_ylim() == pytest.approx((rows - 0.5, -0.5))
-    assert len(ax.images) == 1  # the picture, not the map
+    assert len(ax.images) == 1  # the picture, not the frame's own map
     # The first line is agent 0's observed path, in the picture's pixels.
     hist = frame.positions[0][frame.mask[0]]
     q = np.c_[hist, np.ones(len(hist))] @ np.asarray(scene.world_to_pixel).T
@@ -103,17 +97,18 @@ def test_plot_over_a_picture_through_its_homography_with_boxes() -> None:
     np.testing.assert_allclose(corners.mean(axis=0), centre[:2] / centre[2], atol=1e-6)
 
 
-def test_plot_refuses_a_picture_without_a_homography() -> None:
+def test_plot_in_pixels_needs_a_valid_raster_map() -> None:
     frame, pred, _ = zara1()
-    picture = np.zeros((10, 10, 3))
-    with pytest.raises(exc.InvalidMapError, match="world_to_pixel"):
-        dgan.plot(frame, pred, image=picture)
-    with pytest.raises(exc.InvalidMapError, match="invertible"):
-        dgan.plot(frame, pred, image=picture, world_to_pixel=np.zeros((3, 3)))
-    with pytest.raises(exc.InvalidMapError, match="invertible"):
-        dgan.plot(frame, pred, image=picture, world_to_pixel=np.eye(2))
-    with pytest.raises(exc.InvalidMapError, match=r"\(H, W\)"):
-        dgan.plot(frame, pred, image=np.zeros(5), world_to_pixel=np.eye(3))
+    picture = np.zeros((10, 10, 3), np.uint8)
+    with pytest.raises(exc.InvalidMapError, match="in_pixels draws a RasterMap"):
+        dgan.plot(frame, pred, map=dgan.VectorMap([]), in_pixels=True)
+    # The picture's homography and shape are the RasterMap's own checks.
+    with pytest.raises(exc.InvalidMapError, match="singular"):
+        dgan.plot(frame, pred, map=dgan.RasterMap(picture, np.zeros((3, 3))), in_pixels=True)
+    with pytest.raises(exc.InvalidMapError, match="3×3"):
+        dgan.plot(frame, pred, map=dgan.RasterMap(picture, np.eye(2)), in_pixels=True)
+    with pytest.raises(exc.InvalidMapError, match=r"\(H, W, 3\)"):
+        dgan.plot(frame, pred, map=dgan.RasterMap(np.zeros(5, np.uint8), np.eye(3)), in_pixels=True)
 
 
 def test_rerun_recording(tmp_path: Path) -> None:
