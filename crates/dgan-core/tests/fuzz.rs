@@ -1,6 +1,8 @@
 //! A stable-toolchain fuzzer of the engine's doors: random and mutated frames, maps, contracts, sealed model bytes and
 //! detection streams, each run to completion under `catch_unwind`. Every input must give `Ok` or a typed error: a
-//! panic, or one input taking longer than [`SLOW`], fails the run.
+//! panic fails the run. How long inputs take is printed (the slowest one with its seed), never asserted: the work an
+//! input may cause is bounded by `Limits`, which the engine's own tests check, and a wall-clock bound inside a test
+//! measures the machine as much as the code.
 //!
 //! `cargo test -p dgan-core --test fuzz` runs a quick round (`DGAN_FUZZ_ITERS`, default 2,000 an area); the long
 //! run is `./dev fuzz [ITERS]` (release build), which prints the executions per area.
@@ -20,9 +22,6 @@ use rand_chacha::ChaCha8Rng;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-/// The longest any single fuzz input may take.
-const SLOW: Duration = Duration::from_secs(2);
 
 /// A number drawn to hit edges: zeros, tiny, huge, negative, non-finite, and ordinary values.
 fn number(rng: &mut ChaCha8Rng) -> f64 {
@@ -254,6 +253,7 @@ fn fuzz_every_door() {
     for (k, (name, target)) in TARGETS.iter().enumerate() {
         let t0 = Instant::now();
         let mut deep = 0u64;
+        let mut slowest = (Duration::ZERO, 0u64);
         for i in 0..iters {
             let case_seed = seed ^ ((k as u64) << 56) ^ i;
             let mut rng = ChaCha8Rng::seed_from_u64(case_seed);
@@ -264,12 +264,15 @@ fn fuzz_every_door() {
                 Ok(false) => {}
                 Err(_) => failures.push(format!("{name}: panic with seed {case_seed}")),
             }
-            if t.elapsed() > SLOW {
-                failures.push(format!("{name}: {:?} with seed {case_seed}", t.elapsed()));
-            }
+            slowest = slowest.max((t.elapsed(), case_seed));
         }
         total += iters;
-        println!("fuzz {name:<12} {iters} executions ({deep} past validation) in {:.1} s", t0.elapsed().as_secs_f64());
+        println!(
+            "fuzz {name:<12} {iters} executions ({deep} past validation) in {:.1} s; slowest {:.1} ms (seed {})",
+            t0.elapsed().as_secs_f64(),
+            slowest.0.as_secs_f64() * 1e3,
+            slowest.1
+        );
     }
     let _ = std::panic::take_hook();
     println!(
