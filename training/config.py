@@ -35,6 +35,9 @@ class DataConfig:
     # extra_stride-th step.
     extra_pedestrians: str = ""
     extra_stride: int = 3
+    # Whether those pedestrians' futures join the k-means of the anchors; false fits the anchors on the dataset's own
+    # training windows alone (the network still trains on all of them).
+    extra_in_anchors: bool = True
 
 
 @dataclass(frozen=True)

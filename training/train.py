@@ -76,6 +76,13 @@ def run_name(cfg: Config) -> str:
 
 def load_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> Windows:
     """A split's cached windows; for training, with the pedestrians of ``data.extra_pedestrians`` (ETH/UCY only)."""
+    parts = load_window_parts(cfg, spec, split, progress)
+    return parts[0] if len(parts) == 1 else concat_windows(parts)
+
+
+def load_window_parts(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> list[Windows]:
+    """A split's cached windows of the dataset itself, then (for training) those of each ``data.extra_pedestrians``
+    source."""
     d = cfg.data
     fold = d.scene if d.dataset == "ethucy" else ""
     cache, root = Path(d.cache_dir).expanduser(), Path(d.root).expanduser()
@@ -84,9 +91,8 @@ def load_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) 
         raise ValueError(f"data.extra_pedestrians is for the ETH/UCY models, not {d.dataset!r}")
     own = cached_windows(d.dataset, root, split, spec, cache, fold, d.window_stride, progress)
     if not sources or split != "train":
-        return own
-    extra = [cached_pedestrian_windows(s, root, spec, cache, d.extra_stride, progress) for s in sources]
-    return concat_windows([own, *extra])
+        return [own]
+    return [own, *(cached_pedestrian_windows(s, root, spec, cache, d.extra_stride, progress) for s in sources)]
 
 
 def restrict_targets(w: Windows, spec: dgan.InputSpec, target_class: str) -> None:
@@ -145,6 +151,12 @@ def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
     hw = (spec.map.height_px, spec.map.width_px) if spec.map else None
     optional = spec.map is not None and spec.map.optional
     return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw, optional)
+
+
+def anchor_windows(cfg: Config, parts: list[Windows], train: Windows) -> Windows:
+    """The training windows whose futures the anchors are fitted on: all of ``train`` (the concatenation of
+    ``parts``), or with ``data.extra_in_anchors`` false the dataset's own windows ``parts[0]`` alone."""
+    return train if cfg.data.extra_in_anchors else parts[0]
 
 
 def residual_futures(w: Windows, spec: dgan.InputSpec) -> np.ndarray:
@@ -355,13 +367,16 @@ def main(argv: list[str] | None = None) -> Path:
     spec = input_spec(cfg)
     show = rank == 0
     bars = show and sys.stderr.isatty()
-    train = load_windows(cfg, spec, "train", bars)
+    parts = load_window_parts(cfg, spec, "train", bars)
+    train = parts[0] if len(parts) == 1 else concat_windows(parts)
     val = load_windows(cfg, spec, "val", bars)
 
     ckpt = torch.load(out / "last.pt", weights_only=False) if args.resume and (out / "last.pt").is_file() else None
-    anchors_np, class_of_np = (
-        (ckpt["anchors"], ckpt["class_of"]) if ckpt is not None else fit_anchors(cfg, train, spec, len(spec.classes))
-    )
+    if ckpt is not None:
+        anchors_np, class_of_np = ckpt["anchors"], ckpt["class_of"]
+    else:
+        anchors_np, class_of_np = fit_anchors(cfg, anchor_windows(cfg, parts, train), spec, len(spec.classes))
+    del parts
     if cfg.data.target_class:
         restrict_targets(train, spec, cfg.data.target_class)
         restrict_targets(val, spec, cfg.data.target_class)

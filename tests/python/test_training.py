@@ -265,6 +265,25 @@ def test_concatenated_windows_batch_as_their_parts() -> None:
         concat_windows([val, replace(val, map=None)])
 
 
+def test_anchors_can_leave_the_extra_windows_out() -> None:
+    from training.data import cached_windows, concat_windows
+    from training.train import anchor_windows, fit_anchors
+
+    root = data_root()
+    cfg = Config.load(CONFIG, {"train.anchors_per_class": 4})
+    spec = input_spec(cfg)
+    cache = Path(cfg.data.cache_dir).expanduser()
+    parts = [cached_windows("ethucy", root, "val", spec, cache, fold=f, progress=False) for f in ("zara1", "eth")]
+    both = concat_windows(parts)
+    own = replace(cfg, data=replace(cfg.data, extra_in_anchors=False))
+    assert anchor_windows(own, parts, both) is parts[0]
+    assert anchor_windows(cfg, parts, both) is both
+    alone, _ = fit_anchors(own, anchor_windows(own, parts, both), spec, 1)
+    mixed, _ = fit_anchors(cfg, anchor_windows(cfg, parts, both), spec, 1)
+    np.testing.assert_array_equal(alone, fit_anchors(cfg, parts[0], spec, 1)[0])
+    assert not np.allclose(alone, mixed)
+
+
 def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
     from training.anchors import kmeans_anchors
     from training.datasets import recordings, split_files
