@@ -65,6 +65,10 @@ class TrainConfig:
     class_balance: float = 0.0
     # Fit a temperature of the anchor logits on the validation split after training (written into the model).
     calibrate: bool = True
+    # The mode the classifier is taught to pick: "closest_anchor" (the paper's: the anchor of the agent's class
+    # closest to its future) or "best_mode" (the decoded mode, anchor plus offset, of that class closest to it; what
+    # the reliability of the mode probabilities counts). The regression follows the closest anchor either way.
+    cls_target: str = "closest_anchor"
 
 
 @dataclass(frozen=True)

@@ -25,18 +25,29 @@ def dgan_loss(
     alpha: float,
     beta: float = 0.0,
     weights: Tensor | None = None,
+    cls_target: str = "closest_anchor",
 ) -> tuple[Tensor, dict[str, float]]:
     """Mean loss over the given (target) agents, and its parts.
 
     ``beta`` > 0 adds the mean L2 error of the most probable mode (its selection carries no gradient), so the offset
     of the mode a user sees first also learns to correct a wrong anchor choice; the other modes keep their diversity.
-    ``weights`` ``(N,)`` makes the mean a weighted one (:func:`class_weights`).
+    ``weights`` ``(N,)`` makes the mean a weighted one (:func:`class_weights`). ``cls_target`` "best_mode" teaches
+    the classifier the decoded mode of the agent's class closest to its future (by ADE; no gradient through the
+    choice) instead of the closest anchor.
     """
     k_star = closest_anchor(future, anchors, class_of_anchor, class_index)
     rows = torch.arange(len(future))
     log_pc = torch.log_softmax(class_logits, dim=1)[rows, class_index]
     in_class = class_of_anchor.unsqueeze(0) == class_index.unsqueeze(1)
-    log_pk = torch.log_softmax(anchor_logits.masked_fill(~in_class, float("-inf")), dim=1)[rows, k_star]
+    if cls_target == "closest_anchor":
+        k_cls = k_star
+    elif cls_target == "best_mode":
+        with torch.no_grad():
+            ade = torch.linalg.norm(anchors + offsets - future.unsqueeze(1), dim=-1).mean(dim=-1)
+            k_cls = ade.masked_fill(~in_class, float("inf")).argmin(dim=1)
+    else:
+        raise ValueError(f"train.cls_target must be 'closest_anchor' or 'best_mode', not {cls_target!r}")
+    log_pk = torch.log_softmax(anchor_logits.masked_fill(~in_class, float("-inf")), dim=1)[rows, k_cls]
     cls = -(log_pc + log_pk)
     pred = anchors[k_star] + offsets[rows, k_star]
     reg = torch.linalg.norm(pred - future, dim=-1).mean(dim=-1)

@@ -37,6 +37,7 @@ from training.model import DGAN
 #: ``train.select``: the validation figure (a column of ``log.csv``) whose lowest epoch is kept as ``best.pt``, or
 #: ``"last"`` for the final epoch.
 SELECT = ("val_loss", "val_ade", "last")
+CLS_TARGETS = ("closest_anchor", "best_mode")
 
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
@@ -199,7 +200,7 @@ def forward_loss(
     classes = b["class_index"][t]
     weights = None if weight_of_class is None else weight_of_class[classes]
     a, beta = cfg.train.alpha, cfg.train.beta
-    loss, parts = dgan_loss(*outs, residual, classes, anchors, class_of, a, beta, weights)
+    loss, parts = dgan_loss(*outs, residual, classes, anchors, class_of, a, beta, weights, cfg.train.cls_target)
     return loss, parts, outs
 
 
@@ -269,6 +270,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Confi
     cfg = Config.load(args.config, overrides)
     if cfg.train.select not in SELECT:
         raise ValueError(f"train.select must be 'val_loss', 'val_ade' or 'last', got {cfg.train.select!r}")
+    if cfg.train.cls_target not in CLS_TARGETS:
+        raise ValueError(f"train.cls_target must be 'closest_anchor' or 'best_mode', got {cfg.train.cls_target!r}")
     return args, cfg
 
 

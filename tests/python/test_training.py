@@ -77,6 +77,23 @@ def test_loss_picks_the_closest_anchor_of_the_class() -> None:
     assert float(weighted) == pytest.approx((each[0] + 3 * each[1]) / 4, rel=1e-6)
 
 
+def test_the_classifier_can_be_taught_the_best_decoded_mode() -> None:
+    anchors = torch.tensor([[[1.0, 0.0]], [[2.0, 0.0]], [[0.0, 5.0]]])
+    class_of = torch.tensor([0, 0, 1])
+    future = torch.tensor([[[0.0, 4.0]]])
+    # Anchor 0 is the closest of class 0, but anchor 1's offset brings its mode onto the future.
+    offsets = torch.tensor([[[[0.0, 0.0]], [[-2.0, 4.0]], [[0.0, 0.0]]]])
+    anchor_logits = torch.tensor([[0.0, float(np.log(3.0)), 0.0]])  # p(k | class 0) = 1/4, 3/4
+    args = (torch.zeros(1, 2), anchor_logits, offsets, future, torch.tensor([0]), anchors, class_of, 1.0)
+    _, paper = dgan_loss(*args)
+    _, best = dgan_loss(*args, cls_target="best_mode")
+    assert paper["cls"] == pytest.approx(np.log(2) + np.log(4), rel=1e-6)  # −log(½ · ¼): anchor 0
+    assert best["cls"] == pytest.approx(np.log(2) + np.log(4 / 3), rel=1e-6)  # −log(½ · ¾): mode 1
+    assert best["reg"] == paper["reg"] == pytest.approx(np.sqrt(17), rel=1e-6)  # the regression follows anchor 0
+    with pytest.raises(ValueError, match="cls_target"):
+        dgan_loss(*args, cls_target="nearest")
+
+
 def test_class_weights_balance_the_classes() -> None:
     classes = torch.tensor([0] * 70 + [1] * 20 + [2] * 10)
     assert class_weights(classes, 3, 0.0).tolist() == [1.0, 1.0, 1.0]
