@@ -27,6 +27,7 @@ def synthetic(n: int, temperature: float, seed: int = 0) -> cs.Modes:
     best = np.array([rng.choice(3, p=row[:3] / row[:3].sum()) for row in true])
     m = object.__new__(cs.Modes)
     m.pk, m.pc, m.mc, m.best = pk, pc, mc, best
+    m.speed = rng.uniform(0.0, 3.0, size=n)  # the temperature does not depend on it
     return m
 
 
@@ -42,22 +43,57 @@ def test_probabilities_are_renormalised_within_each_class() -> None:
 
 def test_a_fitted_temperature_calibrates_the_best_mode() -> None:
     val, test = synthetic(4000, 2.0, seed=1), synthetic(4000, 2.0, seed=2)
-    raw = test.reliability(test.pk)
+    raw = test.reliability(test.pk * test.pc)
     for family in cs.FAMILIES:
         f = cs.fit(family, val)
-        assert val.nll(f(val.pk, val.mc)) < val.nll(val.pk)  # the data were drawn at T = 2, not 1
-        assert test.reliability(f(test.pk, test.mc))["ece"] < raw["ece"]
-    # Both temperature fits (likelihood and Brier score) recover the temperature the data were drawn at.
-    for family in ("temperature", "temperature_brier"):
-        q = cs.fit(family, val)(val.pk, val.mc)
-        np.testing.assert_allclose(q, cs.tempered(val.pk, val.mc, 2.0), atol=0.05)
+        assert val.nll(f(val)) < val.nll(val.pk * val.pc)  # the data were drawn at T = 2, not 1
+        assert test.reliability(f(test))["ece"] < raw["ece"]
+    # Every temperature fit recovers the temperature the data were drawn at: the likelihood's, the Brier score's, the
+    # one beside a class temperature (every agent is of class 0 for certain) and the one that may vary with speed.
+    for family in ("temperature", "temperature_brier", "class_temperature", "temperature_by_speed"):
+        p = cs.fit(family, val)(val)
+        np.testing.assert_allclose(p, cs.tempered(val.pk, val.mc, 2.0) * val.pc, atol=0.05, err_msg=family)
+
+
+def test_a_class_temperature_renormalises_over_the_classes_of_a_row() -> None:
+    mc = np.array([[0, 0, 1, 2], [0, 1, 1, 1]])
+    pc = np.array([[0.7, 0.7, 0.2, 0.1], [0.5, 0.5, 0.5, 0.5]])
+    q = cs.class_tempered(pc, mc, 2.0)
+    w = np.sqrt([0.7, 0.2, 0.1])
+    np.testing.assert_allclose(q[0], (w / w.sum())[[0, 0, 1, 2]])
+    np.testing.assert_allclose(q[1], 0.5)  # classes 0 and 1 alike
+    np.testing.assert_allclose(cs.class_tempered(pc[:1], mc[:1], 1.0), pc[:1] / 1.0)
 
 
 def test_the_brier_score_is_lowest_for_the_true_probabilities() -> None:
     m = synthetic(4000, 2.0, seed=3)
-    scores = {t: m.brier(cs.tempered(m.pk, m.mc, t)) for t in (1.0, 2.0, 4.0)}
+    scores = {t: m.brier(cs.tempered(m.pk, m.mc, t) * m.pc) for t in (1.0, 2.0, 4.0)}
     assert scores[2.0] < scores[1.0]
     assert scores[2.0] < scores[4.0]
+
+
+def test_diagnostics_count_other_classes_and_speeds(tmp_path: Path) -> None:
+    m = synthetic(6, 1.0)
+    m.classes, m.temperature = ("vehicle", "cyclist"), 1.0
+    m.own = np.array([0, 0, 0, 0, 1, 1])
+    m.margin = np.array([0.0, 0.5, 0.3, 0.0, 0.0, 0.2])  # two vehicles and a cyclist best served by another class
+    m.speed = np.array([0.1, 0.1, 1.0, 5.0, 5.0, 5.0])
+    m.pk = np.tile([0.7, 0.2, 0.1, 0.5, 0.5], (6, 1))
+    m.pc = np.where(m.mc == 0, 1.0, 0.0)
+    m.best = np.array([0, 1, 0, 0, 2, 0])
+    d = cs.diagnostics(m)
+    assert d["classes"]["vehicle"] == {"targets": 4, "other_class": 0.5, "closer": pytest.approx(0.4)}
+    assert d["classes"]["cyclist"] == {"targets": 2, "other_class": 0.5, "closer": pytest.approx(0.2)}
+    standing, fast = d["speeds"]["standing, under 0.2 m/s"], d["speeds"]["faster than 3 m/s"]
+    assert (standing["targets"], standing["top_wins"], standing["top_p"]) == (2, 0.5, pytest.approx(0.7))
+    assert (fast["targets"], fast["top_wins"]) == (3, pytest.approx(2 / 3))
+    path = tmp_path / "why.json"
+    assert "not run" in cs.diagnostics_section(path)
+    path.write_text(json.dumps({"apolloscape": d}))
+    text = cs.diagnostics_section(path)
+    assert "| apolloscape | vehicle | 4 | 50% | 0.40 m |" in text
+    assert "| apolloscape | faster than 3 m/s | 3 | 67% | 0.70 |" in text
+    assert "0.2 to 3 m/s | 1 | 100% |" in text
 
 
 def test_section_renders_the_study(tmp_path: Path) -> None:
