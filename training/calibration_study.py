@@ -258,7 +258,8 @@ def section(path: Path = STUDY) -> str:
 
 
 def diagnostics_section(path: Path = DIAGNOSTICS) -> str:
-    """:func:`diagnostics` as two Markdown tables: the multi-class models' classes, every model's speeds."""
+    """:func:`diagnostics` as two Markdown tables: the multi-class models' classes, every model's speed bands (those
+    of at least 30 targets)."""
     if not path.is_file():
         return "*(not run: `python -m training.calibration_study` writes `docs/calibration_diagnostics.json`)*"
     why = json.loads(path.read_text())
@@ -276,6 +277,8 @@ def diagnostics_section(path: Path = DIAGNOSTICS) -> str:
     ]
     for name, d in why.items():
         for band, r in d["speeds"].items():
+            if r["targets"] < 30:  # as the reliability bins: fewer say little
+                continue
             lines.append(f"| {name} | {band} | {r['targets']} | {r['top_wins']:.0%} | {r['top_p']:.2f} |")
     return "\n".join(lines)
 
