@@ -99,11 +99,19 @@ def extra_data_line(cfg: dict[str, Any]) -> str:
     if "sdd" not in pedestrian_sources(str(cfg["data"].get("extra_pedestrians", ""))):
         return ""
     stride = cfg["data"].get("extra_stride", 3)
+    anchors = "" if cfg["data"].get("extra_in_anchors", True) else " The anchors are fitted on ETH/UCY's windows alone."
     return (
         "\n  Also trained on the pedestrians of Stanford Drone's 30 training videos (none of its test videos), "
         f"resampled to 0.4 s, in metres, without a map, in windows ending at steps divisible by {stride} "
-        "(`data.extra_pedestrians`)."
+        f"(`data.extra_pedestrians`).{anchors}"
     )
+
+
+def classification_words(cfg: dict[str, Any]) -> str:
+    """The card's words on what the classifier is taught (``train.cls_target``)."""
+    if cfg["train"].get("cls_target", "closest_anchor") == "best_mode":
+        return "hierarchical classification of the decoded mode closest to the future (`train.cls_target`)"
+    return "the paper's hierarchical classification"
 
 
 def extra_licence_line(cfg: dict[str, Any]) -> str:
@@ -134,7 +142,7 @@ training.
 - **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP, map CNN (ResNet-style, width
   {m["map_channels"]}), {m["gat_layers"]} GAT layers × {m["gat_heads"]} heads over the attention-zone graph (λ = 0.5)
   with neighbour geometry on the edges, {cfg["train"]["anchors_per_class"]} k-means anchors with offset regression.
-  Loss: the paper's hierarchical classification and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
+  Loss: {classification_words(cfg)} and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
   β = {cfg["train"]["beta"]} times the error of the most probable mode (see `docs/results.md`).
   One class (pedestrian). {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs, best at epoch {best["epoch"]}, {seconds / 60:.1f} min on {_threads(cfg)}; seed
@@ -229,7 +237,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 - **Protocol**: {d["protocol"]}
 - **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP (speed, acceleration, yaw rate,
   direction of motion, length, width, one-hot class), {map_line}{m["gat_layers"]} GAT layers × {m["gat_heads"]} heads
-  over the attention-zone graph (λ = 0.5) with neighbour geometry on the edges. Loss: hierarchical classification and
+  over the attention-zone graph (λ = 0.5) with neighbour geometry on the edges. Loss: {classification_words(cfg)} and
   closest-anchor regression (α = {cfg["train"]["alpha"]}) plus β = {cfg["train"]["beta"]} times the error of the most
   probable mode. {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}

@@ -223,10 +223,12 @@ def build_windows(
 
 
 def concat_windows(parts: Sequence[Windows]) -> Windows:
-    """Several window sets as one: agent and edge pointers and file indices shifted, files listed in order. Their
-    maps must all be present or all absent."""
+    """Several window sets as one: agent and edge pointers and file indices shifted, files listed in order (one set
+    is returned as it is). Their maps must all be present or all absent."""
     if not parts:
         raise ValueError("concat_windows needs at least one window set")
+    if len(parts) == 1:
+        return parts[0]
     if len({p.map is None for p in parts}) > 1:
         raise ValueError("window sets with and without map crops cannot be concatenated")
     agent_ptr, edge_ptr, window_file = [np.zeros(1, np.int64)], [np.zeros(1, np.int64)], []

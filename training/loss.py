@@ -14,6 +14,16 @@ def closest_anchor(future: Tensor, anchors: Tensor, class_of_anchor: Tensor, cla
     return d.argmin(dim=1)
 
 
+#: ``train.cls_target``: what the classifier is taught to pick (:func:`dgan_loss`).
+CLS_TARGETS = ("closest_anchor", "best_mode")
+
+
+def check_cls_target(name: str) -> None:
+    """Raises a ValueError naming the choices unless ``name`` is one of :data:`CLS_TARGETS`."""
+    if name not in CLS_TARGETS:
+        raise ValueError(f"train.cls_target must be 'closest_anchor' or 'best_mode', got {name!r}")
+
+
 def dgan_loss(
     class_logits: Tensor,
     anchor_logits: Tensor,
@@ -39,14 +49,12 @@ def dgan_loss(
     rows = torch.arange(len(future))
     log_pc = torch.log_softmax(class_logits, dim=1)[rows, class_index]
     in_class = class_of_anchor.unsqueeze(0) == class_index.unsqueeze(1)
-    if cls_target == "closest_anchor":
-        k_cls = k_star
-    elif cls_target == "best_mode":
+    check_cls_target(cls_target)
+    k_cls = k_star
+    if cls_target == "best_mode":
         with torch.no_grad():
             ade = torch.linalg.norm(anchors + offsets - future.unsqueeze(1), dim=-1).mean(dim=-1)
             k_cls = ade.masked_fill(~in_class, float("inf")).argmin(dim=1)
-    else:
-        raise ValueError(f"train.cls_target must be 'closest_anchor' or 'best_mode', not {cls_target!r}")
     log_pk = torch.log_softmax(anchor_logits.masked_fill(~in_class, float("-inf")), dim=1)[rows, k_cls]
     cls = -(log_pc + log_pk)
     pred = anchors[k_star] + offsets[rows, k_star]

@@ -31,13 +31,12 @@ from training.anchors import kmeans_anchors
 from training.config import Config
 from training.data import Windows, cached_pedestrian_windows, cached_windows, concat_windows
 from training.datasets import DATASETS, pedestrian_sources
-from training.loss import class_weights, decode_torch, dgan_loss
+from training.loss import check_cls_target, class_weights, decode_torch, dgan_loss
 from training.model import DGAN
 
 #: ``train.select``: the validation figure (a column of ``log.csv``) whose lowest epoch is kept as ``best.pt``, or
 #: ``"last"`` for the final epoch.
 SELECT = ("val_loss", "val_ade", "last")
-CLS_TARGETS = ("closest_anchor", "best_mode")
 
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
@@ -77,8 +76,7 @@ def run_name(cfg: Config) -> str:
 
 def load_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> Windows:
     """A split's cached windows; for training, with the pedestrians of ``data.extra_pedestrians`` (ETH/UCY only)."""
-    parts = load_window_parts(cfg, spec, split, progress)
-    return parts[0] if len(parts) == 1 else concat_windows(parts)
+    return concat_windows(load_window_parts(cfg, spec, split, progress))
 
 
 def load_window_parts(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> list[Windows]:
@@ -270,8 +268,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Confi
     cfg = Config.load(args.config, overrides)
     if cfg.train.select not in SELECT:
         raise ValueError(f"train.select must be 'val_loss', 'val_ade' or 'last', got {cfg.train.select!r}")
-    if cfg.train.cls_target not in CLS_TARGETS:
-        raise ValueError(f"train.cls_target must be 'closest_anchor' or 'best_mode', got {cfg.train.cls_target!r}")
+    check_cls_target(cfg.train.cls_target)
     return args, cfg
 
 
@@ -371,7 +368,7 @@ def main(argv: list[str] | None = None) -> Path:
     show = rank == 0
     bars = show and sys.stderr.isatty()
     parts = load_window_parts(cfg, spec, "train", bars)
-    train = parts[0] if len(parts) == 1 else concat_windows(parts)
+    train = concat_windows(parts)
     val = load_windows(cfg, spec, "val", bars)
 
     ckpt = torch.load(out / "last.pt", weights_only=False) if args.resume and (out / "last.pt").is_file() else None
