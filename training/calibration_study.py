@@ -35,11 +35,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from scipy.optimize import minimize
 from sklearn.isotonic import IsotonicRegression
 
 import dgan
 from training import metrics
+from training.calibrate import best_mode_brier, best_mode_log_loss
 from training.data import iter_windows
 from training.datasets import DATASETS, recordings
 from training.evaluate import calibration, per_class_normalised, rows_of, untempered
@@ -90,13 +92,11 @@ class Modes:
 
     def nll(self, p: np.ndarray) -> float:
         """Mean −log probability of the best mode, given the modes' calibrated probabilities ``p``."""
-        return float(-np.log(np.maximum(p[np.arange(len(self.best)), self.best], 1e-12)).mean())
+        return best_mode_log_loss(torch.from_numpy(p), torch.from_numpy(self.best))
 
     def brier(self, p: np.ndarray) -> float:
         """Mean Brier score of the best-mode indicator, given the modes' calibrated probabilities ``p``."""
-        hit = np.zeros(p.shape)
-        hit[np.arange(len(self.best)), self.best] = 1.0
-        return float(((p - hit) ** 2).sum(axis=1).mean())
+        return best_mode_brier(torch.from_numpy(p), torch.from_numpy(self.best))
 
     def reliability(self, p: np.ndarray) -> dict[str, Any]:
         hit = np.zeros(p.shape, dtype=bool)

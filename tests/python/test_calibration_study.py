@@ -11,6 +11,7 @@ import pytest
 
 pytest.importorskip("sklearn")
 pytest.importorskip("scipy")
+pytest.importorskip("torch")
 
 from training import calibration_study as cs
 from training.evaluate import per_class_normalised
