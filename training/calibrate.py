@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -67,15 +68,22 @@ def best_mode_brier(p: torch.Tensor, best: torch.Tensor) -> float:
     return float(((p - hit) ** 2).sum(dim=1).mean())
 
 
-def reliability_gap(p: torch.Tensor, best: torch.Tensor) -> float:
-    """The worst |frequency − probability| of a checked reliability bin (``training.scorecard.worst_gap``); infinite
-    when no bin qualifies, so that a temperature cannot pass by leaving no mode at p ≥ 0.3."""
+def best_mode_reliability(p: torch.Tensor, best: torch.Tensor) -> dict[str, Any]:
+    """The reliability bins (``training.evaluate.calibration``) of mode probabilities ``p (N, K)`` against the event
+    'this mode is the best'."""
     from training.evaluate import calibration
-    from training.scorecard import worst_gap
 
     hit = torch.zeros_like(p, dtype=torch.bool)
     hit[torch.arange(len(best)), best] = True
-    gap, at = worst_gap(calibration(p.double().numpy().ravel(), hit.numpy().ravel()))
+    return calibration(p.double().numpy().ravel(), hit.numpy().ravel())
+
+
+def reliability_gap(p: torch.Tensor, best: torch.Tensor) -> float:
+    """The worst |frequency − probability| of a checked reliability bin (``training.scorecard.worst_gap``); infinite
+    when no bin qualifies, so that a temperature cannot pass by leaving no mode at p ≥ 0.3."""
+    from training.scorecard import worst_gap
+
+    gap, at = worst_gap(best_mode_reliability(p, best))
     return gap if at == at else float("inf")
 
 

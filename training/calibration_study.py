@@ -41,10 +41,10 @@ from sklearn.isotonic import IsotonicRegression
 
 import dgan
 from training import metrics
-from training.calibrate import best_mode_brier, best_mode_log_loss
+from training.calibrate import best_mode_brier, best_mode_log_loss, best_mode_reliability
 from training.data import iter_windows
 from training.datasets import DATASETS, recordings
-from training.evaluate import calibration, per_class_normalised, rows_of, untempered
+from training.evaluate import per_class_normalised, rows_of, untempered
 from training.scorecard import worst_gap
 
 #: (bundled model, dataset, ETH/UCY fold, test datasets).
@@ -99,9 +99,8 @@ class Modes:
         return best_mode_brier(torch.from_numpy(p), torch.from_numpy(self.best))
 
     def reliability(self, p: np.ndarray) -> dict[str, Any]:
-        hit = np.zeros(p.shape, dtype=bool)
-        hit[np.arange(len(self.best)), self.best] = True
-        return calibration(p.ravel(), hit.ravel())
+        """The reliability bins of the modes' calibrated probabilities ``p``."""
+        return best_mode_reliability(torch.from_numpy(p), torch.from_numpy(self.best))
 
 
 def tempered(pk: np.ndarray, mc: np.ndarray, t: float | np.ndarray) -> np.ndarray:
