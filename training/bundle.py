@@ -94,9 +94,14 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
+def _with_sdd(cfg: dict[str, Any]) -> bool:
+    """Whether the run also trained on Stanford Drone's pedestrians (``data.extra_pedestrians``)."""
+    return "sdd" in pedestrian_sources(str(cfg["data"].get("extra_pedestrians", "")))
+
+
 def extra_data_line(cfg: dict[str, Any]) -> str:
     """The card's words on other sources' pedestrians in training (``data.extra_pedestrians``), if any."""
-    if "sdd" not in pedestrian_sources(str(cfg["data"].get("extra_pedestrians", ""))):
+    if not _with_sdd(cfg):
         return ""
     stride = cfg["data"].get("extra_stride", 3)
     anchors = "" if cfg["data"].get("extra_in_anchors", True) else " The anchors are fitted on ETH/UCY's windows alone."
@@ -116,7 +121,7 @@ def classification_words(cfg: dict[str, Any]) -> str:
 
 def extra_licence_line(cfg: dict[str, Any]) -> str:
     """The card's licence words for other sources' pedestrians in training, if any."""
-    if "sdd" not in pedestrian_sources(str(cfg["data"].get("extra_pedestrians", ""))):
+    if not _with_sdd(cfg):
         return ""
     return "\n  Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016."
 

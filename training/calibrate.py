@@ -45,17 +45,6 @@ def best_mode_logits(
     return torch.cat(cls), torch.cat(anc), torch.cat(best)
 
 
-def best_mode_nll(
-    class_logits: torch.Tensor,
-    anchor_logits: torch.Tensor,
-    best: torch.Tensor,
-    class_of: torch.Tensor,
-    temperature: float,
-) -> float:
-    """Mean −log p(best mode) at one temperature."""
-    return best_mode_log_loss(mode_probabilities(class_logits, anchor_logits, class_of, temperature), best)
-
-
 def best_mode_log_loss(p: torch.Tensor, best: torch.Tensor) -> float:
     """Mean −log p(best mode) of mode probabilities ``p (N, K)``."""
     return float(-torch.log(p[torch.arange(len(best)), best].clamp_min(1e-12)).mean())

@@ -128,9 +128,15 @@ def platt(pk: np.ndarray, mc: np.ndarray, a: float, b: float) -> np.ndarray:
 Fitted = Callable[[Modes], np.ndarray]
 
 
+def _params(score: Callable[[np.ndarray], float], model: Callable[..., np.ndarray], x0: list[float]) -> np.ndarray:
+    """The parameters ``x`` minimising ``score(model(*x))`` on the validation modes ``model`` is closed over."""
+    x: np.ndarray = minimize(lambda x: score(model(*x)), x0, method="Nelder-Mead").x
+    return x
+
+
 def _fitted(score: Callable[[np.ndarray], float], model: Callable[..., np.ndarray], x0: list[float]) -> Fitted:
-    """``model(modes, *x)`` with ``x`` minimising ``score`` on the validation modes ``model`` is closed over."""
-    x = minimize(lambda x: score(model(*x)), x0, method="Nelder-Mead").x
+    """``model(*x, m=modes)`` with :func:`_params`' ``x``."""
+    x = _params(score, model, x0)
     return lambda m: model(*x, m=m)
 
 
@@ -157,7 +163,7 @@ def fit(family: str, val: Modes) -> Fitted:
             return tempered(m.pk, m.mc, np.exp(a + b * np.log1p(m.speed))[:, None]) * m.pc
 
         return _fitted(val.brier, by_speed, [0.0, 0.0])
-    t = float(np.exp(minimize(lambda x: val.nll(temp(x[0])), [0.0], method="Nelder-Mead").x[0]))
+    t = float(np.exp(_params(val.nll, temp, [0.0])[0]))  # the "temperature" family's
     hit = np.zeros(val.pk.shape)
     hit[np.arange(len(val.best)), val.best] = 1.0
     rounds, q = [], tempered(val.pk, val.mc, t)
@@ -238,16 +244,27 @@ STUDY = Path(__file__).resolve().parents[1] / "docs" / "calibration_study.json"
 DIAGNOSTICS = STUDY.with_name("calibration_diagnostics.json")
 
 
+def _written(path: Path) -> Any:
+    """What :func:`main` wrote at ``path``, or None before the study has run."""
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def _not_run(path: Path) -> str:
+    return f"*(not run: `python -m training.calibration_study` writes `docs/{path.name}`)*"
+
+
+def _head(*columns: str) -> list[str]:
+    """A Markdown table's header and rule lines."""
+    return ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+
+
 def section(path: Path = STUDY) -> str:
     """The study as a Markdown table for ``docs/results.md``: per model and family, the worst gap on the validation
     split it was fitted on and on each test set."""
-    if not path.is_file():
-        return "*(not run: `python -m training.calibration_study` writes `docs/calibration_study.json`)*"
-    study = json.loads(path.read_text())
-    lines = [
-        "| model | calibration map | worst gap, validation (fitted there) | worst gap, test |",
-        "|---|---|---|---|",
-    ]
+    study = _written(path)
+    if study is None:
+        return _not_run(path)
+    lines = _head("model", "calibration map", "worst gap, validation (fitted there)", "worst gap, test")
     for name, families in study.items():
         for family, row in families.items():
             gap = {k: f"{g:.2f} (p≈{p:.2f})" if p == p else "no bin of 30 modes" for k, (g, p) in row.items()}
@@ -259,21 +276,23 @@ def section(path: Path = STUDY) -> str:
 def diagnostics_section(path: Path = DIAGNOSTICS) -> str:
     """:func:`diagnostics` as two Markdown tables: the multi-class models' classes, every model's speed bands (those
     of at least 30 targets)."""
-    if not path.is_file():
-        return "*(not run: `python -m training.calibration_study` writes `docs/calibration_diagnostics.json`)*"
-    why = json.loads(path.read_text())
-    lines = [
-        "| model | class | validation targets | best mode another class's | closer than the class's best (median) |",
-        "|---|---|---|---|---|",
-    ]
+    why = _written(path)
+    if why is None:
+        return _not_run(path)
+    lines = _head(
+        "model", "class", "validation targets", "best mode another class's", "closer than the class's best (median)"
+    )
     for name, d in why.items():
         for c, r in d["classes"].items():
             lines.append(f"| {name} | {c} | {r['targets']} | {r['other_class']:.0%} | {r['closer']:.2f} m |")
-    lines += [
-        "",
-        "| model | speed at the last observed step | validation targets | top mode the best | its mean probability |",
-        "|---|---|---|---|---|",
-    ]
+    speeds = (
+        "model",
+        "speed at the last observed step",
+        "validation targets",
+        "top mode the best",
+        "its mean probability",
+    )
+    lines += ["", *_head(*speeds)]
     for name, d in why.items():
         for band, r in d["speeds"].items():
             if r["targets"] < 30:  # as the reliability bins: fewer say little
