@@ -3,6 +3,8 @@ for the parity test in ``training/checkpoints/<name>.pt``, evaluate it with the 
 
     python -m training.bundle runs/ethucy_zara1 --name zara1 --data-root ../shared/data
     python -m training.bundle runs/sdd --name sdd
+    python -m training.bundle runs/apollo_s0 runs/apollo_s1 --name apolloscape \
+        --calibration-fold runs/fold1_s0 runs/fold1_s1 --calibration-fold ...   # a cross-fitted temperature
     python -m training.bundle --reexport zara1 sdd      # the kept checkpoints, exported again (a new contract)
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -90,8 +93,25 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             "Agents' headings come from their direction of motion"
             + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
         )
-    parts.append(f"Mode probabilities at the temperature {metrics.get('temperature', 1.0):.2f} fitted on validation.")
+    parts.append(f"Mode probabilities at the temperature {metrics.get('temperature', 1.0):.2f} {fitted_where(cfg)}.")
     return " ".join(parts)
+
+
+def calibration_folds(cfg: dict[str, Any]) -> list[str]:
+    """The validation splits of the further runs a cross-fitted temperature is fitted with (``train.calibration_folds``
+    of a run's configuration), each as ``data.val_recordings`` names it."""
+    return [f for f in str(cfg["train"].get("calibration_folds", "")).split(";") if f]
+
+
+def fitted_where(cfg: dict[str, Any], whom: str = "") -> str:
+    """Where the model's temperature was fitted, in the card's words (``whom``: " for the consensus", say)."""
+    folds = calibration_folds(cfg)
+    if not folds:
+        return f"fitted{whom} on validation"
+    return (
+        f"cross-fitted{whom} on {len(folds) + 1} validation folds (its validation split and {len(folds)} more, each "
+        "held out in turn by runs of this configuration: `train.calibration_folds`)"
+    )
 
 
 def _with_sdd(cfg: dict[str, Any]) -> bool:
@@ -263,33 +283,56 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 """
 
 
-def ensemble_line(runs: list[Path], predictor: dgan.Predictor) -> str:
+def ensemble_line(runs: list[Path], predictor: dgan.Predictor, cfg: dict[str, Any]) -> str:
     """The card's line for a model that is the consensus of several runs."""
     seeds = [json.loads((r / "config.json").read_text())["config"]["train"]["seed"] for r in runs]
     return (
         f"- **Ensemble**: the consensus of {len(runs)} runs of this configuration, seeds "
         f"{', '.join(map(str, seeds))} (`training.ensemble`): its most probable mode (of the agent's most probable "
         f"class) is the mean of the runs' most probable modes, its other modes are seed {seeds[0]}'s. Weights "
-        f"stored as float16; temperature {float(predictor.contract.get('temperature', 1.0)):.3f}, fitted on "
-        f"validation for the consensus. The training line above is seed {seeds[0]}'s run. A prediction runs all "
-        f"{len(runs)} networks.\n"
+        f"stored as float16; temperature {float(predictor.contract.get('temperature', 1.0)):.3f}, "
+        f"{fitted_where(cfg, ' for the consensus')}. The training line above is seed {seeds[0]}'s run. A prediction "
+        f"runs all {len(runs)} networks.\n"
     )
 
 
-def bundle(runs: list[Path], name: str, data_root: Path) -> dict[str, Any]:
-    """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
-    weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card."""
-    run = runs[0]
-    cfg = json.loads((run / "config.json").read_text())["config"]
-    dataset = cfg["data"].get("dataset", "ethucy")
-    MODELS.mkdir(parents=True, exist_ok=True)
+def model_checkpoint(runs: list[Path], out: Path) -> Path:
+    """The checkpoint of one run (slimmed) or of several runs' consensus (``training.ensemble``, float16) at ``out``."""
     if len(runs) > 1:
         from training.ensemble import ensemble_checkpoint
 
-        ensemble_checkpoint(runs, CHECKPOINTS / f"{name}.pt", half=True)
-    else:
-        slim_checkpoint(run, CHECKPOINTS / f"{name}.pt")
-    print(f"{name}: {calibrate_checkpoint(CHECKPOINTS / f'{name}.pt', data_root)}", flush=True)
+        return ensemble_checkpoint(runs, out, half=True)
+    return slim_checkpoint(runs[0], out)
+
+
+def check_folds(cfg: dict[str, Any], folds: list[list[Path]]) -> None:
+    """The fold runs must hold out exactly the validation splits the configuration declares, each once."""
+    held = sorted(
+        json.loads((f[0] / "config.json").read_text())["config"]["data"].get("val_recordings", "") for f in folds
+    )
+    want = sorted(calibration_folds(cfg))
+    if held != want:
+        raise ValueError(
+            f"train.calibration_folds declares the validation splits {want or 'none'}; the fold runs given hold out "
+            f"{held or 'none'} (pass --calibration-fold RUN [RUN ...] once per declared split)"
+        )
+
+
+def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]] | None = None) -> dict[str, Any]:
+    """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
+    weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card.
+
+    ``folds``: for a configuration with ``train.calibration_folds``, the runs (seeds, as many as ``runs``) of each of
+    its folds; their consensus models' predictions on their validation splits join the temperature's fit."""
+    run = runs[0]
+    cfg = json.loads((run / "config.json").read_text())["config"]
+    dataset = cfg["data"].get("dataset", "ethucy")
+    check_folds(cfg, folds or [])
+    MODELS.mkdir(parents=True, exist_ok=True)
+    model_checkpoint(runs, CHECKPOINTS / f"{name}.pt")
+    with tempfile.TemporaryDirectory() as tmp:
+        fold_ckpts = [model_checkpoint(f, Path(tmp) / f"fold{i}.pt") for i, f in enumerate(folds or [])]
+        print(f"{name}: {calibrate_checkpoint(CHECKPOINTS / f'{name}.pt', data_root, folds=fold_ckpts)}", flush=True)
     if dataset == "ethucy":
         description = (
             f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "
@@ -309,7 +352,7 @@ def bundle(runs: list[Path], name: str, data_root: Path) -> dict[str, Any]:
         metrics["without_map"] = evaluate(predictor, dataset, data_root, fold, with_map=False)
     text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
     if len(runs) > 1:
-        text = text.replace("- **Test metrics**", ensemble_line(runs, predictor) + "- **Test metrics**", 1)
+        text = text.replace("- **Test metrics**", ensemble_line(runs, predictor, cfg) + "- **Test metrics**", 1)
     (MODELS / f"{name}.md").write_text(text)
     (run / "metrics.json").write_text(json.dumps(metrics, indent=2))
     return metrics
@@ -331,6 +374,14 @@ def main() -> None:
     )
     ap.add_argument("--name")
     ap.add_argument("--data-root", type=Path, default=Path("../shared/data"))
+    ap.add_argument(
+        "--calibration-fold",
+        nargs="+",
+        type=Path,
+        action="append",
+        metavar="RUN",
+        help="the runs of one fold of a cross-fitted temperature (train.calibration_folds); once per fold",
+    )
     ap.add_argument("--reexport", nargs="+", metavar="MODEL", help="export bundled models again from their checkpoints")
     a = ap.parse_args()
     if a.reexport:
@@ -339,7 +390,7 @@ def main() -> None:
         return
     if not a.run or a.name is None:
         ap.error("give a run folder (or several) and --name (or --reexport MODEL ...)")
-    print(json.dumps(bundle(a.run, a.name, a.data_root.expanduser()), indent=2))
+    print(json.dumps(bundle(a.run, a.name, a.data_root.expanduser(), a.calibration_fold), indent=2))
 
 
 if __name__ == "__main__":

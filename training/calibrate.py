@@ -8,6 +8,7 @@ at least 30 modes: :func:`training.scorecard.worst_gap`) is kept. The engine app
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -79,7 +80,8 @@ def reliability_gap(p: torch.Tensor, best: torch.Tensor) -> float:
 @dataclass(frozen=True)
 class TemperatureFit:
     """The kept temperature, the score it minimised (``"nll"`` or ``"brier"``), the validation best-mode NLL at
-    T = 1 and at it, and the worst checked reliability gap on validation at T = 1 and at it."""
+    T = 1 and at it, the worst checked reliability gap on validation at T = 1 and at it, the number of targets it
+    was fitted on and of validation splits they came from (``folds`` > 1: cross-fitted)."""
 
     temperature: float
     objective: str
@@ -87,12 +89,15 @@ class TemperatureFit:
     nll_after: float
     gap_before: float
     gap_after: float
+    targets: int = 0
+    folds: int = 1
 
     def __str__(self) -> str:
+        where = "validation" if self.folds == 1 else f"{self.folds} validation folds"
         return (
-            f"temperature {self.temperature:.3f} (by {self.objective}): validation best-mode NLL "
-            f"{self.nll_before:.4f} -> {self.nll_after:.4f}, worst reliability gap {self.gap_before:.3f} -> "
-            f"{self.gap_after:.3f}"
+            f"temperature {self.temperature:.3f} (by {self.objective}; {self.targets} targets of {where}): "
+            f"best-mode NLL {self.nll_before:.4f} -> {self.nll_after:.4f}, worst reliability gap "
+            f"{self.gap_before:.3f} -> {self.gap_after:.3f}"
         )
 
 
@@ -129,12 +134,15 @@ def choose_temperature(
         nll[i],
         reliability_gap(at_one, best),
         gaps[objective],
+        len(best),
     )
 
 
-def calibrate_checkpoint(path: Path, data_root: Path | None = None, progress: bool = False) -> TemperatureFit:
-    """Fits the temperature of the checkpoint at ``path`` (one run's or an ensemble's, ``training.ensemble``) on its
-    configuration's validation split (under ``data_root`` if given) and stores it there."""
+def validation_logits(
+    path: Path, data_root: Path | None = None, progress: bool = False
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """:func:`best_mode_logits` of the checkpoint at ``path`` on its configuration's validation split (under
+    ``data_root`` if given), and the class of each of its anchors."""
     from training.export import load_checkpoint
     from training.train import load_windows
 
@@ -142,8 +150,30 @@ def calibrate_checkpoint(path: Path, data_root: Path | None = None, progress: bo
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = load_windows(cfg, spec, "val", progress)
-    found = fit_temperature(model, val, spec, torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long())
+    cl, al, best = best_mode_logits(model, val, spec, torch.from_numpy(anchors).float())
+    return cl, al, best, torch.from_numpy(class_of).long()
+
+
+def calibrate_checkpoint(
+    path: Path, data_root: Path | None = None, progress: bool = False, folds: Sequence[Path] = ()
+) -> TemperatureFit:
+    """Fits the temperature of the checkpoint at ``path`` (one run's or an ensemble's, ``training.ensemble``) on its
+    configuration's validation split (under ``data_root`` if given) and stores it there.
+
+    ``folds``: checkpoints of the same configuration trained with other validation splits (cross-fitting,
+    ``data.val_recordings``); their predictions on their own validation splits join the fit, which then sees every
+    fold's validation data instead of one split's."""
+    cl, al, best, class_of = validation_logits(path, data_root, progress)
+    parts = [(cl, al, best)]
+    for fold in folds:
+        *part, fold_class_of = validation_logits(fold, data_root, progress)
+        if not torch.equal(fold_class_of, class_of):
+            raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
+        parts.append((part[0], part[1], part[2]))
+    cl, al, best = (torch.cat(x) for x in zip(*parts, strict=True))
+    found = replace(choose_temperature(cl, al, best, class_of), folds=len(parts))
     ckpt = torch.load(path, weights_only=False)
     ckpt["temperature"] = found.temperature
+    ckpt["calibration_folds"] = found.folds
     torch.save(ckpt, path)
     return found

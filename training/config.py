@@ -38,6 +38,10 @@ class DataConfig:
     # Whether those pedestrians' futures join the k-means of the anchors; false fits the anchors on the dataset's own
     # training windows alone (the network still trains on all of them).
     extra_in_anchors: bool = True
+    # ApolloScape only: the recordings that form the validation split instead of training.datasets.APOLLO_VAL
+    # (comma-separated numbers; never a test recording), for the folds of a cross-fitted temperature
+    # (training.crossfit).
+    val_recordings: str = ""
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,14 @@ class TrainConfig:
     # closest to its future) or "best_mode" (the decoded mode, anchor plus offset, of that class closest to it; what
     # the reliability of the mode probabilities counts). The regression follows the closest anchor either way.
     cls_target: str = "closest_anchor"
+    # Where the closest anchor (and the best mode) is sought: "own_class" (the paper's: among the anchors of the
+    # agent's class, so p(c) learns the input class) or "all_classes" (among every class's anchors: p(c) learns which
+    # class's anchors hold the future, and the mode probabilities count every mode the engine returns).
+    anchor_pool: str = "own_class"
+    # Cross-fitted temperature (ApolloScape): the validation splits (data.val_recordings values, ";"-separated) of
+    # further runs of this configuration whose out-of-fold predictions join the temperature's fit beside the
+    # validation split's own (training.bundle --calibration-fold; training.calibrate.calibrate_checkpoint).
+    calibration_folds: str = ""
 
 
 @dataclass(frozen=True)

@@ -152,7 +152,8 @@ class Recording:
 
 
 def recordings(dataset: str, root: Path, split: str, fold: str = "", with_map: bool = True) -> list[Recording]:
-    """Every recording of a split (``train``, ``val`` or ``test``); ``fold`` is the held-out ETH/UCY scene."""
+    """Every recording of a split (``train``, ``val`` or ``test``); ``fold`` is the held-out ETH/UCY scene, or
+    ApolloScape's validation recordings (:func:`apollo_val_recordings`)."""
     files = source_files(dataset, root, split, fold)
     if dataset == "ethucy":
         return [ethucy_recording(p, root, with_map) for p in files]
@@ -177,7 +178,7 @@ def source_files(dataset: str, root: Path, split: str, fold: str = "") -> list[P
         return hdmap_files(root, split)
     if dataset == "argoverse2":
         return argoverse2_files(root, split)
-    return apollo_files(root, split)
+    return apollo_files(root, split, fold)
 
 
 # ---- ETH/UCY -------------------------------------------------------------------------------------------------------
@@ -375,14 +376,32 @@ def apollo_recording_id(path: Path) -> int:
     return int(m.group(1))
 
 
-def apollo_files(root: Path, split: str) -> list[Path]:
+def apollo_val_recordings(fold: str) -> tuple[int, ...]:
+    """The ApolloScape recordings of the validation split: ``fold`` (comma-separated recording numbers, never a test
+    recording) or, if empty, :data:`APOLLO_VAL`."""
+    if not fold:
+        return APOLLO_VAL
+    try:
+        ids = tuple(int(x) for x in fold.split(","))
+    except ValueError:
+        raise ValueError(f"data.val_recordings must be comma-separated recording numbers, got {fold!r}") from None
+    if clash := sorted(set(ids) & set(APOLLO_TEST)):
+        raise ValueError(f"data.val_recordings {clash} are test recordings (training.datasets.APOLLO_TEST)")
+    return ids
+
+
+def apollo_files(root: Path, split: str, fold: str = "") -> list[Path]:
+    """The files of a split; ``fold`` names the validation recordings (:func:`apollo_val_recordings`)."""
     folder = root / "apolloscape_trajectory" / "prediction_train"
     files = sorted(folder.glob("result_*_frame.txt"))
     if not files:
         raise FileNotFoundError(f"no ApolloScape files in {folder}; set data.root to the folder holding it")
-    held = {"test": APOLLO_TEST, "val": APOLLO_VAL}
+    val = apollo_val_recordings(fold)
+    if missing := sorted(set(val) - {apollo_recording_id(p) for p in files}):
+        raise ValueError(f"no ApolloScape recording {missing} in {folder}")
+    held = {"test": APOLLO_TEST, "val": val}
     if split == "train":
-        return [p for p in files if apollo_recording_id(p) not in APOLLO_TEST + APOLLO_VAL]
+        return [p for p in files if apollo_recording_id(p) not in APOLLO_TEST + val]
     return [p for p in files if apollo_recording_id(p) in held[split]]
 
 

@@ -1,5 +1,6 @@
 """The paper's loss: hierarchical classification −log(p(c*) · p(k* | c*)) plus α times the mean L2 error of the
-offset-corrected closest anchor k* (closest to the ground truth by summed squared distance, among c*'s anchors)."""
+offset-corrected closest anchor k* (closest to the ground truth by summed squared distance, among the agent's class's
+anchors, or among all with ``train.anchor_pool = "all_classes"``; c* is k*'s class)."""
 
 from __future__ import annotations
 
@@ -7,11 +8,30 @@ import torch
 from torch import Tensor
 
 
-def closest_anchor(future: Tensor, anchors: Tensor, class_of_anchor: Tensor, class_index: Tensor) -> Tensor:
-    """``(N,)`` index k* of the anchor of the agent's class closest to its future."""
+def closest_anchor(future: Tensor, anchors: Tensor, pool: Tensor) -> Tensor:
+    """``(N,)`` index k* of the anchor closest to each future among those ``pool (N, K)`` allows."""
     d = ((anchors.unsqueeze(0) - future.unsqueeze(1)) ** 2).sum(dim=(-1, -2))  # (N, K)
-    d = d.masked_fill(class_of_anchor.unsqueeze(0) != class_index.unsqueeze(1), float("inf"))
-    return d.argmin(dim=1)
+    return d.masked_fill(~pool, float("inf")).argmin(dim=1)
+
+
+#: ``train.anchor_pool``: which anchors an agent's targets are drawn from (:func:`dgan_loss`).
+ANCHOR_POOLS = ("own_class", "all_classes")
+
+
+def check_anchor_pool(name: str) -> None:
+    """Raises a ValueError naming the choices unless ``name`` is one of :data:`ANCHOR_POOLS`."""
+    if name not in ANCHOR_POOLS:
+        raise ValueError(f"train.anchor_pool must be 'own_class' or 'all_classes', got {name!r}")
+
+
+def anchor_pool(name: str, class_of_anchor: Tensor, class_index: Tensor) -> Tensor:
+    """``(N, K)`` the anchors each agent may be taught: its own class's ("own_class", the paper's) or every class's
+    ("all_classes": the class probability p(c) then learns which class's anchors hold the future, not the input
+    class, and p(c) · p(k | c) is the probability that anchor k is the closest of all K)."""
+    check_anchor_pool(name)
+    if name == "all_classes":
+        return torch.ones(len(class_index), len(class_of_anchor), dtype=torch.bool, device=class_index.device)
+    return class_of_anchor.unsqueeze(0) == class_index.unsqueeze(1)
 
 
 #: ``train.cls_target``: what the classifier is taught to pick (:func:`dgan_loss`).
@@ -36,25 +56,29 @@ def dgan_loss(
     beta: float = 0.0,
     weights: Tensor | None = None,
     cls_target: str = "closest_anchor",
+    pool: str = "own_class",
 ) -> tuple[Tensor, dict[str, float]]:
     """Mean loss over the given (target) agents, and its parts.
 
     ``beta`` > 0 adds the mean L2 error of the most probable mode (its selection carries no gradient), so the offset
     of the mode a user sees first also learns to correct a wrong anchor choice; the other modes keep their diversity.
     ``weights`` ``(N,)`` makes the mean a weighted one (:func:`class_weights`). ``cls_target`` "best_mode" teaches
-    the classifier the decoded mode of the agent's class closest to its future (by ADE; no gradient through the
-    choice) instead of the closest anchor.
+    the classifier the decoded mode closest to its future (by ADE; no gradient through the choice) instead of the
+    closest anchor. ``pool`` (:func:`anchor_pool`) says whether both are sought among the agent's class's anchors
+    or among all; the class taught to p(c) is the chosen anchor's.
     """
-    k_star = closest_anchor(future, anchors, class_of_anchor, class_index)
+    allowed = anchor_pool(pool, class_of_anchor, class_index)
+    k_star = closest_anchor(future, anchors, allowed)
     rows = torch.arange(len(future))
-    log_pc = torch.log_softmax(class_logits, dim=1)[rows, class_index]
-    in_class = class_of_anchor.unsqueeze(0) == class_index.unsqueeze(1)
     check_cls_target(cls_target)
     k_cls = k_star
     if cls_target == "best_mode":
         with torch.no_grad():
             ade = torch.linalg.norm(anchors + offsets - future.unsqueeze(1), dim=-1).mean(dim=-1)
-            k_cls = ade.masked_fill(~in_class, float("inf")).argmin(dim=1)
+            k_cls = ade.masked_fill(~allowed, float("inf")).argmin(dim=1)
+    c_cls = class_of_anchor[k_cls]
+    log_pc = torch.log_softmax(class_logits, dim=1)[rows, c_cls]
+    in_class = class_of_anchor.unsqueeze(0) == c_cls.unsqueeze(1)
     log_pk = torch.log_softmax(anchor_logits.masked_fill(~in_class, float("-inf")), dim=1)[rows, k_cls]
     cls = -(log_pc + log_pk)
     pred = anchors[k_star] + offsets[rows, k_star]

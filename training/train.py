@@ -31,7 +31,7 @@ from training.anchors import kmeans_anchors
 from training.config import Config
 from training.data import Windows, cached_pedestrian_windows, cached_windows, concat_windows
 from training.datasets import DATASETS, pedestrian_sources
-from training.loss import check_cls_target, class_weights, decode_torch, dgan_loss
+from training.loss import check_anchor_pool, check_cls_target, class_weights, decode_torch, dgan_loss
 from training.model import DGAN
 
 #: ``train.select``: the validation figure (a column of ``log.csv``) whose lowest epoch is kept as ``best.pt``, or
@@ -83,7 +83,9 @@ def load_window_parts(cfg: Config, spec: dgan.InputSpec, split: str, progress: b
     """A split's cached windows of the dataset itself, then (for training) those of each ``data.extra_pedestrians``
     source."""
     d = cfg.data
-    fold = d.scene if d.dataset == "ethucy" else ""
+    fold = {"ethucy": d.scene, "apolloscape": d.val_recordings}.get(d.dataset, "")
+    if d.val_recordings and d.dataset != "apolloscape":
+        raise ValueError(f"data.val_recordings is for ApolloScape, not {d.dataset!r}")
     cache, root = Path(d.cache_dir).expanduser(), Path(d.root).expanduser()
     sources = pedestrian_sources(d.extra_pedestrians)
     if sources and d.dataset != "ethucy":
@@ -197,8 +199,10 @@ def forward_loss(
     residual = b["future"][t] - b["prior"][t]
     classes = b["class_index"][t]
     weights = None if weight_of_class is None else weight_of_class[classes]
-    a, beta = cfg.train.alpha, cfg.train.beta
-    loss, parts = dgan_loss(*outs, residual, classes, anchors, class_of, a, beta, weights, cfg.train.cls_target)
+    tr = cfg.train
+    loss, parts = dgan_loss(
+        *outs, residual, classes, anchors, class_of, tr.alpha, tr.beta, weights, tr.cls_target, tr.anchor_pool
+    )
     return loss, parts, outs
 
 
@@ -269,6 +273,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Confi
     if cfg.train.select not in SELECT:
         raise ValueError(f"train.select must be 'val_loss', 'val_ade' or 'last', got {cfg.train.select!r}")
     check_cls_target(cfg.train.cls_target)
+    check_anchor_pool(cfg.train.anchor_pool)
     return args, cfg
 
 

@@ -1,14 +1,28 @@
-"""training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, and the
-choice itself on best modes drawn at a known temperature."""
+"""training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, the
+choice itself on best modes drawn at a known temperature, and a temperature cross-fitted over validation folds."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import asdict
+from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
+from conftest import shared_data
 
-from training.calibrate import best_mode_brier, choose_temperature, reliability_gap
+from training.calibrate import (
+    best_mode_brier,
+    calibrate_checkpoint,
+    choose_temperature,
+    reliability_gap,
+    validation_logits,
+)
+from training.config import Config
+from training.train import build_model, input_spec
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_brier_score_of_the_best_mode_indicator() -> None:
@@ -40,3 +54,45 @@ def test_best_modes_drawn_at_a_temperature_give_it_back() -> None:
     assert fit.nll_after < fit.nll_before  # the logits at T = 1 are overconfident
     assert fit.gap_after < 0.05 < fit.gap_before
     assert "temperature" in str(fit)
+
+
+def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int) -> Path:
+    """An untrained ApolloScape network with random anchors, saved as a checkpoint whose validation split is
+    ``val_recordings`` (the default split if empty)."""
+    torch.manual_seed(seed)
+    overrides = {"data.val_recordings": val_recordings, "data.root": str(shared_data("apolloscape_trajectory"))}
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", overrides)
+    spec = input_spec(cfg)
+    k = kc * len(spec.classes)
+    anchors = np.cumsum(np.random.default_rng(seed).normal(0.5, 0.3, (k, spec.t_f, 2)), axis=1)
+    ckpt = {
+        "model": build_model(cfg, spec, k).eval().state_dict(),
+        "anchors": anchors.astype(np.float32),
+        "class_of": np.repeat(np.arange(len(spec.classes)), kc),
+        "config": asdict(cfg),
+        "epoch": 0,
+    }
+    torch.save(ckpt, path)
+    return path
+
+
+def test_a_cross_fitted_temperature_pools_every_folds_validation_split(tmp_path: Path) -> None:
+    main = _apollo_checkpoint(tmp_path / "main.pt", "", 4, 0)
+    fold = _apollo_checkpoint(tmp_path / "fold.pt", "9053,9059", 4, 1)
+    own = len(validation_logits(main)[2])
+    other = len(validation_logits(fold)[2])
+    assert own > 0
+    assert other > 0
+    alone = calibrate_checkpoint(main)
+    assert (alone.targets, alone.folds) == (own, 1)
+    pooled = calibrate_checkpoint(main, folds=[fold])
+    assert (pooled.targets, pooled.folds) == (own + other, 2)
+    assert "2 validation folds" in str(pooled)
+    ckpt = torch.load(main, weights_only=False)
+    assert ckpt["temperature"] == pooled.temperature
+    assert ckpt["calibration_folds"] == 2
+    # A fold of another anchor layout is another configuration: refused, and the checkpoint keeps its temperature.
+    odd = _apollo_checkpoint(tmp_path / "odd.pt", "9053,9059", 3, 2)
+    with pytest.raises(ValueError, match="folds must share a configuration"):
+        calibrate_checkpoint(main, folds=[odd])
+    assert torch.load(main, weights_only=False)["temperature"] == pooled.temperature

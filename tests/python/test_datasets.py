@@ -124,6 +124,21 @@ def test_apolloscape_splits_by_recording() -> None:
     assert rec.label.max() <= 4
 
 
+def test_apolloscape_validation_recordings_can_be_chosen() -> None:
+    root = data_root()
+    val = {apollo_recording_id(p) for p in apollo_files(root, "val", "9050,9055")}
+    train = {apollo_recording_id(p) for p in apollo_files(root, "train", "9050,9055")}
+    assert val == {9050, 9055}
+    assert set(APOLLO_VAL) <= train  # the default validation recordings train in this fold
+    assert not train & (val | set(APOLLO_TEST))
+    with pytest.raises(ValueError, match="test recordings"):
+        apollo_files(root, "val", f"9050,{APOLLO_TEST[0]}")
+    with pytest.raises(ValueError, match="no ApolloScape recording"):
+        apollo_files(root, "val", "1234")
+    with pytest.raises(ValueError, match="comma-separated"):
+        apollo_files(root, "val", "9050;9055")
+
+
 def test_calibration_bins_probabilities_and_hits() -> None:
     prob = np.array([0.01, 0.01, 0.95, 0.95, 0.5])
     hit = np.array([False, False, True, False, True])

@@ -18,7 +18,7 @@ from conftest import shared_data
 import dgan
 from training.config import Config
 from training.export import export_model, load_checkpoint
-from training.loss import class_weights, closest_anchor, decode_torch, dgan_loss
+from training.loss import anchor_pool, class_weights, closest_anchor, decode_torch, dgan_loss
 from training.model import DGAN
 from training.train import INPUTS, build_model, input_spec
 
@@ -49,7 +49,7 @@ def test_loss_picks_the_closest_anchor_of_the_class() -> None:
     class_of = torch.tensor([0, 0, 1])
     future = torch.tensor([[[0.0, 4.0]], [[0.0, 4.0]]])
     # Agent 0 is class 0: anchors 0 and 1 only (anchor 2 is closer but belongs to class 1).
-    k = closest_anchor(future, anchors, class_of, torch.tensor([0, 1]))
+    k = closest_anchor(future, anchors, anchor_pool("own_class", class_of, torch.tensor([0, 1])))
     assert k.tolist() == [0, 2]
     zeros = torch.zeros(2, 3, 1, 2)
     loss, parts = dgan_loss(
@@ -92,6 +92,23 @@ def test_the_classifier_can_be_taught_the_best_decoded_mode() -> None:
     assert best["reg"] == paper["reg"] == pytest.approx(np.sqrt(17), rel=1e-6)  # the regression follows anchor 0
     with pytest.raises(ValueError, match="cls_target"):
         dgan_loss(*args, cls_target="nearest")
+
+
+def test_the_anchors_can_be_drawn_from_every_class() -> None:
+    anchors = torch.tensor([[[1.0, 0.0]], [[2.0, 0.0]], [[0.0, 5.0]]])
+    class_of = torch.tensor([0, 0, 1])
+    future = torch.tensor([[[0.0, 4.0]]])  # a class-0 agent whose future is nearest class 1's anchor
+    pool = anchor_pool("all_classes", class_of, torch.tensor([0]))
+    assert closest_anchor(future, anchors, pool).tolist() == [2]
+    class_logits = torch.tensor([[float(np.log(3.0)), 0.0]])  # p(c) = 3/4, 1/4
+    args = (class_logits, torch.zeros(1, 3), torch.zeros(1, 3, 1, 2), future, torch.tensor([0]), anchors, class_of)
+    _, own = dgan_loss(*args, 1.0)
+    _, every = dgan_loss(*args, 1.0, pool="all_classes")
+    assert own["cls"] == pytest.approx(np.log(4 / 3) + np.log(2), rel=1e-6)  # −log(¾ · ½): anchor 0 of class 0
+    assert every["cls"] == pytest.approx(np.log(4), rel=1e-6)  # −log(¼ · 1): anchor 2, the only one of class 1
+    assert every["reg"] == pytest.approx(1.0, rel=1e-6)  # the regression follows anchor 2
+    with pytest.raises(ValueError, match="anchor_pool"):
+        dgan_loss(*args, 1.0, pool="mine")
 
 
 def test_class_weights_balance_the_classes() -> None:
