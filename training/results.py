@@ -455,8 +455,8 @@ class's best, while the class probability, the class being an input, gives those
 temperature on p(c) (*class_temperature*) moves probability onto them and gives 0.09 on the test recordings, but 0.20
 on validation, so the rule does not pick it. Second, how often the top mode wins depends on speed: on validation it
 is the best of the 60 for 71% of the agents standing at the last observed step and for 9% of those faster than 3 m/s,
-while it is given 0.56 and 0.23 on average; a temperature that grows with speed (*temperature_by_speed*) still leaves
-0.23 there. Neither is carried by the models. Tried on the model side too (validation recordings): 40 anchors per
+while it is given 0.47 and 0.20 on average (at the model's temperature); a temperature that grows with speed
+(*temperature_by_speed*) still leaves 0.23 there. Neither is carried by the models. Tried on the model side too (validation recordings): 40 anchors per
 class instead of 20 (three seeds, as a consensus: top-1 2.026/3.706 m against the bundled model's 2.015/3.670, worst
 gap 0.12 against 0.19, best of 20 0.81 against 0.86 m but best of 5 1.34 against 1.21 m), and teaching the
 classifier the best decoded mode instead of the closest anchor (`train.cls_target = "best_mode"`, one run each with
