@@ -322,8 +322,8 @@ def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]]
     """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
     weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card.
 
-    ``folds``: for a configuration with ``train.calibration_folds``, the runs (seeds, as many as ``runs``) of each of
-    its folds; their consensus models' predictions on their validation splits join the temperature's fit."""
+    ``folds``: for a configuration with ``train.calibration_folds``, the runs of each of its folds (seeds, built into
+    a model as ``runs`` are); their predictions on their validation splits join the temperature's fit."""
     run = runs[0]
     cfg = json.loads((run / "config.json").read_text())["config"]
     dataset = cfg["data"].get("dataset", "ethucy")

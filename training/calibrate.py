@@ -174,6 +174,5 @@ def calibrate_checkpoint(
     found = replace(choose_temperature(cl, al, best, class_of), folds=len(parts))
     ckpt = torch.load(path, weights_only=False)
     ckpt["temperature"] = found.temperature
-    ckpt["calibration_folds"] = found.folds
     torch.save(ckpt, path)
     return found

@@ -148,42 +148,48 @@ def main_table(res: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def ablation_table(scene: str) -> str | None:
-    """Each variant's metrics, averaged over the seeds run (``runs/ablation_<scene>_<variant>[_s<seed>]``)."""
+#: The measured ablations: written by :func:`ablation_runs` whenever ``runs/`` holds them, read when it does not.
+ABLATIONS_JSON = ROOT / "docs" / "ablations.json"
+ABLATION_KEYS = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20", "cv_ade", "cv_fde")
+
+
+def ablation_runs(
+    scene: str, runs_dir: Path = ROOT / "runs", store: Path = ABLATIONS_JSON
+) -> dict[str, list[dict[str, float]]]:
+    """Each variant's test metrics, one entry per seed run (``<runs_dir>/ablation_<scene>_<variant>[_s<seed>]``,
+    written by ``training/ablations.sh``); kept in ``store``, and read from it where no run is found."""
+    found: dict[str, list[dict[str, float]]] = {}
+    for key in ABLATIONS:
+        runs = [runs_dir / f"ablation_{scene}_{key}", *sorted(runs_dir.glob(f"ablation_{scene}_{key}_s*"))]
+        for r in runs:
+            if (r / "metrics.json").is_file():
+                m = json.loads((r / "metrics.json").read_text())
+                found.setdefault(key, []).append({k: m[k] for k in ABLATION_KEYS})
+    stored: dict[str, dict[str, list[dict[str, float]]]] = json.loads(store.read_text()) if store.is_file() else {}
+    if found:
+        stored[scene] = found
+        store.write_text(json.dumps(stored, indent=2))
+    return stored.get(scene, {})
+
+
+def ablation_table(scene: str, results: dict[str, list[dict[str, float]]]) -> str:
+    """Each variant's metrics (:func:`ablation_runs`) averaged over its seeds, and constant velocity on the same
+    targets."""
+    if not results:
+        return f"_No ablation runs for {scene} yet: `python -m training.results --ablations`._"
     rows = []
-    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
     for key, label in ABLATIONS.items():
-        runs = [ROOT / "runs" / f"ablation_{scene}_{key}", *sorted((ROOT / "runs").glob(f"ablation_{scene}_{key}_s*"))]
-        found = [json.loads((r / "metrics.json").read_text()) for r in runs if (r / "metrics.json").is_file()]
-        if not found:
+        if key not in results:
             continue
-        m = {k: sum(f[k] for f in found) / len(found) for k in keys}
-        rows.append(
-            f"| {label} | {len(found)} | {fmt(m['ade'], m['fde'], 3)} | {fmt(m['min_ade5'], m['min_fde5'], 3)} | "
-            f"{fmt(m['min_ade20'], m['min_fde20'], 3)} | {m['brier_min_fde20']:.3f} |"
-        )
-    if not rows:
-        return None
+        m = {k: sum(f[k] for f in results[key]) / len(results[key]) for k in ABLATION_KEYS}
+        cells = [fmt(m[a], m[b], 3) for a, b in (("ade", "fde"), ("min_ade5", "min_fde5"), ("min_ade20", "min_fde20"))]
+        rows.append(f"| {label} | {len(results[key])} | {' | '.join(cells)} | {m['brier_min_fde20']:.3f} |")
+    cv = next(iter(results.values()))[0]
+    cv_cells = fmt(cv["cv_ade"], cv["cv_fde"], 3)
+    rows.append(f"| constant velocity (the better of its two variants), same targets | | {cv_cells} | | | |")
     head = "| variant (10 epochs each) | seeds | top-1 ADE/FDE | minADE5/FDE5 | minADE20/FDE20 | Brier-minFDE20 |\n"
     head += "|---|---|---|---|---|---|"
     return head + "\n" + "\n".join(rows)
-
-
-#: The ablation table of the previous release (contract 1: no kinematic prior, no map dropout, no temperature),
-#: measured by `python -m training.results --ablations` then; shown until the ablations are run again.
-PREVIOUS_ABLATIONS = (
-    "_Measured on the previous release's models (contract 1: absolute anchors, no kinematic prior, no map dropout); "
-    "not yet rerun on the current ones (`python -m training.results --ablations`)._\n\n"
-    + """| variant (10 epochs each) | seeds | top-1 ADE/FDE | minADE5/FDE5 | minADE20/FDE20 | Brier-minFDE20 |
-|---|---|---|---|---|---|
-| full model | 2 | 0.443/0.944 | 0.282/0.556 | 0.240/0.444 | 1.041 |
-| without the map branch | 1 | 0.434/0.937 | 0.277/0.554 | 0.234/0.437 | 1.040 |
-| without the GAT (map + anchors, close to MultiPath) | 1 | 0.450/0.974 | 0.291/0.589 | 0.233/0.443 | 1.058 |
-| GAT without neighbour geometry on the edges | 2 | 0.461/0.993 | 0.280/0.552 | 0.237/0.440 | 1.046 |
-| K_c = 5 anchors | 1 | 0.434/0.938 | 0.320/0.671 | 0.320/0.671 | 0.961 |
-| K_c = 10 anchors | 1 | 0.424/0.906 | 0.289/0.573 | 0.275/0.536 | 1.012 |
-| the paper's loss alone (β = 0) | 1 | 0.455/0.966 | 0.270/0.523 | 0.233/0.419 | 1.025 |"""
-)
 
 
 def main() -> None:
@@ -258,7 +264,7 @@ def main() -> None:
         calibration_diagnostics=calibration_study.diagnostics_section(),
         seed_study=seed_study.section(),
         table=main_table(res),
-        ablations=ablation_table("zara1") or PREVIOUS_ABLATIONS,
+        ablations=ablation_table("zara1", ablation_runs("zara1")),
         multiclass=multiclass.sections(multi),
         hdmap=hdmap.section(hd),
         hdmap_reading=hdmap.reading(hd),
@@ -449,25 +455,25 @@ bundled model's on its validation split: 15,512 targets instead of 1,305. On the
 temperature, 1.82 (worst checked bin 0.13 on the pooled folds), over the likelihood's, 1.42 (0.15); on the test
 recordings the worst bin is then 0.08 (table above). Top-1 does not move (a temperature within a class keeps its
 order); Brier-minFDE20 went 1.76 → 1.78. Even pooled, no single temperature brings the validation folds within 0.1.
-Two causes were measured on its validation recordings. First, 43% of the vehicles' and 42% of the
-cyclists' best modes (of all 60) are another class's anchors, 0.16 m and 0.12 m closer (median) than their own
-class's best, while the class probability, the class being an input, gives those modes almost nothing: a second
-temperature on p(c) (*class_temperature*) moves probability onto them and gives 0.09 on the test recordings, but 0.20
-on validation, so the rule does not pick it. Second, how often the top mode wins depends on speed: on validation it
-is the best of the 60 for 71% of the agents standing at the last observed step and for 9% of those faster than 3 m/s,
-while it is given 0.47 and 0.20 on average (at the model's temperature); a temperature that grows with speed
-(*temperature_by_speed*) still leaves 0.23 there. Neither is carried by the models. Tried on the model side too (validation recordings): 40 anchors per
-class instead of 20 (three seeds, as a consensus: top-1 2.026/3.706 m against the bundled model's 2.015/3.670, worst
-gap 0.12 against 0.19, best of 20 0.81 against 0.86 m but best of 5 1.34 against 1.21 m), and teaching the
-classifier the best decoded mode instead of the closest anchor (`train.cls_target = "best_mode"`, one run each with
-20 and 40 anchors: top-1 2.137 and 2.188 m against 2.067–2.084 for single runs of the bundled configuration, gaps
-0.14 and 0.16). Single runs of one configuration leave gaps from 0.10 to 0.21 on this split (seeds 0–2 of 40
-anchors 0.10, 0.12, 0.16; seeds 0–1 of 20 anchors 0.21, 0.12), so it cannot rank such changes; none was kept.
-Then the first cause was taken at its word: `train.anchor_pool = "all_classes"` seeks the closest anchor among every
-class's anchors, so that p(c) learns which class's anchors hold the future instead of the input class. Three runs
-(seeds 0–2) had validation top-1 2.144, 2.201 and 2.098 m against 2.067–2.084, worst gaps 0.12, 0.18 and 0.36; seed
-0 was behind for every class (vehicles 2.53 against 2.48 m, cyclists 1.80 against 1.65, pedestrians 0.61 against
-0.57) and in best of 5 (1.39 against 1.20 m). Not kept. Both causes, per model, on the validation splits:
+Two causes were measured on its validation recordings. First, 43% of the vehicles' and 42% of the cyclists' best
+modes (of all 60) are another class's anchors, 0.16 m and 0.12 m closer (median) than their own class's best, while
+the class probability, the class being an input, gives those modes almost nothing: a second temperature on p(c)
+(*class_temperature*) moves probability onto them and gives 0.09 on the test recordings, but 0.20 on validation, so
+the rule does not pick it. Second, how often the top mode wins depends on speed: on validation it is the best of the
+60 for 71% of the agents standing at the last observed step and for 9% of those faster than 3 m/s, while it is given
+0.47 and 0.20 on average (at the model's temperature); a temperature that grows with speed (*temperature_by_speed*)
+still leaves 0.23 there. Neither is carried by the models. Tried on the model side too (validation recordings): 40
+anchors per class instead of 20 (three seeds, as a consensus: top-1 2.026/3.706 m against the bundled model's
+2.015/3.670, worst gap 0.12 against 0.19, best of 20 0.81 against 0.86 m but best of 5 1.34 against 1.21 m), and
+teaching the classifier the best decoded mode instead of the closest anchor (`train.cls_target = "best_mode"`, one
+run each with 20 and 40 anchors: top-1 2.137 and 2.188 m against 2.067–2.084 for single runs of the bundled
+configuration, gaps 0.14 and 0.16). Single runs of one configuration leave gaps from 0.10 to 0.21 on this split
+(seeds 0–2 of 40 anchors 0.10, 0.12, 0.16; seeds 0–1 of 20 anchors 0.21, 0.12), so it cannot rank such changes; none
+was kept. Then the first cause was taken at its word: `train.anchor_pool = "all_classes"` seeks the closest anchor
+among every class's anchors, so that p(c) learns which class's anchors hold the future instead of the input class.
+Three runs (seeds 0–2) had validation top-1 2.144, 2.201 and 2.098 m against 2.067–2.084, worst gaps 0.12, 0.18 and
+0.36; seed 0 was behind for every class (vehicles 2.53 against 2.48 m, cyclists 1.80 against 1.65, pedestrians 0.61
+against 0.57) and in best of 5 (1.39 against 1.20 m). Not kept. Both causes, per model, on the validation splits:
 
 {calibration_diagnostics}
 
@@ -493,25 +499,38 @@ protocol, so they compare with **min20**. Social-GAN's own paper reports 0.61/1.
 
 {ablations}
 
+The table is the bundled zara1 configuration (kinematic prior, map dropout 0.3, β = 3, Stanford Drone's training
+pedestrians), each variant trained for 10 epochs instead of 15 and measured by the engine on the zara1 test scene at
+its temperature fitted on validation: single runs, not the bundled three-run consensus (0.38/0.81). Where a row has
+two seeds (0 and 1) it is their mean. `python -m training.results --ablations` retrains them; the figures are kept
+in `docs/ablations.json`.
+
 **One departure from the paper's loss.** The paper regresses only the offset of the anchor closest to the ground
 truth. Its most probable mode then keeps the raw anchor whenever the classifier picks another anchor (about half the
-time here: 51.5% top-1 anchor accuracy on the zara1 fold's validation set), and in our first zara1 model (the paper's
-loss alone, 20 epochs) top-1 stayed above constant velocity on the test scene (0.51/1.07 against 0.43/0.96). The
-trainer therefore adds β (default 1) times the error of the most probable mode, whose selection carries no gradient.
-The ablation above measures the trade at equal budget: β = 1 improves top-1 and costs a little best-of-K
-(compare *full model* with *the paper's loss alone*). `train.beta = 0` restores the paper's loss.
+time here: 51.5% top-1 anchor accuracy on the zara1 fold's validation set, in an earlier model), and in our first
+zara1 model (the paper's loss alone, 20 epochs) top-1 stayed above constant velocity on the test scene (0.51/1.07
+against 0.43/0.96). The trainer therefore adds β times the error of the most probable mode, whose selection carries
+no gradient (β = 1 by default, 3 in the ETH/UCY configurations, chosen on validation). The ablation above measures
+the trade at equal budget: the paper's loss alone (β = 0) has top-1 0.412/0.882 against 0.376/0.808 with β = 3 (both
+seeds of each), and better best of 20 (0.213/0.398 against 0.225/0.432). `train.beta = 0` restores the paper's loss.
 
-**Reading the ablations.** Each row is one training run per seed on one fold, so differences of about 0.01 m are
-within run-to-run noise (the *seeds* column says how many runs a row averages). Fewer anchors make the top-1 choice
-easier and best-of-K worse (K_c = 5 caps min5 and min20 at 5 modes); K_c = 20 gives the best minADE20/minFDE20. On
-zara1 the map branch does not help pedestrians — as in the paper, whose map helps vehicles and cyclists and matters
-little for pedestrians; the ETH/UCY masks carry little more than walkable ground.
+**Reading the ablations.** The two seeds of the full model are 0.015 m apart in top-1 ADE (0.369 and 0.384), so a
+difference smaller than that is within noise. Every variant is ahead of constant velocity (0.431/0.960).
+- *The map branch* helps here: without it top-1 is 0.407 and 0.402 against 0.369 and 0.384, and best of 20 is worse
+  too. In the previous release's ablation (no kinematic prior, no map dropout, no extra pedestrians) it did not help
+  on zara1 (0.434/0.937 without against 0.443/0.944 with).
+- *The GAT*: without it (map, state and anchors alone, close to MultiPath) top-1 is 0.397 and 0.399 against 0.369 and
+  0.384.
+- *Fewer anchors* (one seed each, against seed 0's 0.369/0.792): K_c = 5 and 10 leave top-1 level (0.369/0.792,
+  0.368/0.794) and cost best of K (min20 0.306/0.645 and 0.261/0.529 against 0.224/0.431). Their Brier-minFDE20 is
+  lower (0.861 and 0.929 against 1.007) because fewer modes share the probability. K_c = 20 keeps the best min20.
 
 Neighbour geometry reaches the attention on the edges: node features are agent-centric, so each directed edge carries
 the sender's position, relative velocity and heading in the receiver's frame, which enter both the attention score and
-the message (`training/model.py`, `docs/model-contract.md`). The *without neighbour geometry* row zeroes them. In
-both seeds run here it raised the top-1 error (0.444/0.946 and 0.443/0.942 with geometry against 0.468/1.008 and
-0.453/0.977 without), more than the two seeds of either variant differ from each other; best-of-20 was unchanged.
+the message (`training/model.py`, `docs/model-contract.md`). The *without neighbour geometry* row zeroes them. Seed by
+seed it raised the top-1 error (0.369/0.792 and 0.384/0.824 with geometry against 0.384/0.839 and 0.393/0.856
+without) and best of 20 a little (0.431 and 0.433 m minFDE20 against 0.440 and 0.461), as in the previous release's
+two seeds.
 
 # Several classes, one model
 
