@@ -372,19 +372,8 @@ def main(argv: list[str] | None = None) -> Path:
     spec = input_spec(cfg)
     show = rank == 0
     bars = show and sys.stderr.isatty()
-    parts = load_window_parts(cfg, spec, "train", bars)
-    train = concat_windows(parts)
-    val = load_windows(cfg, spec, "val", bars)
-
     ckpt = torch.load(out / "last.pt", weights_only=False) if args.resume and (out / "last.pt").is_file() else None
-    if ckpt is not None:
-        anchors_np, class_of_np = ckpt["anchors"], ckpt["class_of"]
-    else:
-        anchors_np, class_of_np = fit_anchors(cfg, anchor_windows(cfg, parts, train), spec, len(spec.classes))
-    del parts
-    if cfg.data.target_class:
-        restrict_targets(train, spec, cfg.data.target_class)
-        restrict_targets(val, spec, cfg.data.target_class)
+    train, val, anchors_np, class_of_np = training_data(cfg, spec, ckpt, bars)
     anchors = torch.from_numpy(anchors_np)
     class_of = torch.from_numpy(class_of_np).long()
     weight_of_class = None
@@ -439,14 +428,48 @@ def main(argv: list[str] | None = None) -> Path:
     if world > 1:
         dist.barrier()
         dist.destroy_process_group()
-    if show and cfg.train.calibrate and last_epoch == cfg.train.epochs:
+    if show and last_epoch == cfg.train.epochs:
+        finish(out, cfg, model, val, spec, anchors, class_of, export=not args.no_export)
+    return out
+
+
+def training_data(
+    cfg: Config, spec: dgan.InputSpec, ckpt: dict[str, Any] | None, bars: bool
+) -> tuple[Windows, Windows, np.ndarray, np.ndarray]:
+    """The training and validation windows (restricted to ``data.target_class`` if set) and the anchors with the
+    class of each: a resumed run's ``ckpt`` keeps its own, a new run fits them (:func:`anchor_windows`)."""
+    parts = load_window_parts(cfg, spec, "train", bars)
+    train = concat_windows(parts)
+    val = load_windows(cfg, spec, "val", bars)
+    if ckpt is not None:
+        anchors, class_of = ckpt["anchors"], ckpt["class_of"]
+    else:
+        anchors, class_of = fit_anchors(cfg, anchor_windows(cfg, parts, train), spec, len(spec.classes))
+    if cfg.data.target_class:
+        restrict_targets(train, spec, cfg.data.target_class)
+        restrict_targets(val, spec, cfg.data.target_class)
+    return train, val, anchors, class_of
+
+
+def finish(
+    out: Path,
+    cfg: Config,
+    model: DGAN,
+    val: Windows,
+    spec: dgan.InputSpec,
+    anchors: torch.Tensor,
+    class_of: torch.Tensor,
+    export: bool,
+) -> None:
+    """After the last epoch: the temperature fitted on validation into ``best.pt`` (``train.calibrate``), then the
+    ONNX model exported beside it unless ``export`` is false."""
+    if cfg.train.calibrate:
         calibrate(out / "best.pt", model, val, spec, anchors, class_of)
-    if show and not args.no_export and last_epoch == cfg.train.epochs:
+    if export:
         from training.export import export_checkpoint
 
         path = export_checkpoint(out / "best.pt", out / "model.onnx", name=f"dgan-{run_name(cfg)}")
         print(f"exported {path}")
-    return out
 
 
 if __name__ == "__main__":
