@@ -81,6 +81,9 @@ class TrainConfig:
     # further runs of this configuration whose out-of-fold predictions join the temperature's fit beside the
     # validation split's own (training.bundle --calibration-fold; training.calibrate.calibrate_checkpoint).
     calibration_folds: str = ""
+    # One anchor of each class held at a zero residual, the kinematic prior itself, so that "nothing to add" is a mode
+    # the classifier can pick (training.anchors.kmeans_anchors); the other anchors are k-means around it.
+    zero_anchor: bool = False
 
 
 @dataclass(frozen=True)

@@ -178,7 +178,8 @@ def fit_anchors(cfg: Config, train: Windows, spec: dgan.InputSpec, num_classes: 
             flipped = fut.copy()
             flipped[..., 1] *= -1
             fut = np.concatenate([fut, flipped])
-        out.append(kmeans_anchors(fut, cfg.train.anchors_per_class, cfg.train.seed).astype(np.float32))
+        k, seed = cfg.train.anchors_per_class, cfg.train.seed
+        out.append(kmeans_anchors(fut, k, seed, cfg.train.zero_anchor).astype(np.float32))
     class_of = np.repeat(np.arange(num_classes), cfg.train.anchors_per_class)
     return np.concatenate(out), class_of
 

@@ -318,6 +318,21 @@ def test_anchors_can_leave_the_extra_windows_out() -> None:
     assert not np.allclose(alone, mixed)
 
 
+def test_an_anchor_can_be_held_at_the_prior() -> None:
+    from training.anchors import kmeans_anchors
+
+    rng = np.random.default_rng(0)
+    futures = np.concatenate([rng.normal(0.0, 0.05, (200, 5, 2)), rng.normal(1.0, 0.1, (200, 5, 2))])
+    futures = np.concatenate([futures, rng.normal(-2.0, 0.1, (100, 5, 2))])
+    held = kmeans_anchors(futures, 4, zero=True)
+    assert held.shape == (4, 5, 2)
+    assert np.count_nonzero(np.abs(held).sum(axis=(1, 2)) == 0.0) == 1  # exactly one anchor is the prior itself
+    ends = sorted(held[:, -1, 0].round(1).tolist())
+    assert ends[0] == pytest.approx(-2.0, abs=0.1)
+    assert ends[-1] == pytest.approx(1.0, abs=0.1)  # the others still find the clusters around it
+    assert not (np.abs(kmeans_anchors(futures, 4)).sum(axis=(1, 2)) == 0.0).any()
+
+
 def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
     from training.anchors import kmeans_anchors
     from training.datasets import recordings, split_files
