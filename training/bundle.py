@@ -97,15 +97,20 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
     return " ".join(parts)
 
 
-def calibration_folds(cfg: dict[str, Any]) -> list[str]:
-    """The validation splits of the further runs a cross-fitted temperature is fitted with (``train.calibration_folds``
-    of a run's configuration), each as ``data.val_recordings`` names it."""
-    return [f for f in str(cfg["train"].get("calibration_folds", "")).split(";") if f]
+def calibration_folds(declared: str) -> list[str]:
+    """The validation splits of the further runs a cross-fitted temperature is fitted with, from their
+    ``train.calibration_folds`` declaration, each as ``data.val_recordings`` names it."""
+    return [f for f in declared.split(";") if f]
+
+
+def _declared_folds(cfg: dict[str, Any]) -> list[str]:
+    """:func:`calibration_folds` of a run's configuration (its ``config.json``)."""
+    return calibration_folds(str(cfg["train"].get("calibration_folds", "")))
 
 
 def fitted_where(cfg: dict[str, Any], whom: str = "") -> str:
     """Where the model's temperature was fitted, in the card's words (``whom``: " for the consensus", say)."""
-    folds = calibration_folds(cfg)
+    folds = _declared_folds(cfg)
     if not folds:
         return f"fitted{whom} on validation"
     return (
@@ -310,7 +315,7 @@ def check_folds(cfg: dict[str, Any], folds: list[list[Path]]) -> None:
     held = sorted(
         json.loads((f[0] / "config.json").read_text())["config"]["data"].get("val_recordings", "") for f in folds
     )
-    want = sorted(calibration_folds(cfg))
+    want = sorted(_declared_folds(cfg))
     if held != want:
         raise ValueError(
             f"train.calibration_folds declares the validation splits {want or 'none'}; the fold runs given hold out "

@@ -166,10 +166,10 @@ def calibrate_checkpoint(
     cl, al, best, class_of = validation_logits(path, data_root, progress)
     parts = [(cl, al, best)]
     for fold in folds:
-        *part, fold_class_of = validation_logits(fold, data_root, progress)
+        fold_cl, fold_al, fold_best, fold_class_of = validation_logits(fold, data_root, progress)
         if not torch.equal(fold_class_of, class_of):
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
-        parts.append((part[0], part[1], part[2]))
+        parts.append((fold_cl, fold_al, fold_best))
     cl, al, best = (torch.cat(x) for x in zip(*parts, strict=True))
     found = replace(choose_temperature(cl, al, best, class_of), folds=len(parts))
     ckpt = torch.load(path, weights_only=False)

@@ -40,7 +40,7 @@ class DataConfig:
     extra_in_anchors: bool = True
     # ApolloScape only: the recordings that form the validation split instead of training.datasets.APOLLO_VAL
     # (comma-separated numbers; never a test recording), for the folds of a cross-fitted temperature
-    # (training.crossfit).
+    # (train.calibration_folds, training.bundle --calibration-fold).
     val_recordings: str = ""
 
 

@@ -15,7 +15,6 @@ import argparse
 import json
 import subprocess
 import sys
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -206,28 +205,10 @@ def main() -> None:
     root = a.data_root.expanduser().resolve()
     if a.train:
         from training.bundle import bundle
-        from training.train import main as train
 
         for s in SCENES:
-            runs = []
-            for seed in ENSEMBLE_SEEDS["ethucy"]:
-                run = ROOT / "runs" / f"ethucy_{s}_s{seed}"
-                cfg = str(ROOT / "training" / "configs" / f"ethucy_{s}.toml")
-                train(
-                    [
-                        "--config",
-                        cfg,
-                        "--out",
-                        str(run),
-                        "--set",
-                        f"data.root={root}",
-                        "--set",
-                        f"train.seed={seed}",
-                        "--no-export",
-                    ]
-                )
-                runs.append(run)
-            bundle(runs, s, root)
+            toml = ROOT / "training" / "configs" / f"ethucy_{s}.toml"
+            bundle(_seed_runs(toml, root, ENSEMBLE_SEEDS["ethucy"], f"ethucy_{s}"), s, root)
     if a.train_multiclass:
         train_multiclass(root)
     if a.train_hdmap:
@@ -321,33 +302,34 @@ def train_multiclass(root: Path) -> None:
     from training.bundle import bundle, calibration_folds, model_checkpoint
     from training.calibrate import calibrate_checkpoint
     from training.config import Config
-    from training.train import main as train
 
     for ds in multiclass.MULTICLASS_DATASETS:
         toml = ROOT / "training" / "configs" / f"{ds}.toml"
         seeds = ENSEMBLE_SEEDS.get(ds, (0,))
-
-        def runs_of(tag: str, *args: str, toml: Path = toml, seeds: tuple[int, ...] = seeds) -> list[Path]:
-            """One run per seed, under runs/<tag>_s<seed>."""
-            out = []
-            for seed in seeds:
-                run = ROOT / "runs" / f"{tag}_s{seed}"
-                config = ["--config", str(toml), "--set", f"data.root={root}", "--set", f"train.seed={seed}"]
-                train([*config, "--out", str(run), *args, "--no-export"])
-                out.append(run)
-            return out
-
-        members = runs_of(ds)
+        members = _seed_runs(toml, root, seeds, ds)
         folds = [
-            runs_of(f"{ds}_val{fold.replace(',', '_')}", "--set", f"data.val_recordings={fold}")
-            for fold in calibration_folds(asdict(Config.load(toml)))
+            _seed_runs(toml, root, seeds, f"{ds}_val{fold.replace(',', '_')}", "--set", f"data.val_recordings={fold}")
+            for fold in calibration_folds(Config.load(toml).train.calibration_folds)
         ]
         bundle(members, ds, root, folds)
         for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines
-            runs = runs_of(f"{ds}-{cls}", "--set", f"data.target_class={cls}")
+            runs = _seed_runs(toml, root, seeds, f"{ds}-{cls}", "--set", f"data.target_class={cls}")
             path = model_checkpoint(runs, multiclass.BASELINES / f"{ds}-{cls}.pt")
             if len(seeds) > 1:
                 calibrate_checkpoint(path, root)
+
+
+def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: str) -> list[Path]:
+    """One training run of the configuration ``toml`` (with ``args``) per seed, under ``runs/<tag>_s<seed>``."""
+    from training.train import main as train
+
+    out = []
+    for seed in seeds:
+        run = ROOT / "runs" / f"{tag}_s{seed}"
+        config = ["--config", str(toml), "--set", f"data.root={root}", "--set", f"train.seed={seed}"]
+        train([*config, "--out", str(run), *args, "--no-export"])
+        out.append(run)
+    return out
 
 
 #: The seeds of each bundled ensemble's members (``training.ensemble``), chosen on validation (`docs/seed_study.json`).
@@ -364,16 +346,11 @@ def train_hdmap(root: Path) -> None:
     from training.bundle import bundle
     from training.calibrate import calibrate_checkpoint
     from training.ensemble import ensemble_checkpoint
-    from training.train import main as train
 
-    runs: dict[str, list[Path]] = {}
-    for config in ("hdmap", "hdmap_nomap"):
-        cfg = str(ROOT / "training" / "configs" / f"{config}.toml")
-        for seed in ENSEMBLE_SEEDS["hdmap"]:
-            run = ROOT / "runs" / f"{config}_s{seed}"
-            args = ["--set", f"data.root={root}", "--set", f"train.seed={seed}", "--no-export"]
-            train(["--config", cfg, "--out", str(run), *args])
-            runs.setdefault(config, []).append(run)
+    runs = {
+        config: _seed_runs(ROOT / "training" / "configs" / f"{config}.toml", root, ENSEMBLE_SEEDS["hdmap"], config)
+        for config in ("hdmap", "hdmap_nomap")
+    }
     bundle(runs["hdmap"], "hdmap", root)
     ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)
     calibrate_checkpoint(hdmap.NOMAP, root)

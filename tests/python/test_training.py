@@ -353,3 +353,8 @@ def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
     sdd = Config.load(ROOT / "training" / "configs" / "sdd.toml", {"data.extra_pedestrians": "sdd"})
     with pytest.raises(ValueError, match="for the ETH/UCY models"):
         load_windows(replace(sdd, data=replace(sdd.data, root=str(data_root()))), input_spec(sdd), "train", False)
+    sdd_val = Config.load(ROOT / "training" / "configs" / "sdd.toml", {"data.val_recordings": "9050,9055"})
+    with pytest.raises(ValueError, match="val_recordings is for ApolloScape"):
+        load_windows(
+            replace(sdd_val, data=replace(sdd_val.data, root=str(data_root()))), input_spec(sdd_val), "val", False
+        )
