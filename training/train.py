@@ -287,6 +287,14 @@ def optimiser(cfg: Config, model: torch.nn.Module) -> tuple[torch.optim.Optimize
     return opt, sched
 
 
+def save_atomic(state: dict[str, Any], path: Path) -> None:
+    """``torch.save`` to a temporary file beside ``path``, then renamed over it: a run stopped while it saves (a
+    time limit, a killed job) keeps its previous checkpoint whole, so ``--resume`` still loads."""
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
 def resume(
     ckpt: dict[str, Any] | None,
     model: torch.nn.Module,
@@ -414,7 +422,6 @@ def main(argv: list[str] | None = None) -> Path:
         row.update(validate(model, val, spec, anchors, class_of, cfg))
         row["lr"] = sched.get_last_lr()[0]
         row["seconds"] = time.perf_counter() - t0
-        log_row(out / "log.csv", row, epoch == 0)
         key = None if cfg.train.select == "last" else cfg.train.select
         improved = key is None or row[key] < best
         best = row[key] if key is not None and improved else best
@@ -423,9 +430,10 @@ def main(argv: list[str] | None = None) -> Path:
             **{"epoch": epoch, "best": best, "anchors": anchors_np, "class_of": class_of_np},
             **{"config": asdict(cfg), "rng": torch.get_rng_state()},
         }
-        torch.save(state, out / "last.pt")
+        save_atomic(state, out / "last.pt")
         if improved:
-            torch.save(state, out / "best.pt")
+            save_atomic(state, out / "best.pt")
+        log_row(out / "log.csv", row, epoch == 0)  # after the checkpoints: a logged epoch is a resumable one
     if world > 1:
         dist.barrier()
         dist.destroy_process_group()

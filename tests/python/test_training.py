@@ -277,6 +277,26 @@ def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
     assert kept["epoch"] + 1 == int(min(rows, key=lambda r: float(r["val_ade"]))["epoch"])
 
 
+def test_a_checkpoint_save_stopped_midway_keeps_the_previous_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from training import train
+
+    path = tmp_path / "last.pt"
+    train.save_atomic({"epoch": 3}, path)
+    assert torch.load(path)["epoch"] == 3
+    assert [p.name for p in tmp_path.iterdir()] == ["last.pt"]
+
+    def killed(state: object, f: Path) -> None:  # the job's time limit strikes inside torch.save
+        Path(f).write_bytes(b"\x80\x02half a pick")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(torch, "save", killed)
+    with pytest.raises(KeyboardInterrupt):
+        train.save_atomic({"epoch": 4}, path)
+    assert torch.load(path)["epoch"] == 3  # --resume still loads epoch 3
+
+
 def test_concatenated_windows_batch_as_their_parts() -> None:
     from training.data import cached_windows, concat_windows
 
