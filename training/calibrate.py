@@ -163,6 +163,8 @@ def calibrate_checkpoint(
     ``folds``: checkpoints of the same configuration trained with other validation splits (cross-fitting,
     ``data.val_recordings``); their predictions on their own validation splits join the fit, which then sees every
     fold's validation data instead of one split's."""
+    from training.train import save_atomic
+
     cl, al, best, class_of = validation_logits(path, data_root, progress)
     parts = [(cl, al, best)]
     for fold in folds:
@@ -174,5 +176,5 @@ def calibrate_checkpoint(
     found = replace(choose_temperature(cl, al, best, class_of), folds=len(parts))
     ckpt = torch.load(path, weights_only=False)
     ckpt["temperature"] = found.temperature
-    torch.save(ckpt, path)
+    save_atomic(ckpt, path)
     return found

@@ -246,7 +246,7 @@ def calibrate(
     model.load_state_dict(ckpt["model"])
     found = fit_temperature(model, val, spec, anchors, class_of)
     ckpt["temperature"] = found.temperature
-    torch.save(ckpt, path)
+    save_atomic(ckpt, path)
     print(found, flush=True)
     return found.temperature
 
@@ -289,7 +289,8 @@ def optimiser(cfg: Config, model: torch.nn.Module) -> tuple[torch.optim.Optimize
 
 def save_atomic(state: dict[str, Any], path: Path) -> None:
     """``torch.save`` to a temporary file beside ``path``, then renamed over it: a run stopped while it saves (a
-    time limit, a killed job) keeps its previous checkpoint whole, so ``--resume`` still loads."""
+    time limit, a killed job) keeps its previous checkpoint whole, so ``--resume`` still loads. Every rewrite of an
+    existing checkpoint goes through it (each epoch's, the temperature's after training or at bundling)."""
     tmp = path.with_name(path.name + ".tmp")
     torch.save(state, tmp)
     os.replace(tmp, path)
