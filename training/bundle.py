@@ -288,16 +288,25 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 """
 
 
-def ensemble_line(runs: list[Path], predictor: dgan.Predictor, cfg: dict[str, Any]) -> str:
-    """The card's line for a model that is the consensus of several runs."""
+def ensemble_line(
+    runs: list[Path], predictor: dgan.Predictor, cfg: dict[str, Any], scale: list[float] | None = None
+) -> str:
+    """The card's line for a model that is the consensus of several runs (``scale``: its top-mode scales)."""
     seeds = [json.loads((r / "config.json").read_text())["config"]["train"]["seed"] for r in runs]
+    scaled = [f"{c} {s:g}" for c, s in zip(predictor.classes, scale or [], strict=False) if s != 1.0]
+    scale_words = (
+        f" The most probable mode keeps this share of its refinement of the prior, fitted on validation "
+        f"(`training.ensemble.fit_top_scale`): {', '.join(scaled)}; every other class keeps all of it."
+        if scaled
+        else ""
+    )
     return (
         f"- **Ensemble**: the consensus of {len(runs)} runs of this configuration, seeds "
         f"{', '.join(map(str, seeds))} (`training.ensemble`): its most probable mode (of the agent's most probable "
         f"class) is the mean of the runs' most probable modes, its other modes are seed {seeds[0]}'s. Weights "
         f"stored as float16; temperature {float(predictor.contract.get('temperature', 1.0)):.3f}, "
         f"{fitted_where(cfg, ' for the consensus')}. The training line above is seed {seeds[0]}'s run. A prediction "
-        f"runs all {len(runs)} networks.\n"
+        f"runs all {len(runs)} networks.{scale_words}\n"
     )
 
 
@@ -308,6 +317,20 @@ def model_checkpoint(runs: list[Path], out: Path) -> Path:
 
         return ensemble_checkpoint(runs, out, half=True)
     return slim_checkpoint(runs[0], out)
+
+
+def with_scale(path: Path, scale: list[float] | None) -> None:
+    """Stores the top-mode scales ``scale`` (``training.ensemble.fit_top_scale``) in the ensemble checkpoint at
+    ``path``; nothing for ``None``."""
+    from training.train import save_atomic
+
+    if scale is None:
+        return
+    ckpt = torch.load(path, weights_only=False)
+    if "members" not in ckpt:
+        raise ValueError(f"{path}: a top-mode scale needs an ensemble checkpoint (training.ensemble)")
+    ckpt["top_scale"] = scale
+    save_atomic(ckpt, path)
 
 
 def check_folds(cfg: dict[str, Any], folds: list[list[Path]]) -> None:
@@ -335,8 +358,17 @@ def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]]
     check_folds(cfg, folds or [])
     MODELS.mkdir(parents=True, exist_ok=True)
     model_checkpoint(runs, CHECKPOINTS / f"{name}.pt")
+    scale = None
+    if len(runs) > 1:
+        from training.ensemble import fit_top_scale
+
+        fit = fit_top_scale(CHECKPOINTS / f"{name}.pt", data_root)
+        print(f"{name}: {fit}", flush=True)
+        scale = list(fit.scale)
     with tempfile.TemporaryDirectory() as tmp:
         fold_ckpts = [model_checkpoint(f, Path(tmp) / f"fold{i}.pt") for i, f in enumerate(folds or [])]
+        for fold_ckpt in fold_ckpts:  # the folds stand in for the model: the same top-mode scales
+            with_scale(fold_ckpt, scale)
         print(f"{name}: {calibrate_checkpoint(CHECKPOINTS / f'{name}.pt', data_root, folds=fold_ckpts)}", flush=True)
     if dataset == "ethucy":
         description = (
@@ -357,7 +389,7 @@ def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]]
         metrics["without_map"] = evaluate(predictor, dataset, data_root, fold, with_map=False)
     text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
     if len(runs) > 1:
-        text = text.replace("- **Test metrics**", ensemble_line(runs, predictor, cfg) + "- **Test metrics**", 1)
+        text = text.replace("- **Test metrics**", ensemble_line(runs, predictor, cfg, scale) + "- **Test metrics**", 1)
     (MODELS / f"{name}.md").write_text(text)
     (run / "metrics.json").write_text(json.dumps(metrics, indent=2))
     return metrics

@@ -8,19 +8,32 @@ network). Its most probable mode (of the agent's most probable class) is the mea
 modes; the other modes are the first member's. The temperature is fitted anew on the validation split
 (``training.calibrate``; ``--no-calibrate`` keeps the first member's), since the consensus mode is the best mode more
 often than any one member's top mode.
+
+Before the temperature, a scale per class of the consensus mode's residual over the kinematic prior is fitted on the
+validation split (:func:`fit_top_scale`; ``--no-top-scale`` keeps 1): where the network's refinement makes a class's
+most probable mode worse than its prior there, the mode moves towards the prior.
 """
 
 from __future__ import annotations
 
 import argparse
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 import torch
 
 from training.calibrate import calibrate_checkpoint
 from training.export import SLIM_KEYS, export_checkpoint, load_checkpoint
+from training.model import ConsensusEnsemble
+
+#: The residual scales tried for a class's most probable mode (:func:`fit_top_scale`); 1 is the network as trained.
+TOP_SCALES = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: A scale other than 1 is kept only if it lowers the class's validation top-1 ADE by at least this share.
+MIN_GAIN = 0.01
 
 
 def ensemble_checkpoint(runs: list[Path], out: Path, half: bool = False) -> Path:
@@ -41,6 +54,90 @@ def ensemble_checkpoint(runs: list[Path], out: Path, half: bool = False) -> Path
     return out
 
 
+def choose_scale(ade: npt.ArrayLike, scales: tuple[float, ...] = TOP_SCALES, min_gain: float = MIN_GAIN) -> float:
+    """The scale of ``scales`` with the lowest top-1 ADE ``ade`` (one per scale), kept only if it is at least
+    ``min_gain`` below the ADE at scale 1; else 1."""
+    a = np.asarray(ade, dtype=np.float64)
+    if a.shape != (len(scales),) or not np.isfinite(a).all():
+        raise ValueError(f"need one finite ADE per scale {scales}; got {a.tolist()}")
+    base = float(a[scales.index(1.0)])
+    i = int(np.argmin(a))
+    return float(scales[i]) if a[i] <= (1.0 - min_gain) * base else 1.0
+
+
+@torch.no_grad()
+def top_mode_errors(path: Path, data_root: Path | None = None, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """For every validation target of the ensemble checkpoint at ``path`` (its configuration's validation windows,
+    as the temperature's fit uses; scale 1 whatever the checkpoint holds): the ADE of its most probable mode at each
+    of :data:`TOP_SCALES` ``(N, S)``, and its class ``(N,)``."""
+    from dataclasses import replace
+
+    from training.loss import mode_probabilities
+    from training.train import forward_inputs, load_windows, prepared_batch, windows_with_targets
+
+    model, spec, anchors_np, class_of_np, cfg, temperature = load_checkpoint(path)
+    if not isinstance(model, ConsensusEnsemble):
+        raise ValueError(f"{path}: not an ensemble checkpoint (training.ensemble); a top-mode scale needs one")
+    model.top_scale.fill_(1.0)
+    if data_root is not None:
+        cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
+    w = load_windows(cfg, spec, "val", progress)
+    anchors, class_of = torch.from_numpy(anchors_np).float(), torch.from_numpy(class_of_np).long()
+    scales = torch.tensor(TOP_SCALES, dtype=torch.float32)[None, :, None, None]
+    errors, classes = [], []
+    keep = windows_with_targets(w)
+    for start in range(0, len(keep), 64):
+        b = prepared_batch(w, keep[start : start + 64], spec)
+        cl, al, off = model(*forward_inputs(b))
+        t = b["target"]
+        top = mode_probabilities(cl[t], al[t], class_of, temperature).argmax(dim=1)
+        residual = (anchors.unsqueeze(0) + off[t].float())[torch.arange(len(top)), top]  # (n, T, 2)
+        prior, future = b["prior"][t].float(), b["future"][t].float()
+        pred = prior.unsqueeze(1) + scales * residual.unsqueeze(1)  # (n, S, T, 2)
+        errors.append(torch.linalg.norm(pred - future.unsqueeze(1), dim=-1).mean(-1))
+        classes.append(b["state"][t, 7:].argmax(dim=1))
+    return torch.cat(errors).numpy(), torch.cat(classes).numpy()
+
+
+@dataclass(frozen=True)
+class TopScaleFit:
+    """Per class: its name, validation targets, top-1 ADE at each of :data:`TOP_SCALES` and the scale kept."""
+
+    classes: tuple[str, ...]
+    targets: tuple[int, ...]
+    ade: tuple[tuple[float, ...], ...]
+    scale: tuple[float, ...]
+
+    def __str__(self) -> str:
+        rows = [
+            f"{c} ({n} targets): top-1 ADE {' '.join(f'{x:.4f}' for x in a)} at scales {TOP_SCALES} -> {s:g}"
+            for c, n, a, s in zip(self.classes, self.targets, self.ade, self.scale, strict=True)
+        ]
+        return "top-mode scale on validation: " + "; ".join(rows)
+
+
+def fit_top_scale(path: Path, data_root: Path | None = None, progress: bool = False) -> TopScaleFit:
+    """Fits the top-mode residual scale of each class of the ensemble checkpoint at ``path`` on its validation split
+    (:func:`top_mode_errors`, :func:`choose_scale`; a class without validation targets keeps 1) and stores it there
+    as ``top_scale``."""
+    from training.train import save_atomic
+
+    errors, klass = top_mode_errors(path, data_root, progress)
+    names = load_checkpoint(path)[1].classes
+    seen = [bool((klass == i).any()) for i in range(len(names))]
+    ade = [errors[klass == i].mean(axis=0) if seen[i] else np.ones(len(TOP_SCALES)) for i in range(len(names))]
+    scale = [choose_scale(a) if seen[i] else 1.0 for i, a in enumerate(ade)]
+    ckpt = torch.load(path, weights_only=False)
+    ckpt["top_scale"] = scale
+    save_atomic(ckpt, path)
+    return TopScaleFit(
+        tuple(names),
+        tuple(int((klass == i).sum()) for i in range(len(names))),
+        tuple(tuple(float(x) for x in a) for a in ade),
+        tuple(scale),
+    )
+
+
 def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("runs", nargs="+", type=Path)
@@ -50,6 +147,7 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--description", default="")
     ap.add_argument("--data-root", type=Path, help="the data folder for the validation split (the runs' own if unset)")
     ap.add_argument("--no-calibrate", action="store_true", help="keep the first member's temperature")
+    ap.add_argument("--no-top-scale", action="store_true", help="keep every class's top mode as the consensus")
     ap.add_argument("--half", action="store_true", help="round the weights to float16 and store them so")
     a = ap.parse_args(argv)
     missing = [str(r) for r in a.runs if not (r / "best.pt").is_file()]
@@ -57,6 +155,8 @@ def main(argv: list[str] | None = None) -> Path:
         ap.error(f"not training runs (no best.pt): {', '.join(missing)}")
     with tempfile.TemporaryDirectory() as tmp:
         ckpt = ensemble_checkpoint(a.runs, a.checkpoint or Path(tmp) / "ensemble.pt", a.half)
+        if not a.no_top_scale:
+            print(fit_top_scale(ckpt, a.data_root, progress=True))
         if not a.no_calibrate:
             print(calibrate_checkpoint(ckpt, a.data_root, progress=True))
         description = a.description or f"Consensus of {len(a.runs)} runs: {', '.join(r.name for r in a.runs)}"

@@ -38,7 +38,8 @@ def load_checkpoint(
 ) -> tuple[DGAN | ConsensusEnsemble, dgan.InputSpec, np.ndarray, np.ndarray, Config, float]:
     """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor, the config and the
     temperature fitted on validation after training (1 for a checkpoint without one). An ensemble's checkpoint
-    (``training.ensemble``) holds its members' checkpoints: its anchors and config are its first member's."""
+    (``training.ensemble``) holds its members' checkpoints: its anchors and config are its first member's, and its
+    ``top_scale`` (per class, ``training.ensemble.fit_top_scale``) if fitted."""
     ckpt = torch.load(path, weights_only=False)
     if "members" in ckpt:
         members = [_member(m) for m in ckpt["members"]]
@@ -47,7 +48,9 @@ def load_checkpoint(
             if other[1].to_json() != first[1].to_json() or not np.array_equal(other[3], first[3]):
                 raise ValueError(f"{path}: the ensemble's members take different inputs or classes")
         tables = [torch.from_numpy(np.asarray(m[2], dtype=np.float32)) for m in members]
-        ensemble = ConsensusEnsemble([m[0] for m in members], tables, len(first[1].classes)).eval()
+        ensemble = ConsensusEnsemble(
+            [m[0] for m in members], tables, len(first[1].classes), ckpt.get("top_scale")
+        ).eval()
         return ensemble, first[1], first[2], first[3], first[4], float(ckpt.get("temperature", 1.0))
     model, spec, anchors, class_of, cfg = _member(ckpt)
     return model, spec, anchors, class_of, cfg, float(ckpt.get("temperature", 1.0))

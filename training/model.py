@@ -288,11 +288,18 @@ class ConsensusEnsemble(nn.Module):
     class is the consensus; the other modes are the first member's.
 
     Averaging the members' most probable futures cancels much of the run-to-run spread (``training.seed_study``).
+
+    ``top_scale (C,)``: per class, how much of the consensus mode's residual over the prior is kept
+    (``prior + s_c · residual``; 1 by default, 0 is the prior itself), fitted on validation by
+    ``training.ensemble.fit_top_scale`` for classes whose top mode the network refines for the worse.
     """
 
     anchors: Tensor
+    top_scale: Tensor
 
-    def __init__(self, members: list[nn.Module], anchors: list[Tensor], classes: int) -> None:
+    def __init__(
+        self, members: list[nn.Module], anchors: list[Tensor], classes: int, top_scale: list[float] | None = None
+    ) -> None:
         super().__init__()
         if not members or len(members) != len(anchors):
             raise ValueError("an ensemble needs one anchor set per member, and at least one member")
@@ -303,6 +310,10 @@ class ConsensusEnsemble(nn.Module):
         self.classes, self.per_class = classes, shape[0] // classes
         # (M, C, Kc, T, 2): anchors grouped by class, as the contract stores them.
         self.register_buffer("anchors", torch.stack([a.reshape(classes, self.per_class, *shape[1:]) for a in anchors]))
+        scale = [1.0] * classes if top_scale is None else [float(x) for x in top_scale]
+        if len(scale) != classes or not all(0.0 <= x <= 1.0 for x in scale):
+            raise ValueError(f"top_scale needs one value in [0, 1] per class ({classes}); got {top_scale}")
+        self.register_buffer("top_scale", torch.tensor(scale, dtype=torch.float32))
 
     def combine(self, outs: list[tuple[Tensor, Tensor, Tensor]]) -> tuple[Tensor, Tensor, Tensor]:
         cl0, al0, off0 = outs[0]
@@ -314,7 +325,8 @@ class ConsensusEnsemble(nn.Module):
             modes = self.anchors[m].unsqueeze(0) + off.reshape(n, c, kc, *tail)
             tops.append(modes.gather(2, best[:, :, None, None, None].expand(n, c, 1, *tail)).squeeze(2))
             bests.append(best)
-        consensus = torch.stack(tops).mean(0)  # (N, C, T, 2)
+        # (N, C, T, 2), relative to the prior; scaled per class towards it.
+        consensus = torch.stack(tops).mean(0) * self.top_scale.to(off0.dtype)[None, :, None, None]
         best0 = bests[0]
         # Only in the block of the most probable class (the class is an input, so p(c) is all but one-hot there):
         # the other blocks keep the first member's modes, which vary continuously with the inputs, while a block's

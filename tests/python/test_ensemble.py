@@ -1,5 +1,6 @@
 """training.ensemble and training.model.ConsensusEnsemble: the consensus of the members' most probable modes, its
-export under the contract (engine–PyTorch parity) and float16 weight storage."""
+export under the contract (engine–PyTorch parity), float16 weight storage, and the top mode's residual scale per
+class fitted on validation."""
 
 from __future__ import annotations
 
@@ -10,12 +11,13 @@ import numpy as np
 import onnx
 import pytest
 import torch
+from conftest import shared_data
 from onnx import TensorProto, helper, numpy_helper
 from test_training import assert_parity, randomised_batch_norm
 
 import dgan
 from training.config import Config
-from training.ensemble import ensemble_checkpoint
+from training.ensemble import TOP_SCALES, choose_scale, ensemble_checkpoint, fit_top_scale, top_mode_errors
 from training.export import export_model, load_checkpoint, store_half
 from training.model import ConsensusEnsemble
 from training.train import build_model, input_spec
@@ -23,14 +25,26 @@ from training.train import build_model, input_spec
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_the_top_mode_of_the_top_class_is_the_mean_of_the_members_top_modes() -> None:
-    g = torch.Generator().manual_seed(0)
-    n, c, kc, t = 6, 3, 4, 6
-    anchors = [torch.randn(c * kc, t, 2, generator=g) for _ in range(3)]
+Outputs = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+def _random_members(
+    seed: int, members: int, n: int, c: int, kc: int, t: int
+) -> tuple[list[torch.Tensor], list[Outputs]]:
+    """Random anchors ``(c·kc, t, 2)`` and network outputs (class logits, anchor logits, offsets) of ``members``
+    members for ``n`` agents."""
+    g = torch.Generator().manual_seed(seed)
+    anchors = [torch.randn(c * kc, t, 2, generator=g) for _ in range(members)]
     outs = [
         (torch.randn(n, c, generator=g), torch.randn(n, c * kc, generator=g), torch.randn(n, c * kc, t, 2, generator=g))
-        for _ in range(3)
+        for _ in range(members)
     ]
+    return anchors, outs
+
+
+def test_the_top_mode_of_the_top_class_is_the_mean_of_the_members_top_modes() -> None:
+    n, c, kc, t = 6, 3, 4, 6
+    anchors, outs = _random_members(0, 3, n, c, kc, t)
     ens = ConsensusEnsemble([torch.nn.Identity() for _ in range(3)], anchors, c)
     cl, al, off = ens.combine(outs)
     assert torch.equal(cl, outs[0][0])  # the ranking is the first member's
@@ -46,6 +60,98 @@ def test_the_top_mode_of_the_top_class_is_the_mean_of_the_members_top_modes() ->
         torch.testing.assert_close(anchors[0][k0] + off[i, k0], torch.stack(tops).mean(0))
         others = [k for k in range(c * kc) if k != k0]
         assert torch.equal(off[i, others], outs[0][2][i, others])  # every other mode is the first member's
+
+
+def test_the_top_scale_moves_the_consensus_towards_the_prior_per_class() -> None:
+    n, c, kc, t = 9, 3, 4, 5
+    anchors, outs = _random_members(1, 2, n, c, kc, t)
+    members: list[torch.nn.Module] = [torch.nn.Identity(), torch.nn.Identity()]
+    full = ConsensusEnsemble(members, anchors, c).combine(outs)[2]
+    scale = [0.0, 0.5, 1.0]
+    scaled = ConsensusEnsemble(members, anchors, c, scale).combine(outs)[2]
+    for i in range(n):
+        b = int(outs[0][0][i].argmax())
+        k0 = b * kc + int(outs[0][1][i, b * kc : (b + 1) * kc].argmax())
+        # The top mode's residual over the prior (anchor + offset) is scaled by its class's share; 0 is the prior.
+        torch.testing.assert_close(anchors[0][k0] + scaled[i, k0], scale[b] * (anchors[0][k0] + full[i, k0]))
+        others = [k for k in range(c * kc) if k != k0]
+        assert torch.equal(scaled[i, others], full[i, others])
+
+
+def test_the_top_scale_needs_one_share_per_class() -> None:
+    anchors = [torch.zeros(6, 3, 2)]
+    for bad in ([1.0], [0.5, 1.5], [-0.1, 1.0], [float("nan"), 1.0]):
+        with pytest.raises(ValueError, match="one value in"):
+            ConsensusEnsemble([torch.nn.Identity()], anchors, 2, bad)
+
+
+def test_a_scale_is_kept_only_for_a_gain_of_at_least_one_percent() -> None:
+    assert choose_scale([0.43, 0.432, 0.435, 0.44, 0.445]) == 0.0  # 3.4% below scale 1
+    assert choose_scale([1.9, 1.77, 1.66, 1.58, 1.543]) == 1.0  # scale 1 is best
+    assert choose_scale([0.268, 0.267, 0.2665, 0.268, 0.2688]) == 1.0  # best is 0.9% below: not enough
+    assert choose_scale([2.0, 1.9, 1.5, 1.6, 2.0]) == 0.5
+    with pytest.raises(ValueError, match="one finite ADE per scale"):
+        choose_scale([0.4, 0.4, float("nan"), 0.4, 0.4])
+    with pytest.raises(ValueError, match="one finite ADE per scale"):
+        choose_scale([0.4, 0.4])
+
+
+def _apollo_runs(tmp_path: Path, seeds: tuple[int, ...]) -> list[Path]:
+    """Untrained ApolloScape networks with random anchors saved as training runs, reading the shared data."""
+    from dataclasses import asdict
+
+    runs = []
+    for seed in seeds:
+        torch.manual_seed(seed)
+        overrides = {"data.root": str(shared_data("apolloscape_trajectory")), "train.seed": seed}
+        cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", overrides)
+        spec = input_spec(cfg)
+        kc = 3
+        k = kc * len(spec.classes)
+        anchors = np.cumsum(np.random.default_rng(seed).normal(0.5, 0.3, (k, spec.t_f, 2)), axis=1)
+        run = tmp_path / f"apollo{seed}"
+        run.mkdir()
+        ckpt = {
+            "model": randomised_batch_norm(build_model(cfg, spec, k).eval()).state_dict(),
+            "anchors": anchors.astype(np.float32),
+            "class_of": np.repeat(np.arange(len(spec.classes)), kc),
+            "config": asdict(cfg),
+            "epoch": 0,
+        }
+        torch.save(ckpt, run / "best.pt")
+        (run / "config.json").write_text(json.dumps({"config": asdict(cfg)}))
+        runs.append(run)
+    return runs
+
+
+def test_the_top_scale_is_fitted_on_validation_stored_and_exported(tmp_path: Path) -> None:
+    ckpt = ensemble_checkpoint(_apollo_runs(tmp_path, (0, 1)), tmp_path / "ensemble.pt")
+    errors, klass = top_mode_errors(ckpt)
+    assert errors.shape == (len(klass), len(TOP_SCALES))
+    assert np.isfinite(errors).all()
+    fit = fit_top_scale(ckpt)
+    assert fit.classes == ("vehicle", "cyclist", "pedestrian")
+    assert sum(fit.targets) == len(klass)
+    for i, (ade, s) in enumerate(zip(fit.ade, fit.scale, strict=True)):
+        np.testing.assert_allclose(ade, errors[klass == i].mean(axis=0), rtol=1e-6)
+        assert s == choose_scale(ade)
+    # Random anchors and untrained networks refine nothing: the prior alone is best for some class.
+    assert 0.0 in fit.scale
+    assert "top-mode scale on validation" in str(fit)
+    model, spec, anchors, class_of, _, temperature = load_checkpoint(ckpt)
+    assert isinstance(model, ConsensusEnsemble)
+    assert model.top_scale.tolist() == list(fit.scale)
+    # The scale is part of the exported graph: the engine matches PyTorch with it.
+    path = export_model(model, spec, anchors, class_of, tmp_path / "scaled.onnx", "scaled", temperature=temperature)
+    assert_parity(model, spec, anchors, class_of, path, temperature)
+    # Fitting again measures the network at scale 1 whatever the checkpoint holds: the same scales.
+    assert fit_top_scale(ckpt).scale == fit.scale
+
+
+def test_a_single_run_has_no_top_scale(tmp_path: Path) -> None:
+    run = _apollo_runs(tmp_path, (0,))[0]
+    with pytest.raises(ValueError, match="not an ensemble checkpoint"):
+        top_mode_errors(run / "best.pt")
 
 
 def test_members_need_the_same_anchor_layout() -> None:
@@ -136,3 +242,18 @@ def test_store_half_keeps_only_exact_weights(tmp_path: Path) -> None:
     x = np.ones((1, 4), dtype=np.float32)
     session = ort.InferenceSession(m.SerializeToString(), providers=["CPUExecutionProvider"])
     np.testing.assert_allclose(session.run(None, {"x": x})[0], x @ exact @ inexact, rtol=1e-6)
+
+
+def test_fold_checkpoints_take_the_models_top_scale(tmp_path: Path) -> None:
+    from training.bundle import with_scale
+
+    runs, _ = _members(tmp_path, (0, 1))
+    ckpt = ensemble_checkpoint(runs, tmp_path / "fold.pt")
+    with_scale(ckpt, None)  # nothing to store: unchanged
+    assert "top_scale" not in torch.load(ckpt, weights_only=False)
+    with_scale(ckpt, [1.0, 0.5, 0.0])
+    model = load_checkpoint(ckpt)[0]
+    assert isinstance(model, ConsensusEnsemble)
+    assert model.top_scale.tolist() == [1.0, 0.5, 0.0]
+    with pytest.raises(ValueError, match="needs an ensemble checkpoint"):
+        with_scale(runs[0] / "best.pt", [1.0, 1.0, 1.0])
