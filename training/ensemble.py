@@ -65,11 +65,24 @@ def choose_scale(ade: npt.ArrayLike, scales: tuple[float, ...] = TOP_SCALES, min
     return float(scales[i]) if a[i] <= (1.0 - min_gain) * base else 1.0
 
 
+def scaled_errors(
+    top: npt.ArrayLike, prior: npt.ArrayLike, truth: npt.ArrayLike, scales: tuple[float, ...] = TOP_SCALES
+) -> np.ndarray:
+    """``(N, len(scales))`` ADE of ``prior + s (top - prior)`` for each scale s; ``top``, ``prior`` and ``truth`` are
+    ``(N, t_f, 2)``."""
+    t, p, y = (np.asarray(a, dtype=np.float64) for a in (top, prior, truth))
+    s = np.asarray(scales, dtype=np.float64)[None, :, None, None]
+    pred = p[:, None] + s * (t - p)[:, None]
+    return np.asarray(np.linalg.norm(pred - y[:, None], axis=3).mean(axis=2), dtype=np.float64)
+
+
 @torch.no_grad()
-def top_mode_errors(path: Path, data_root: Path | None = None, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def top_mode_errors(
+    path: Path, data_root: Path | None = None, progress: bool = False
+) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """For every validation target of the ensemble checkpoint at ``path`` (its configuration's validation windows,
     as the temperature's fit uses; scale 1 whatever the checkpoint holds): the ADE of its most probable mode at each
-    of :data:`TOP_SCALES` ``(N, S)``, and its class ``(N,)``."""
+    of :data:`TOP_SCALES` ``(N, S)`` (:func:`scaled_errors`), its class index ``(N,)``, and the model's classes."""
     from dataclasses import replace
 
     from training.loss import mode_probabilities
@@ -83,7 +96,6 @@ def top_mode_errors(path: Path, data_root: Path | None = None, progress: bool = 
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     w = load_windows(cfg, spec, "val", progress)
     anchors, class_of = torch.from_numpy(anchors_np).float(), torch.from_numpy(class_of_np).long()
-    scales = torch.tensor(TOP_SCALES, dtype=torch.float32)[None, :, None, None]
     errors, classes = [], []
     keep = windows_with_targets(w)
     for start in range(0, len(keep), 64):
@@ -92,11 +104,10 @@ def top_mode_errors(path: Path, data_root: Path | None = None, progress: bool = 
         t = b["target"]
         top = mode_probabilities(cl[t], al[t], class_of, temperature).argmax(dim=1)
         residual = (anchors.unsqueeze(0) + off[t].float())[torch.arange(len(top)), top]  # (n, T, 2)
-        prior, future = b["prior"][t].float(), b["future"][t].float()
-        pred = prior.unsqueeze(1) + scales * residual.unsqueeze(1)  # (n, S, T, 2)
-        errors.append(torch.linalg.norm(pred - future.unsqueeze(1), dim=-1).mean(-1))
+        prior = b["prior"][t].double()
+        errors.append(scaled_errors((prior + residual).numpy(), prior.numpy(), b["future"][t].numpy()))
         classes.append(b["state"][t, 7:].argmax(dim=1))
-    return torch.cat(errors).numpy(), torch.cat(classes).numpy()
+    return np.concatenate(errors), torch.cat(classes).numpy(), tuple(spec.classes)
 
 
 @dataclass(frozen=True)
@@ -122,8 +133,7 @@ def fit_top_scale(path: Path, data_root: Path | None = None, progress: bool = Fa
     as ``top_scale``."""
     from training.train import save_atomic
 
-    errors, klass = top_mode_errors(path, data_root, progress)
-    names = load_checkpoint(path)[1].classes
+    errors, klass, names = top_mode_errors(path, data_root, progress)
     seen = [bool((klass == i).any()) for i in range(len(names))]
     ade = [errors[klass == i].mean(axis=0) if seen[i] else np.ones(len(TOP_SCALES)) for i in range(len(names))]
     scale = [choose_scale(a) if seen[i] else 1.0 for i, a in enumerate(ade)]

@@ -12,9 +12,9 @@ targets' futures in their agent frames.
     python -m training.prior_study --residual-scale [--data-root ../shared/data]
 
 How much of the network's refinement helps, per class: the bundled model's most probable mode with its residual over
-the engine's own prior (``dgan.preprocess``'s ``prior``, in world coordinates) scaled by s,
-``prior + s (top mode - prior)``, on the same validation targets in world metres; s = 1 is the model, s = 0 the prior
-alone.
+the engine's prior scaled by s, ``prior + s (top mode - prior)``, on its validation windows (the ones its temperature
+and top-mode scale are fitted on: ``training.ensemble.top_mode_errors``, which measures the network's own refinement
+whatever scale the model was bundled with); s = 1 is the network, s = 0 the prior alone.
 """
 
 from __future__ import annotations
@@ -28,11 +28,12 @@ import numpy.typing as npt
 import dgan
 from training.config import DataConfig
 from training.data import cached_windows
-from training.datasets import DATASETS
-from training.evaluate import rows_of, scored_windows
+from training.ensemble import TOP_SCALES, top_mode_errors
 
 Arr = npt.NDArray[np.float64]
 
+#: The bundled models' checkpoints.
+CHECKPOINTS = Path(__file__).resolve().parent / "checkpoints"
 #: (bundled model, dataset).
 MODELS = (("hdmap", "hdmap"), ("apolloscape", "apolloscape"))
 
@@ -83,33 +84,16 @@ def study(root: Path) -> dict[str, dict[str, dict[str, tuple[float, float]]]]:
     return out
 
 
-#: The residual scales measured by ``residual_scale_study``.
-SCALES = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25)
-
-
-def scaled_errors(top: Arr, prior: Arr, truth: Arr, scales: tuple[float, ...] = SCALES) -> Arr:
-    """``(N, len(scales))`` ADE of ``prior + s (top - prior)`` for each scale s; ``top``, ``prior`` and ``truth`` are
-    ``(N, t_f, 2)``."""
-    s = np.asarray(scales, dtype=np.float64)[None, :, None, None]
-    pred = prior[:, None] + s * (top - prior)[:, None]
-    return np.asarray(np.linalg.norm(pred - truth[:, None], axis=3).mean(axis=2), dtype=np.float64)
-
-
 def residual_scale_study(root: Path) -> dict[str, dict[str, tuple[int, list[float]]]]:
-    """Per driving model and class: the number of validation targets and the top mode's ADE at each of ``SCALES``."""
+    """Per driving model and class: its validation targets and its top mode's ADE at each of ``TOP_SCALES``."""
     out: dict[str, dict[str, tuple[int, list[float]]]] = {}
-    for model, dataset in MODELS:
-        predictor = dgan.Predictor(model)
-        info = DATASETS[dataset]
-        errors: dict[str, list[Arr]] = {}
-        for sw in scored_windows(predictor.spec, dataset, root, "val"):
-            sub = rows_of(predictor.predict(sw.frame), sw.target, sw.unit)
-            geo = dgan.preprocess(sw.frame, predictor.spec)
-            prior = dgan.to_world_frame(geo["prior"].astype(np.float64), geo["origin"], geo["heading"])
-            e = scaled_errors(sub.trajectories[:, 0].astype(np.float64), prior[sw.target] / sw.unit, sw.truth)
-            for i, label in enumerate(sw.label):
-                errors.setdefault(info.label_class[label], []).append(e[i] * sw.unit)
-        out[model] = {c: (len(v), np.mean(v, axis=0).tolist()) for c, v in errors.items()}
+    for model, _ in MODELS:
+        errors, klass, classes = top_mode_errors(CHECKPOINTS / f"{model}.pt", root)
+        out[model] = {
+            c: (int((klass == i).sum()), errors[klass == i].mean(axis=0).tolist())
+            for i, c in enumerate(classes)
+            if (klass == i).any()
+        }
     return out
 
 
@@ -121,7 +105,7 @@ def main() -> None:
     if a.residual_scale:
         for model, by_class in residual_scale_study(a.data_root.expanduser()).items():
             for name, (n, ade) in by_class.items():
-                cells = "  ".join(f"s={s:g} {x:.3f}" for s, x in zip(SCALES, ade, strict=True))
+                cells = "  ".join(f"s={s:g} {x:.3f}" for s, x in zip(TOP_SCALES, ade, strict=True))
                 print(f"{model:12s} {name:10s} n={n:5d}  {cells}")
         return
     for model, classes in study(a.data_root.expanduser()).items():

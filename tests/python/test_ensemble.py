@@ -17,7 +17,14 @@ from test_training import assert_parity, randomised_batch_norm
 
 import dgan
 from training.config import Config
-from training.ensemble import TOP_SCALES, choose_scale, ensemble_checkpoint, fit_top_scale, top_mode_errors
+from training.ensemble import (
+    TOP_SCALES,
+    choose_scale,
+    ensemble_checkpoint,
+    fit_top_scale,
+    scaled_errors,
+    top_mode_errors,
+)
 from training.export import export_model, load_checkpoint, store_half
 from training.model import ConsensusEnsemble
 from training.train import build_model, input_spec
@@ -96,6 +103,15 @@ def test_a_scale_is_kept_only_for_a_gain_of_at_least_one_percent() -> None:
         choose_scale([0.4, 0.4])
 
 
+def test_scaled_errors_run_from_the_prior_to_the_top_mode() -> None:
+    truth = np.zeros((1, 3, 2))
+    prior = np.tile([[[0.0, 2.0]]], (1, 3, 1))  # 2 m off at every step
+    top = np.tile([[[0.0, -2.0]]], (1, 3, 1))  # 2 m off the other way
+    e = scaled_errors(top, prior, truth, (0.0, 0.5, 1.0, 1.5))
+    # s = 0 is the prior, s = 1 the top mode, s = 0.5 halfway (on the truth), s = 1.5 beyond the top mode.
+    np.testing.assert_allclose(e, [[2.0, 0.0, 2.0, 4.0]], atol=1e-12)
+
+
 def _apollo_runs(tmp_path: Path, seeds: tuple[int, ...]) -> list[Path]:
     """Untrained ApolloScape networks with random anchors saved as training runs, reading the shared data."""
     from dataclasses import asdict
@@ -126,11 +142,11 @@ def _apollo_runs(tmp_path: Path, seeds: tuple[int, ...]) -> list[Path]:
 
 def test_the_top_scale_is_fitted_on_validation_stored_and_exported(tmp_path: Path) -> None:
     ckpt = ensemble_checkpoint(_apollo_runs(tmp_path, (0, 1)), tmp_path / "ensemble.pt")
-    errors, klass = top_mode_errors(ckpt)
+    errors, klass, classes = top_mode_errors(ckpt)
     assert errors.shape == (len(klass), len(TOP_SCALES))
     assert np.isfinite(errors).all()
     fit = fit_top_scale(ckpt)
-    assert fit.classes == ("vehicle", "cyclist", "pedestrian")
+    assert fit.classes == classes == ("vehicle", "cyclist", "pedestrian")
     assert sum(fit.targets) == len(klass)
     for i, (ade, s) in enumerate(zip(fit.ade, fit.scale, strict=True)):
         np.testing.assert_allclose(ade, errors[klass == i].mean(axis=0), rtol=1e-6)

@@ -1,10 +1,10 @@
-"""training.prior_study: the turning rollout against closed forms, and the residual scale."""
+"""training.prior_study: the turning rollout against closed forms."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from training.prior_study import scaled_errors, turning_rollout
+from training.prior_study import turning_rollout
 
 
 def test_without_turning_or_acceleration_it_is_constant_velocity() -> None:
@@ -21,12 +21,3 @@ def test_a_constant_turn_follows_the_circle_and_braking_stops() -> None:
     # 2 m/s braking at 1 m/s²: stops after 2 s, 2 m on, and stays there.
     r = turning_rollout(np.array([[2.0, 0.0]]), np.zeros(1), np.array([-1.0]), 1.0, 4, substeps=1000)
     np.testing.assert_allclose(r[0, :, 0], [1.5, 2.0, 2.0, 2.0], atol=2e-3)
-
-
-def test_scaled_errors_run_from_the_prior_to_the_top_mode() -> None:
-    truth = np.zeros((1, 3, 2))
-    prior = np.tile([[[0.0, 2.0]]], (1, 3, 1))  # 2 m off at every step
-    top = np.tile([[[0.0, -2.0]]], (1, 3, 1))  # 2 m off the other way
-    e = scaled_errors(top, prior, truth, (0.0, 0.5, 1.0, 1.5))
-    # s = 0 is the prior, s = 1 the top mode, s = 0.5 halfway (on the truth), s = 1.5 beyond the top mode.
-    np.testing.assert_allclose(e, [[2.0, 0.0, 2.0, 4.0]], atol=1e-12)
