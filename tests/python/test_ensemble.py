@@ -11,8 +11,8 @@ import numpy as np
 import onnx
 import pytest
 import torch
-from conftest import shared_data
 from onnx import TensorProto, helper, numpy_helper
+from test_calibrate import _apollo_checkpoint
 from test_training import assert_parity, randomised_batch_norm
 
 import dgan
@@ -113,29 +113,12 @@ def test_scaled_errors_run_from_the_prior_to_the_top_mode() -> None:
 
 
 def _apollo_runs(tmp_path: Path, seeds: tuple[int, ...]) -> list[Path]:
-    """Untrained ApolloScape networks with random anchors saved as training runs, reading the shared data."""
-    from dataclasses import asdict
-
+    """Untrained ApolloScape networks with random anchors (``test_calibrate``'s) saved as training runs."""
     runs = []
     for seed in seeds:
-        torch.manual_seed(seed)
-        overrides = {"data.root": str(shared_data("apolloscape_trajectory")), "train.seed": seed}
-        cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", overrides)
-        spec = input_spec(cfg)
-        kc = 3
-        k = kc * len(spec.classes)
-        anchors = np.cumsum(np.random.default_rng(seed).normal(0.5, 0.3, (k, spec.t_f, 2)), axis=1)
         run = tmp_path / f"apollo{seed}"
         run.mkdir()
-        ckpt = {
-            "model": randomised_batch_norm(build_model(cfg, spec, k).eval()).state_dict(),
-            "anchors": anchors.astype(np.float32),
-            "class_of": np.repeat(np.arange(len(spec.classes)), kc),
-            "config": asdict(cfg),
-            "epoch": 0,
-        }
-        torch.save(ckpt, run / "best.pt")
-        (run / "config.json").write_text(json.dumps({"config": asdict(cfg)}))
+        _apollo_checkpoint(run / "best.pt", "", 3, seed)
         runs.append(run)
     return runs
 
