@@ -163,7 +163,7 @@ def calibrate_checkpoint(
     ``folds``: checkpoints of the same configuration trained with other validation splits (cross-fitting,
     ``data.val_recordings``); their predictions on their own validation splits join the fit, which then sees every
     fold's validation data instead of one split's."""
-    from training.train import save_atomic
+    from training.train import update_checkpoint
 
     cl, al, best, class_of = validation_logits(path, data_root, progress)
     parts = [(cl, al, best)]
@@ -174,7 +174,5 @@ def calibrate_checkpoint(
         parts.append((fold_cl, fold_al, fold_best))
     cl, al, best = (torch.cat(x) for x in zip(*parts, strict=True))
     found = replace(choose_temperature(cl, al, best, class_of), folds=len(parts))
-    ckpt = torch.load(path, weights_only=False)
-    ckpt["temperature"] = found.temperature
-    save_atomic(ckpt, path)
+    update_checkpoint(path, temperature=found.temperature)
     return found

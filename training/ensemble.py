@@ -131,15 +131,13 @@ def fit_top_scale(path: Path, data_root: Path | None = None, progress: bool = Fa
     """Fits the top-mode residual scale of each class of the ensemble checkpoint at ``path`` on its validation split
     (:func:`top_mode_errors`, :func:`choose_scale`; a class without validation targets keeps 1) and stores it there
     as ``top_scale``."""
-    from training.train import save_atomic
+    from training.train import update_checkpoint
 
     errors, klass, names = top_mode_errors(path, data_root, progress)
     seen = [bool((klass == i).any()) for i in range(len(names))]
     ade = [errors[klass == i].mean(axis=0) if seen[i] else np.ones(len(TOP_SCALES)) for i in range(len(names))]
     scale = [choose_scale(a) if seen[i] else 1.0 for i, a in enumerate(ade)]
-    ckpt = torch.load(path, weights_only=False)
-    ckpt["top_scale"] = scale
-    save_atomic(ckpt, path)
+    update_checkpoint(path, top_scale=scale)
     return TopScaleFit(
         tuple(names),
         tuple(int((klass == i).sum()) for i in range(len(names))),

@@ -290,10 +290,19 @@ def optimiser(cfg: Config, model: torch.nn.Module) -> tuple[torch.optim.Optimize
 def save_atomic(state: dict[str, Any], path: Path) -> None:
     """``torch.save`` to a temporary file beside ``path``, then renamed over it: a run stopped while it saves (a
     time limit, a killed job) keeps its previous checkpoint whole, so ``--resume`` still loads. Every rewrite of an
-    existing checkpoint goes through it (each epoch's, the temperature's after training or at bundling)."""
+    existing checkpoint goes through it (each epoch's, the temperature's and top-mode scales after training or at
+    bundling: :func:`update_checkpoint`)."""
     tmp = path.with_name(path.name + ".tmp")
     torch.save(state, tmp)
     os.replace(tmp, path)
+
+
+def update_checkpoint(path: Path, **values: Any) -> None:
+    """Sets ``values`` (a fitted temperature, top-mode scales) in the checkpoint at ``path``, saved with
+    :func:`save_atomic`."""
+    ckpt = torch.load(path, weights_only=False)
+    ckpt.update(values)
+    save_atomic(ckpt, path)
 
 
 def resume(
