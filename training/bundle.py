@@ -80,7 +80,13 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
     parts = []
     if prior != "none":
         window = d.get("prior_window_s", 0.0)
-        how = f"the mean velocity over the last {window:g} s" if window else "the velocity of the last two steps"
+        fit = d.get("prior_fit", "endpoints")
+        how = "the velocity of the last two steps"
+        if window:
+            how = f"{'a least-squares' if fit == 'least_squares' else 'the mean'} velocity over the last {window:g} s"
+        standing = d.get("prior_standing_mps", 0.0)
+        if standing:
+            how += f", standing below {standing:g} m/s"
         parts.append(f"The network refines a constant-velocity rollout ({how}) computed by the engine.")
     if t.get("map_dropout", 0.0) > 0 and d.get("use_map", True) and cfg["model"].get("use_map", True):
         parts.append(

@@ -28,6 +28,10 @@ class DataConfig:
     # "constant_velocity"; prior_window_s > 0 estimates its velocity over that many seconds of observed positions.
     prior: str = "none"
     prior_window_s: float = 0.0
+    # How that window's velocity is estimated: "endpoints" or "least_squares" (a line through every valid position);
+    # agents slower than prior_standing_mps (m/s, 0 = never) get a standing prior (dgan.PriorSpec).
+    prior_fit: str = "endpoints"
+    prior_standing_mps: float = 0.0
     # Where agents' headings come from (dgan.InputSpec.heading): "measured", "motion_when_moving" or "motion".
     heading: str = "measured"
     # ETH/UCY only: pedestrians of other sources added to the training windows (training.datasets.PEDESTRIAN_SOURCES,
@@ -42,6 +46,11 @@ class DataConfig:
     # (comma-separated numbers; never a test recording), for the folds of a cross-fitted temperature
     # (train.calibration_folds, training.bundle --calibration-fold).
     val_recordings: str = ""
+    # Tracker-like augmentation (training.augment.tracker_noise): one noisy copy of the training windows per
+    # comma-separated sigma (metres of Gaussian noise on the observed positions), each with augment_drop of the
+    # observed steps before the current one dropped; "" = none. Validation and test stay as recorded.
+    augment_noise: str = ""
+    augment_drop: float = 0.1
 
 
 @dataclass(frozen=True)

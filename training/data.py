@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
+from training.augment import tracker_noise
 from training.datasets import DATASETS, DatasetInfo, Recording, pedestrian_recordings, recordings, source_files
 
 Arr = npt.NDArray[Any]
@@ -186,9 +187,16 @@ def iter_windows(
 
 
 def build_windows(
-    recs: Sequence[Recording], info: DatasetInfo, spec: dgan.InputSpec, stride: int = 1, progress: bool = True
+    recs: Sequence[Recording],
+    info: DatasetInfo,
+    spec: dgan.InputSpec,
+    stride: int = 1,
+    progress: bool = True,
+    noise: tuple[float, float] = (0.0, 0.0),
 ) -> Windows:
-    """Preprocesses every window of ``recs`` through the engine."""
+    """Preprocesses every window of ``recs`` through the engine; ``noise = (sigma_m, drop)`` first corrupts the
+    observed histories as a tracker would (:func:`training.augment.tracker_noise`, seeded by the recording's order),
+    the futures staying as recorded."""
     from tqdm import tqdm
 
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
@@ -196,7 +204,10 @@ def build_windows(
     class_of_label = np.array([list(spec.classes).index(c) for c in info.label_class])
     for fi, rec in enumerate(recs):
         windows = list(iter_windows(rec, info, spec.t_obs, spec.t_f, stride))
+        rng = np.random.default_rng(fi)
         for w in tqdm(windows, desc=rec.name, disable=not progress, leave=False):
+            if noise != (0.0, 0.0):
+                w = noisy_window(w, spec.t_obs, noise, rng)
             x = dgan.preprocess(w.frame(info, spec.t_obs, with_map=spec.map is not None), spec)
             fut = np.where(w.mask[:, spec.t_obs :, None], w.positions[:, spec.t_obs :], 0.0)
             future = dgan.to_agent_frame(fut, x["origin"], x["heading"])
@@ -219,6 +230,17 @@ def build_windows(
         edge_ptr=np.array(edge_ptr),
         files=[r.name for r in recs],
         **cat,
+    )
+
+
+def noisy_window(w: Window, t_obs: int, noise: tuple[float, float], rng: np.random.Generator) -> Window:
+    """``w`` with its observed steps corrupted by :func:`training.augment.tracker_noise` (``noise = (sigma_m,
+    drop)``); the future steps and the targets stay as they were."""
+    pos, keep = tracker_noise(w.positions[:, :t_obs], w.mask[:, :t_obs], *noise, rng)
+    return replace(
+        w,
+        positions=np.concatenate([pos, w.positions[:, t_obs:]], axis=1),
+        mask=np.concatenate([keep, w.mask[:, t_obs:]], axis=1),
     )
 
 
@@ -296,13 +318,18 @@ def cached_windows(
     fold: str = "",
     stride: int = 1,
     progress: bool = True,
+    noise: tuple[float, float] = (0.0, 0.0),
 ) -> Windows:
-    """``build_windows`` for one split of a dataset (``fold``: the held-out ETH/UCY scene), cached under
-    ``cache_dir`` by content."""
+    """``build_windows`` for one split of a dataset (``fold``: the held-out ETH/UCY scene; ``noise``: tracker-like
+    histories), cached under ``cache_dir`` by content."""
 
     def build() -> Windows:
         recs = recordings(dataset, data_root, split, fold, with_map=spec.map is not None)
-        return build_windows(recs, DATASETS[dataset], spec, stride, progress)
+        return build_windows(recs, DATASETS[dataset], spec, stride, progress, noise)
 
     files = source_files(dataset, data_root, split, fold)
-    return _cached(cache_dir, f"{dataset}{'_' + fold if fold else ''}_{split}", spec, files, stride, "v7", build)
+    info = DATASETS[dataset]
+    # v8: every fully observed agent is a target (hdmap dropped those moving under 1 m before).
+    version = f"v8-move{info.min_move_m:g}" + (f"-noise{noise[0]:g}-drop{noise[1]:g}" if noise != (0.0, 0.0) else "")
+    stem = f"{dataset}{'_' + fold if fold else ''}_{split}"
+    return _cached(cache_dir, stem, spec, files, stride, version, build)

@@ -93,7 +93,7 @@ DATASETS: dict[str, DatasetInfo] = {
         has_map=False,
     ),
     "hdmap": DatasetInfo(
-        "hdmap", 0.2, 10, 15, dgan.CLASSES, dgan.CLASSES, (True,) * 3, "m", min_targets=1, has_map=True, min_move_m=1.0
+        "hdmap", 0.2, 10, 15, dgan.CLASSES, dgan.CLASSES, (True,) * 3, "m", min_targets=1, has_map=True
     ),
 }
 DATASETS["argoverse2"] = replace(DATASETS["hdmap"], name="argoverse2")

@@ -5,9 +5,10 @@ constant-velocity baseline on the very same windows and agents.
     python -m training.evaluate MODEL.onnx --dataset sdd
 
 Windows are built exactly as for training (``training.data.iter_windows``); the targets are the agents of a scored
-label present at all T_obs + T_f steps. Errors are in the dataset's unit (metres; pixels for Stanford Drone), overall,
-per class and per label. Also: the accuracy of the most probable class, and the calibration of the mode probabilities
-(how often a mode given probability p is the best of all K modes).
+label present at all T_obs + T_f steps, standing ones too. Errors are in the dataset's unit (metres; pixels for
+Stanford Drone), overall, per class and per label, and for moving and standing targets (moved less than 1 m from the
+first observed to the last true position) overall and per class. Also: the accuracy of the most probable class,
+and the calibration of the mode probabilities (how often a mode given probability p is the best of all K modes).
 """
 
 from __future__ import annotations
@@ -23,18 +24,21 @@ import numpy as np
 
 import dgan
 from training import metrics
+from training.augment import tracker_noise
 from training.data import iter_windows
 from training.datasets import DATASETS, recordings
 
 #: Edges of the probability bins of the reliability diagram.
 CALIBRATION_BINS = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
+#: A target that moves less than this many metres from its first observed to its last true position stands.
+STANDING_M = 1.0
 
 
 @dataclass
 class Scored:
     """One window's targets as every accuracy table scores them: the frame the model is given, the target rows, and
     the targets' truth ``(n, T_f, 2)``, constant-velocity variants ``{name: (n, 1, T_f, 2)}`` (both in the dataset's
-    unit) and labels."""
+    unit), labels and whether each target moves (:data:`STANDING_M`)."""
 
     frame: dgan.Frame
     target: np.ndarray
@@ -42,17 +46,35 @@ class Scored:
     truth: np.ndarray
     cvs: dict[str, np.ndarray]
     label: np.ndarray
+    moving: np.ndarray
 
 
 def scored_windows(
-    spec: dgan.InputSpec, dataset: str, root: Path, split: str, fold: str = "", with_map: bool = True
+    spec: dgan.InputSpec,
+    dataset: str,
+    root: Path,
+    split: str,
+    fold: str = "",
+    with_map: bool = True,
+    noise: tuple[float, float] = (0.0, 0.0),
 ) -> Iterator[Scored]:
     """Every window of a split, built as for training (``iter_windows``), with its targets' truth and constant
-    velocity; ``with_map=False`` (or a spec without a map) gives frames without their map."""
+    velocity; ``with_map=False`` (or a spec without a map) gives frames without their map. ``noise = (sigma_m,
+    drop)`` corrupts the observed histories as a tracker would (:func:`training.augment.tracker_noise`, seeded per
+    split): the model and constant velocity both see the noisy history, the truth stays as recorded."""
     info = DATASETS[dataset]
     use_map = with_map and spec.map is not None
+    rng = np.random.default_rng(0)
     for rec in recordings(dataset, root, split, fold, with_map=use_map):
         for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
+            moving = np.linalg.norm(w.positions[w.target, -1] - w.positions[w.target, 0], axis=1) >= STANDING_M
+            if noise != (0.0, 0.0):
+                pos, keep = tracker_noise(w.positions[:, : spec.t_obs], w.mask[:, : spec.t_obs], *noise, rng)
+                w = replace(
+                    w,
+                    positions=np.concatenate([pos, w.positions[:, spec.t_obs :]], axis=1),
+                    mask=np.concatenate([keep, w.mask[:, spec.t_obs :]], axis=1),
+                )
             t = w.target
             unit = rec.unit_m
             obs, obs_mask = w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs]
@@ -60,7 +82,7 @@ def scored_windows(
                 k: v / unit for k, v in metrics.constant_velocity_variants(obs, obs_mask, spec.t_f, spec.dt_s).items()
             }
             truth = w.positions[t, spec.t_obs :] / unit
-            yield Scored(w.frame(info, spec.t_obs, with_map=use_map), t, unit, truth, cvs, w.label[t])
+            yield Scored(w.frame(info, spec.t_obs, with_map=use_map), t, unit, truth, cvs, w.label[t], moving)
 
 
 def agent_metrics(pred: dgan.Prediction, gt: np.ndarray, cvs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -116,6 +138,7 @@ def evaluate(
     fold: str = "",
     with_map: bool = True,
     split: str = "test",
+    noise: tuple[float, float] = (0.0, 0.0),
 ) -> dict[str, Any]:
     """Per-agent metrics of the model and of constant velocity on a split (``"test"``; ``"val"`` for model
     selection), averaged overall (flat keys), per
@@ -129,18 +152,19 @@ def evaluate(
             f"(dt {info.dt_s} s, {info.t_obs} + {info.t_f} steps)"
         )
     per: dict[str, list[np.ndarray]] = {}
-    labels, classes, pred_class, mode_p, mode_p_raw, mode_hit = [], [], [], [], [], []
+    labels, classes, pred_class, mode_p, mode_p_raw, mode_hit, moving = [], [], [], [], [], [], []
     temperature = float(predictor.contract.get("temperature", 1.0))
     windows = 0
     model_classes = list(predictor.classes)
     use_map = with_map and spec.map is not None
-    for sw in scored_windows(spec, dataset, data_root, split, fold, with_map):
+    for sw in scored_windows(spec, dataset, data_root, split, fold, with_map, noise):
         windows += 1
         pred = predictor.predict(sw.frame)
         sub = rows_of(pred, sw.target, sw.unit)
         for k, v in agent_metrics(sub, sw.truth, sw.cvs).items():
             per.setdefault(k, []).append(v)
         labels.append(sw.label)
+        moving.append(sw.moving)
         classes.append(np.array([model_classes.index(info.label_class[k]) for k in sw.label]))
         pred_class.append(sub.class_probabilities.argmax(axis=1))
         ade_all = metrics.displacement(sub.trajectories, sw.truth).mean(axis=2)  # (n, K)
@@ -159,7 +183,13 @@ def evaluate(
     out["unit"] = info.unit
     if fold:
         out["scene"] = fold
+    moves = np.concatenate(moving) if moving else np.zeros(0, bool)
+    out["by_motion"] = {m: summarise(flat, sel) for m, sel in (("moving", moves), ("standing", ~moves))}
     out["by_class"] = {c: summarise(flat, klass == i) for i, c in enumerate(model_classes) if (klass == i).any()}
+    for i, c in enumerate(model_classes):
+        if c in out["by_class"]:
+            for m, sel in (("moving", moves), ("standing", ~moves)):
+                out["by_class"][c][m] = summarise(flat, (klass == i) & sel)
     out["by_label"] = {n: summarise(flat, label == i) for i, n in enumerate(info.labels) if (label == i).any()}
     out["class_accuracy"] = float((np.concatenate(pred_class) == klass).mean())
     hits = np.concatenate(mode_hit)

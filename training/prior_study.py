@@ -15,19 +15,32 @@ How much of the network's refinement helps, per class: the bundled model's most 
 the engine's prior scaled by s, ``prior + s (top mode - prior)``, on its validation windows (the ones its temperature
 and top-mode scale are fitted on: ``training.ensemble.top_mode_errors``, which measures the network's own refinement
 whatever scale the model was bundled with); s = 1 is the network, s = 0 the prior alone.
+
+    python -m training.prior_study --velocity [--data-root ../shared/data] [--json docs/prior_study.json]
+
+Which velocity estimate should the prior take, on real and on tracker-like histories? Every fully observed agent of
+the validation split of ``hdmap``, ``apolloscape`` and ``sdd`` (standing ones too), clean and with Gaussian noise of
+0.1 m and 0.3 m on the observed positions and 10% of the observed steps before the current one dropped
+(:func:`training.augment.tracker_noise`), each frame preprocessed by the engine and rolled out by
+``dgan.kinematic_prior``: the last two steps, the endpoints, the least-squares line and the least-squares parabola
+over windows of 0.4-2 s, each with and without a standing threshold. Errors in metres (ADE/FDE), overall, per
+class and for moving and standing agents (moved less than 1 m from the first observed to the last true position).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
 import dgan
+from training.augment import tracker_noise
 from training.config import DataConfig
-from training.data import cached_windows
+from training.data import cached_windows, iter_windows
+from training.datasets import DATASETS, recordings
 from training.ensemble import TOP_SCALES, top_mode_errors
 
 Arr = npt.NDArray[np.float64]
@@ -97,11 +110,97 @@ def residual_scale_study(root: Path) -> dict[str, dict[str, tuple[int, list[floa
     return out
 
 
+#: The histories of the velocity study: (name, noise sigma in metres, share of observed steps dropped).
+CONDITIONS = (("clean", 0.0, 0.0), ("noise 0.1 m", 0.1, 0.1), ("noise 0.3 m", 0.3, 0.1))
+#: Datasets of the velocity study (their validation splits).
+VELOCITY_DATASETS = ("hdmap", "apolloscape", "sdd")
+#: An agent that moves less than this from its first observed to its last true position stands.
+STANDING_M = 1.0
+
+
+def velocity_candidates() -> dict[str, dgan.PriorSpec]:
+    """The velocity estimates compared: the last two steps, then endpoints, a least-squares line and a least-squares
+    parabola over 0.4-2 s, each also with a standing threshold of 0.3 m/s."""
+    out = {"last two steps": dgan.PriorSpec("constant_velocity")}
+    for window in (0.4, 0.8, 1.2, 2.0):
+        for fit in ("endpoints", "least_squares", "quadratic"):
+            for standing in (0.0, 0.3):
+                name = f"{fit} {window:g} s" + (f", standing < {standing:g} m/s" if standing else "")
+                out[name] = dgan.PriorSpec("constant_velocity", window, fit, standing)
+    return out
+
+
+def velocity_study(root: Path, seed: int = 0) -> dict[str, dict[str, dict[str, dict[str, list[float]]]]]:
+    """Per dataset, condition, candidate and group (``all``, ``moving``, ``standing`` and each class): the number of
+    targets and the prior's ADE and FDE (metres) on the validation split."""
+    from tqdm import tqdm
+
+    cands = velocity_candidates()
+    out: dict[str, dict[str, dict[str, dict[str, list[float]]]]] = {}
+    for dataset in VELOCITY_DATASETS:
+        info = DATASETS[dataset]
+        spec = dgan.InputSpec(info.dt_s, info.t_obs, info.t_f, classes=info.classes)
+        windows = [
+            w
+            for r in recordings(dataset, root, "val", with_map=False)
+            for w in iter_windows(r, info, info.t_obs, info.t_f)
+        ]
+        for cond, sigma, drop in CONDITIONS:
+            rng = np.random.default_rng(seed)
+            err: dict[str, list[Arr]] = {c: [] for c in cands}
+            groups: dict[str, list[Arr]] = {}
+            for w in tqdm(windows, desc=f"{dataset} {cond}", leave=False):
+                obs, keep = tracker_noise(w.positions[:, : info.t_obs], w.mask[:, : info.t_obs], sigma, drop, rng)
+                frame = dgan.Frame(obs, mask=keep, classes=[info.label_class[k] for k in w.label], ids=w.ids)
+                x = dgan.preprocess(frame, spec)
+                t = w.target
+                truth = dgan.to_agent_frame(w.positions[t, info.t_obs :], x["origin"][t], x["heading"][t])
+                moved = np.linalg.norm(w.positions[t, -1] - w.positions[t, 0], axis=1) >= STANDING_M
+                klass = np.array([info.label_class[k] for k in w.label[t]])
+                groups.setdefault("moving", []).append(moved)
+                groups.setdefault("class", []).append(klass)
+                for name, prior in cands.items():
+                    pspec = dgan.InputSpec(info.dt_s, info.t_obs, info.t_f, classes=info.classes, prior=prior)
+                    r = dgan.kinematic_prior(x["trajectory"][t], x["trajectory_mask"][t], x["state"][t], pspec)
+                    err[name].append(np.linalg.norm(np.asarray(r, np.float64) - truth, axis=2))
+            moving: npt.NDArray[np.bool_] = np.concatenate(groups["moving"]).astype(bool)
+            klass = np.concatenate(groups["class"])
+            sel = {"all": np.ones(len(moving), bool), "moving": moving, "standing": ~moving}
+            sel |= {c: klass == c for c in info.classes}
+            for name in cands:
+                d = np.concatenate(err[name])
+                out.setdefault(dataset, {}).setdefault(cond, {})[name] = {
+                    g: [int(m.sum()), float(d[m].mean()), float(d[m, -1].mean())] for g, m in sel.items() if m.any()
+                }
+    return out
+
+
+def chosen_velocity(study: dict[str, dict[str, dict[str, dict[str, list[float]]]]], dataset: str) -> str:
+    """The rule (set before the study was run): the candidate with the lowest ADE over all targets, averaged over
+    the three conditions (clean, noise 0.1 m, noise 0.3 m), on the dataset's validation split."""
+    by_cond = study[dataset]
+    names = next(iter(by_cond.values())).keys()
+    return min(names, key=lambda n: float(np.mean([by_cond[c][n]["all"][1] for c in by_cond])))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data-root", type=Path, default=Path("../shared/data"))
     ap.add_argument("--residual-scale", action="store_true", help="measure the residual scale study instead")
+    ap.add_argument("--velocity", action="store_true", help="measure the velocity-estimate study instead")
+    ap.add_argument("--json", type=Path, help="with --velocity: also write the study here")
     a = ap.parse_args()
+    if a.velocity:
+        res = velocity_study(a.data_root.expanduser())
+        if a.json:
+            a.json.write_text(json.dumps(res, indent=1) + "\n")
+        for dataset, by_cond in res.items():
+            print(f"{dataset}: chosen {chosen_velocity(res, dataset)!r}")
+            for cond, by_cand in by_cond.items():
+                for name, groups in by_cand.items():
+                    cells = "  ".join(f"{g} {ade:.3f}/{fde:.3f}" for g, (_, ade, fde) in groups.items())
+                    print(f"  {cond:12s} {name:42s} {cells}")
+        return
     if a.residual_scale:
         for model, by_class in residual_scale_study(a.data_root.expanduser()).items():
             for name, (n, ade) in by_class.items():

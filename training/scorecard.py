@@ -24,6 +24,10 @@ MAX_GAP = 0.1
 MIN_BIN_MODES = 30
 
 
+#: The two groups every target falls in (``training.evaluate.STANDING_M``).
+MOTIONS = ("moving", "standing")
+
+
 @dataclass(frozen=True)
 class TestSet:
     """One test set: its name, unit, the model's results with its map (or without a map branch) and, for a map
@@ -44,6 +48,12 @@ def mean_of(results: list[dict[str, Any]], name: str) -> dict[str, Any]:
     out["cv_variant"] = "per scene"
     classes = set.intersection(*(set(r.get("by_class", {})) for r in results))
     out["by_class"] = {c: mean_of([r["by_class"][c] for r in results], name) for c in sorted(classes)}
+    for motion in MOTIONS:
+        if all(motion in r.get("by_motion", {}) for r in results):
+            out.setdefault("by_motion", {})[motion] = mean_of([r["by_motion"][motion] for r in results], name)
+        for c in classes:
+            if all(motion in r["by_class"][c] for r in results):
+                out["by_class"][c][motion] = mean_of([r["by_class"][c][motion] for r in results], name)
     out["name"] = name
     return out
 
@@ -105,6 +115,24 @@ def table(tests: list[TestSet]) -> str:
                 _pair(nm, "ade", "fde") if nm else "",
                 f"{row['nomap_vs_map_ade']:+.1f}%, {row['nomap_vs_map_fde']:+.1f}%" if nm else "",
             ]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def motion_table(tests: list[TestSet]) -> str:
+    """Moving and standing targets apart, per test set and class (and all of its targets): how many, and top-1
+    ADE/FDE against constant velocity on the same targets."""
+    head = "| test set | class | moving | top-1 | constant velocity | standing | top-1 | constant velocity |"
+    lines = [head, "|---|---|---|---|---|---|---|---|"]
+    for ts in tests:
+        groups = [(c, r) for c, r in ts.res.get("by_class", {}).items()] + [("all", ts.res)]
+        for cls, r in groups:
+            m, st = r.get("by_motion", r).get("moving"), r.get("by_motion", r).get("standing")
+            if m is None or st is None:
+                continue
+            cells = [ts.name, cls]
+            for g in (m, st):
+                cells += [str(g["agents"]), _pair(g, "ade", "fde"), _pair(g, "cv_ade", "cv_fde")]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -61,7 +61,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
         classes=info.classes,
         attention_lambda=0.5,
         map=map_spec,
-        prior=dgan.PriorSpec(d.prior, d.prior_window_s),
+        prior=dgan.PriorSpec(d.prior, d.prior_window_s, d.prior_fit, d.prior_standing_mps),
         heading=d.heading,
     )
 
@@ -91,9 +91,25 @@ def load_window_parts(cfg: Config, spec: dgan.InputSpec, split: str, progress: b
     if sources and d.dataset != "ethucy":
         raise ValueError(f"data.extra_pedestrians is for the ETH/UCY models, not {d.dataset!r}")
     own = cached_windows(d.dataset, root, split, spec, cache, fold, d.window_stride, progress)
-    if not sources or split != "train":
+    if split != "train":
         return [own]
-    return [own, *(cached_pedestrian_windows(s, root, spec, cache, d.extra_stride, progress) for s in sources)]
+    noisy = [
+        cached_windows(d.dataset, root, split, spec, cache, fold, d.window_stride, progress, (sigma, d.augment_drop))
+        for sigma in augment_sigmas(d.augment_noise)
+    ]
+    extra = [cached_pedestrian_windows(s, root, spec, cache, d.extra_stride, progress) for s in sources]
+    return [own, *noisy, *extra]
+
+
+def augment_sigmas(declared: str) -> list[float]:
+    """The noise levels of ``data.augment_noise`` (comma-separated metres; "" = none)."""
+    try:
+        sigmas = [float(x) for x in declared.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"data.augment_noise must be comma-separated metres, got {declared!r}") from None
+    if any(not (0.0 < x <= 5.0) for x in sigmas):
+        raise ValueError(f"data.augment_noise must hold noise levels in (0, 5] metres, got {declared!r}")
+    return sigmas
 
 
 def restrict_targets(w: Windows, spec: dgan.InputSpec, target_class: str) -> None:

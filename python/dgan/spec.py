@@ -39,12 +39,18 @@ class PriorSpec:
     """The kinematic prior the network's outputs are relative to (``docs/model-contract.md``).
 
     ``kind`` is ``"none"`` (anchors are absolute, every contract-1 model) or ``"constant_velocity"`` (along the
-    direction of motion). ``window_s`` = 0 takes the traffic state's velocity; > 0 the mean velocity over the last
-    ``window_s`` seconds of the observed positions.
+    direction of motion). ``window_s`` = 0 takes the traffic state's velocity; > 0 a velocity estimated from the last
+    ``window_s`` seconds of the observed positions: by ``fit`` ``"endpoints"`` (the first and last valid positions
+    of the window), ``"least_squares"`` (a line through every valid position against its time, robust to tracker
+    noise and dropped steps) or ``"quadratic"`` (a parabola's slope at the current step: as robust, without the
+    line's lag behind an accelerating agent). An agent whose estimated speed is below ``standing_mps`` (m/s; 0
+    never) stands: its prior stays at its last position.
     """
 
     kind: str = "none"
     window_s: float = 0.0
+    fit: str = "endpoints"
+    standing_mps: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -75,6 +81,7 @@ class InputSpec:
         if self.map is not None:
             numbers["map.resolution_m"] = self.map.resolution_m
         numbers["prior.window_s"] = self.prior.window_s
+        numbers["prior.standing_mps"] = self.prior.standing_mps
         for key, value in numbers.items():
             if isinstance(value, float) and not math.isfinite(value):
                 raise InvalidSpecError(f"invalid specification: {key} must be a finite number, got {value}")

@@ -4,7 +4,7 @@
 use crate::class::AgentClass;
 use crate::decode::Anchors;
 use crate::error::{DganError, Result};
-use crate::prior::PriorSpec;
+use crate::prior::{PriorSpec, VelocityFit};
 use crate::spec::{GraphLayout, HeadingSource, InputSpec, EDGE_FEATURES};
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
@@ -12,11 +12,12 @@ use std::collections::BTreeMap;
 
 /// The contract version the exporter writes. Version 2 adds the kinematic prior, optional maps (`map_present`)
 /// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph; version 4 the
-/// sealed weights (`weights_sha256`); version 5 where headings come from (`heading`).
-pub const CONTRACT_VERSION: u32 = 5;
+/// sealed weights (`weights_sha256`); version 5 where headings come from (`heading`); version 6 how the prior's
+/// velocity is fitted (`prior.fit`) and its standing threshold (`prior.standing_mps`).
+pub const CONTRACT_VERSION: u32 = 6;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 5] = [1, 2, 3, 4, 5];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 6] = [1, 2, 3, 4, 5, 6];
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
 pub const MAX_ANCHORS_PER_CLASS: usize = 1024;
 
@@ -196,6 +197,14 @@ impl ModelContract {
         if self.contract_version < 5 && self.input.heading != HeadingSource::Measured {
             return Err(DganError::Contract(
                 "heading is a contract-5 key; versions 1 to 4 take measured headings".into(),
+            ));
+        }
+        let prior = &self.input.prior;
+        if self.contract_version < 6 && (prior.fit != VelocityFit::Endpoints || prior.standing_mps != 0.0) {
+            return Err(DganError::Contract(
+                "prior.fit and prior.standing_mps are contract-6 keys; versions 1 to 5 fit endpoints and never \
+                 clamp standing agents"
+                    .into(),
             ));
         }
         match (self.contract_version >= 4, &self.weights_sha256) {
@@ -410,6 +419,13 @@ mod tests {
             ),
         );
         assert_eq!(ModelContract::from_json(&v5).unwrap().input.heading, HeadingSource::MotionWhenMoving);
+        // Version 6 fits the prior's velocity by least squares and holds standing agents; version 5 cannot.
+        let robust = "\"window_s\": 0.8, \"fit\": \"least_squares\", \"standing_mps\": 0.3";
+        let v6 = v5.replace("\"contract_version\": 5", "\"contract_version\": 6").replace("\"window_s\": 0.8", robust);
+        let prior = ModelContract::from_json(&v6).unwrap().input.prior;
+        assert_eq!((prior.fit, prior.standing_mps), (VelocityFit::LeastSquares, 0.3));
+        let v5_robust = v5.replace("\"window_s\": 0.8", robust);
+        assert!(matches!(ModelContract::from_json(&v5_robust), Err(DganError::Contract(_))));
     }
 
     #[test]

@@ -53,7 +53,7 @@ pub use frame::Frame;
 pub use history::{frame_at, tracks_from_rows, Detection, TimeBase, Tracker};
 pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
 pub use preprocess::Limits;
-pub use prior::{PriorKind, PriorSpec};
+pub use prior::{PriorKind, PriorSpec, VelocityFit};
 pub use runtime::{
     available_execution_providers, init_onnxruntime, ExecutionProvider, Prediction, Predictor, PredictorOptions,
 };

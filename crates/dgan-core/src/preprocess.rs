@@ -256,7 +256,7 @@ pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Re
 mod tests {
     use super::*;
     use crate::class::AgentClass;
-    use crate::prior::{PriorKind, PriorSpec};
+    use crate::prior::PriorSpec;
     use crate::spec::HeadingSource;
     use crate::spec::MapSpec;
     use ndarray::Array3;
@@ -281,7 +281,7 @@ mod tests {
                 draw_agents: true,
                 optional,
             }),
-            prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.0 },
+            prior: PriorSpec::constant_velocity(0.0),
             graph: GraphLayout::Padded,
             heading: HeadingSource::Measured,
         }

@@ -30,23 +30,64 @@ impl PriorKind {
     }
 }
 
+/// How the velocity of a windowed prior is estimated from the observed positions in its window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VelocityFit {
+    /// The displacement between the window's first and last valid positions over their time apart (contracts 2-5).
+    #[default]
+    Endpoints,
+    /// The slope of a least-squares line through every valid position of the window against its time: robust to
+    /// position noise, jittered and dropped steps, since every observation counts and the gaps are timed.
+    LeastSquares,
+    /// The derivative at the last valid step of a least-squares parabola through the window's valid positions (a
+    /// Savitzky-Golay-style fit): averages noise like `LeastSquares` without its lag behind an accelerating agent.
+    /// Needs three valid steps; with two it is the least-squares line.
+    Quadratic,
+}
+
+impl VelocityFit {
+    /// The name used in the metadata.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Endpoints => "endpoints",
+            Self::LeastSquares => "least_squares",
+            Self::Quadratic => "quadratic",
+        }
+    }
+}
+
 /// The prior a model declares: its kind and, for constant velocity, how the velocity is estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct PriorSpec {
     /// The rollout.
     #[serde(default)]
     pub kind: PriorKind,
-    /// 0: the traffic state's velocity (given, else the last two valid steps). > 0: the mean velocity over the
+    /// 0: the traffic state's velocity (given, else the last two valid steps). > 0: a velocity estimated from the
     /// last `window_s` seconds of the observed positions (`max(1, round(window_s / dt))` steps), which is less noisy.
     #[serde(default)]
     pub window_s: f64,
+    /// How a windowed velocity is estimated (`window_s > 0`): endpoints (the default) or a least-squares line.
+    #[serde(default)]
+    pub fit: VelocityFit,
+    /// An agent whose speed is below this many metres per second is standing: its prior stays at its last position.
+    /// The speed is that of the least-squares line over the window (`window_s > 0`, whatever `fit` gives the
+    /// velocity), else the estimated velocity's. 0 (the default) never clamps.
+    #[serde(default)]
+    pub standing_mps: f64,
 }
 
 impl PriorSpec {
     /// No prior.
-    pub const NONE: Self = Self { kind: PriorKind::None, window_s: 0.0 };
+    pub const NONE: Self =
+        Self { kind: PriorKind::None, window_s: 0.0, fit: VelocityFit::Endpoints, standing_mps: 0.0 };
 
-    /// Checks the velocity window.
+    /// Constant velocity with the given velocity window and the other settings at their defaults.
+    pub fn constant_velocity(window_s: f64) -> Self {
+        Self { kind: PriorKind::ConstantVelocity, window_s, ..Self::NONE }
+    }
+
+    /// Checks the velocity window and the standing threshold.
     pub fn validate(&self) -> Result<()> {
         if !(self.window_s.is_finite() && (0.0..=60.0).contains(&self.window_s)) {
             return Err(DganError::InvalidSpec(format!(
@@ -54,7 +95,60 @@ impl PriorSpec {
                 self.window_s
             )));
         }
+        if !(self.standing_mps.is_finite() && (0.0..=5.0).contains(&self.standing_mps)) {
+            return Err(DganError::InvalidSpec(format!(
+                "prior.standing_mps must be between 0 and 5 metres per second, got {}",
+                self.standing_mps
+            )));
+        }
+        if self.fit != VelocityFit::Endpoints && self.window_s == 0.0 {
+            return Err(DganError::InvalidSpec(format!(
+                "prior.fit {:?} needs a velocity window (prior.window_s > 0)",
+                self.fit.name()
+            )));
+        }
+        if self.kind == PriorKind::None && (self.window_s != 0.0 || self.standing_mps != 0.0) {
+            return Err(DganError::InvalidSpec(
+                "prior.window_s and prior.standing_mps need a prior (prior.kind \"constant_velocity\")".into(),
+            ));
+        }
         Ok(())
+    }
+
+    /// The estimated velocity `[vx, vy]` (m/s, the trajectory's frame) of one agent from its observed positions
+    /// `traj (T_obs, 2)` and validity `mask (T_obs)`; `None` where the window holds fewer than two valid steps.
+    fn window_velocity(&self, traj: ArrayView2<'_, f32>, mask: &[bool], steps: usize, dt_s: f64) -> Option<[f64; 2]> {
+        let last = (0..mask.len()).rev().find(|&t| mask[t])?;
+        let from = last.saturating_sub(steps);
+        let p = |t: usize, c: usize| f64::from(traj[[t, c]]);
+        match self.fit {
+            VelocityFit::Endpoints => {
+                let first = (from..last).find(|&t| mask[t])?;
+                let span = (last - first) as f64 * dt_s;
+                Some([(p(last, 0) - p(first, 0)) / span, (p(last, 1) - p(first, 1)) / span])
+            }
+            VelocityFit::LeastSquares | VelocityFit::Quadratic => {
+                let valid: Vec<usize> = (from..=last).filter(|&t| mask[t]).collect();
+                if valid.len() < 2 {
+                    return None;
+                }
+                if self.fit == VelocityFit::Quadratic && valid.len() >= 3 {
+                    return Some(quadratic_slope(&valid, last, p).map(|b| b / dt_s));
+                }
+                let n = valid.len() as f64;
+                let mean_t = valid.iter().map(|&t| t as f64).sum::<f64>() / n;
+                let mean = |c: usize| valid.iter().map(|&t| p(t, c)).sum::<f64>() / n;
+                let (mx, my) = (mean(0), mean(1));
+                let (mut sxx, mut sx, mut sy) = (0.0, 0.0, 0.0);
+                for &t in &valid {
+                    let dt = t as f64 - mean_t;
+                    sxx += dt * dt;
+                    sx += dt * (p(t, 0) - mx);
+                    sy += dt * (p(t, 1) - my);
+                }
+                Some([sx / sxx / dt_s, sy / sxx / dt_s])
+            }
+        }
     }
 
     /// The rollout of every agent, `(N, T_f, 2)` metres in each agent's frame, from the network inputs
@@ -87,21 +181,28 @@ impl PriorSpec {
             return Ok(out);
         }
         let window = (self.window_s > 0.0).then(|| ((self.window_s / dt_s).round() as usize).max(1));
+        let mut mask = vec![false; t_obs];
         for i in 0..n {
             let from_state = [
                 f64::from(state[[i, 0]]) * f64::from(state[[i, 3]]),
                 f64::from(state[[i, 0]]) * f64::from(state[[i, 4]]),
             ];
-            let v = window
-                .and_then(|k| {
-                    let valid = |t: usize| trajectory_mask[[i, t]] > 0.5;
-                    let last = (0..t_obs).rev().find(|&t| valid(t))?;
-                    let first = (last.saturating_sub(k)..last).find(|&t| valid(t))?;
-                    let span = (last - first) as f64 * dt_s;
-                    let p = |t: usize, c: usize| f64::from(trajectory[[i, t, c]]);
-                    Some([(p(last, 0) - p(first, 0)) / span, (p(last, 1) - p(first, 1)) / span])
-                })
-                .unwrap_or(from_state);
+            for (t, m) in mask.iter_mut().enumerate() {
+                *m = trajectory_mask[[i, t]] > 0.5;
+            }
+            let traj = trajectory.index_axis(ndarray::Axis(0), i);
+            let mut v = window.and_then(|k| self.window_velocity(traj, &mask, k, dt_s)).unwrap_or(from_state);
+            // Standing is judged on the least-squares line over the window, the estimate least moved by noise,
+            // whichever fit gives the velocity.
+            let line = Self { fit: VelocityFit::LeastSquares, ..*self };
+            let speed = match (self.standing_mps > 0.0, window) {
+                (false, _) => [f64::INFINITY, 0.0],
+                (true, Some(k)) => line.window_velocity(traj, &mask, k, dt_s).unwrap_or(v),
+                (true, None) => v,
+            };
+            if !(v[0].is_finite() && v[1].is_finite()) || speed[0].hypot(speed[1]) < self.standing_mps {
+                v = [0.0, 0.0];
+            }
             for t in 0..t_f {
                 let s = (t + 1) as f64 * dt_s;
                 out[[i, t, 0]] = (v[0] * s) as f32;
@@ -110,6 +211,32 @@ impl PriorSpec {
         }
         Ok(out)
     }
+}
+
+/// The slope at `last` (per step, both coordinates) of the least-squares parabola `a + b τ + c τ²`, τ = t - last,
+/// through the positions `p(t, c)` at the steps `valid` (at least three distinct): `b` from the 3 × 3 normal
+/// equations, solved by Cramer's rule.
+fn quadratic_slope(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> [f64; 2] {
+    let tau = |t: usize| t as f64 - last as f64;
+    let s = |k: i32| valid.iter().map(|&t| tau(t).powi(k)).sum::<f64>();
+    let (s0, s1, s2, s3, s4) = (s(0), s(1), s(2), s(3), s(4));
+    let det3 = |m: [[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let normal = [[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]];
+    let det = det3(normal);
+    let mut out = [0.0; 2];
+    for (c, o) in out.iter_mut().enumerate() {
+        let r = |k: i32| valid.iter().map(|&t| tau(t).powi(k) * p(t, c)).sum::<f64>();
+        let rhs = [r(0), r(1), r(2)];
+        let mut m = normal;
+        for (row, v) in m.iter_mut().zip(rhs) {
+            row[1] = v;
+        }
+        *o = det3(m) / det;
+    }
+    out
 }
 
 #[cfg(test)]
@@ -125,7 +252,7 @@ mod tests {
     fn constant_velocity_from_the_state() {
         let traj = Array3::<f32>::zeros((1, 3, 2));
         let mask = Array2::<f32>::ones((1, 3));
-        let p = PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.0 };
+        let p = PriorSpec::constant_velocity(0.0);
         let r = p.rollout(traj.view(), mask.view(), state(2.0, 0.6, 0.8).view(), 0.5, 3).unwrap();
         // 2 m/s along (0.6, 0.8): 1 m per 0.5 s step.
         let want = array![[0.6f32, 0.8], [1.2, 1.6], [1.8, 2.4]];
@@ -140,7 +267,7 @@ mod tests {
         // middle step missing. The state says 10 m/s, which the window ignores.
         let traj = array![[[-9.0f32, 0.0], [-3.0, 0.0], [0.0, 0.0], [0.0, 0.0]]];
         let mask = array![[1.0f32, 1.0, 0.0, 1.0]];
-        let p = PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 1.0 };
+        let p = PriorSpec::constant_velocity(1.0);
         let r = p.rollout(traj.view(), mask.view(), state(10.0, 1.0, 0.0).view(), 0.5, 2).unwrap();
         // Steps 1..=3 lie within the window; step 1 is the earliest valid: 3 m over 1 s.
         assert_eq!(r.index_axis(ndarray::Axis(0), 0), array![[1.5, 0.0], [3.0, 0.0]]);
@@ -151,16 +278,92 @@ mod tests {
     }
 
     #[test]
+    fn least_squares_velocity_averages_noise_and_times_gaps() {
+        // 1 m/s along x, sampled every 0.5 s with steps 2 and 4 dropped; +-0.1 m noise that the endpoints fit
+        // takes in full and the least-squares line averages.
+        let xs = [-3.0f32, -2.4, 0.0, -1.4, 0.0, -0.6, 0.1];
+        let mut traj = Array3::<f32>::zeros((1, 7, 2));
+        for t in 0..7 {
+            traj[[0, t, 0]] = xs[t];
+        }
+        let mask = array![[1.0f32, 1.0, 0.0, 1.0, 0.0, 1.0, 1.0]];
+        let lsq = PriorSpec { fit: VelocityFit::LeastSquares, ..PriorSpec::constant_velocity(3.0) };
+        let r = lsq.rollout(traj.view(), mask.view(), state(9.0, 1.0, 0.0).view(), 0.5, 2).unwrap();
+        // Hand-computed slope over t = 0, 1, 3, 5, 6 (mean 3, mean x -1.46): sum(dt dx) / sum(dt^2) = 12.9 / 26 m
+        // per 0.5 s step, 0.992 m/s; two steps ahead 0.992 m.
+        let v = 12.9 / 26.0 / 0.5;
+        assert!((f64::from(r[[0, 1, 0]]) - v).abs() < 1e-5, "{r}");
+        // The endpoints fit over the same window: (0.1 - -3.0) / 3 s.
+        let ends = PriorSpec::constant_velocity(3.0);
+        let r = ends.rollout(traj.view(), mask.view(), state(9.0, 1.0, 0.0).view(), 0.5, 1).unwrap();
+        assert!((f64::from(r[[0, 0, 0]]) - 3.1 / 3.0 * 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn quadratic_fit_tracks_acceleration() {
+        // x = t^2 / 2 (1 m/s^2 from rest) at t = 0..=4 s with t = 2 missing: the velocity at t = 4 is 4 m/s, which
+        // the parabola recovers exactly while the line lags (its slope is the velocity mid-window).
+        let mut traj = Array3::<f32>::zeros((1, 5, 2));
+        for t in 0..5 {
+            traj[[0, t, 0]] = (t * t) as f32 / 2.0 - 8.0;
+        }
+        let mask = array![[1.0f32, 1.0, 0.0, 1.0, 1.0]];
+        let quad = PriorSpec { fit: VelocityFit::Quadratic, ..PriorSpec::constant_velocity(4.0) };
+        let r = quad.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        assert!((r[[0, 0, 0]] - 4.0).abs() < 1e-4, "{r}");
+        let line = PriorSpec { fit: VelocityFit::LeastSquares, ..quad };
+        let r = line.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        assert!(r[[0, 0, 0]] < 3.0, "{r}");
+        // Standing is judged on the line: a parked car with one jittered last step stays put under the parabola too.
+        let jitter = array![[[0.0f32, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.5, 0.0]]];
+        let ones = Array2::<f32>::ones((1, 5));
+        let held = PriorSpec { standing_mps: 0.3, ..quad };
+        let r = held.rollout(jitter.view(), ones.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        assert_eq!(r[[0, 0, 0]], 0.0);
+        let r = quad.rollout(jitter.view(), ones.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        assert!(r[[0, 0, 0]] > 0.3, "{r}");
+        // Two valid steps: the line through them.
+        let mask = array![[0.0f32, 0.0, 0.0, 1.0, 1.0]];
+        let r = quad.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        assert!((r[[0, 0, 0]] - 3.5).abs() < 1e-5, "{r}");
+    }
+
+    #[test]
+    fn standing_agents_stay_where_they_are() {
+        // A slow drift of 0.1 m/s is under a 0.2 m/s threshold: the prior stays at the origin.
+        let traj = array![[[-0.2f32, 0.0], [-0.1, 0.0], [0.0, 0.0]]];
+        let mask = Array2::<f32>::ones((1, 3));
+        let p = PriorSpec { standing_mps: 0.2, fit: VelocityFit::LeastSquares, ..PriorSpec::constant_velocity(1.0) };
+        let r = p.rollout(traj.view(), mask.view(), state(0.1, 1.0, 0.0).view(), 1.0, 4).unwrap();
+        assert!(r.iter().all(|v| *v == 0.0), "{r}");
+        // Without the threshold it drifts on.
+        let p = PriorSpec { standing_mps: 0.0, ..p };
+        let r = p.rollout(traj.view(), mask.view(), state(0.1, 1.0, 0.0).view(), 1.0, 4).unwrap();
+        assert!((r[[0, 3, 0]] - 0.4).abs() < 1e-6);
+    }
+
+    #[test]
     fn rejects_bad_shapes_and_windows() {
         let traj = Array3::<f32>::zeros((2, 3, 2));
         let mask = Array2::<f32>::ones((1, 3));
-        let p = PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.0 };
+        let p = PriorSpec::constant_velocity(0.0);
         assert!(p.rollout(traj.view(), mask.view(), state(1.0, 1.0, 0.0).view(), 0.5, 2).is_err());
-        let bad = PriorSpec { kind: PriorKind::ConstantVelocity, window_s: f64::NAN };
+        let bad = PriorSpec::constant_velocity(f64::NAN);
         assert!(bad.validate().is_err());
         let json = r#"{"kind": "constant_velocity", "window_s": 0.8}"#;
         let parsed: PriorSpec = serde_json::from_str(json).unwrap();
-        assert_eq!(parsed, PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.8 });
+        assert_eq!(parsed, PriorSpec::constant_velocity(0.8));
         assert!(serde_json::from_str::<PriorSpec>(r#"{"kind": "magic"}"#).is_err());
+        let json = r#"{"kind": "constant_velocity", "window_s": 1.0, "fit": "least_squares", "standing_mps": 0.3}"#;
+        let parsed: PriorSpec = serde_json::from_str(json).unwrap();
+        assert_eq!((parsed.fit, parsed.standing_mps), (VelocityFit::LeastSquares, 0.3));
+        for bad in [
+            PriorSpec { standing_mps: -0.1, ..PriorSpec::constant_velocity(1.0) },
+            PriorSpec { standing_mps: f64::NAN, ..PriorSpec::constant_velocity(1.0) },
+            PriorSpec { fit: VelocityFit::LeastSquares, ..PriorSpec::constant_velocity(0.0) },
+            PriorSpec { standing_mps: 0.2, ..PriorSpec::NONE },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
     }
 }

@@ -3,8 +3,8 @@
 
 use dgan_core::preprocess::preprocess;
 use dgan_core::{
-    AgentClass, Frame, GraphLayout, HeadingSource, InputSpec, MapElement, MapElementKind, MapSpec, PriorKind,
-    PriorSpec, SceneMap, VectorMap,
+    AgentClass, Frame, GraphLayout, HeadingSource, InputSpec, MapElement, MapElementKind, MapSpec, PriorSpec, SceneMap,
+    VectorMap,
 };
 use ndarray::{Array2, Array3};
 use rand::{Rng, SeedableRng};
@@ -92,7 +92,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
             draw_agents: true,
             optional: false,
         }),
-        prior: PriorSpec { kind: PriorKind::ConstantVelocity, window_s: 0.8 },
+        prior: PriorSpec::constant_velocity(0.8),
         graph: GraphLayout::Padded,
         heading: HeadingSource::Measured,
     };
