@@ -83,11 +83,20 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
         fit = d.get("prior_fit", "endpoints")
         how = "the velocity of the last two steps"
         if window:
-            how = f"{'a least-squares' if fit == 'least_squares' else 'the mean'} velocity over the last {window:g} s"
+            how = {
+                "least_squares": f"the slope of a least-squares line through the last {window:g} s",
+                "quadratic": f"the slope at t_obs of a least-squares parabola through the last {window:g} s",
+            }.get(fit, f"the mean velocity over the last {window:g} s")
         standing = d.get("prior_standing_mps", 0.0)
         if standing:
             how += f", standing below {standing:g} m/s"
         parts.append(f"The network refines a constant-velocity rollout ({how}) computed by the engine.")
+    if d.get("augment_noise"):
+        parts.append(
+            f"Trained also on tracker-like copies of its windows (position noise of "
+            f"{' and '.join(x.strip() for x in d['augment_noise'].split(','))} m, "
+            f"{100 * d.get('augment_drop', 0.1):g}% of the observed steps dropped)."
+        )
     if t.get("map_dropout", 0.0) > 0 and d.get("use_map", True) and cfg["model"].get("use_map", True):
         parts.append(
             f"Trained with map dropout ({t['map_dropout']:g} of the crops blanked), so it also runs without a map "
@@ -238,8 +247,8 @@ MULTICLASS = {
         "the vector map (lane centre lines, dashed and solid lane lines, road edges, crosswalks, bike lanes, medians "
         "and static obstacles) rasterised by the engine in the paper's colours, other agents as blue boxes.",
         "protocol": "5 Hz: 10 observed steps (2 s), 15 predicted (3 s). The 10 Hz sources are sampled every second "
-        "step; nuScenes annotates at 2 Hz only and its test windows end at a keyframe. Targets: agents seen at all "
-        "25 steps that move more than 1 m over them.",
+        "step; nuScenes annotates at 2 Hz only and its test windows end at a keyframe. Targets: every agent seen "
+        "at all 25 steps, standing ones too (moving: at least 1 m from the first to the last position).",
         "licence": "nuScenes: **CC BY-NC-SA 4.0**; Waymo Open Dataset: its own licence, **non-commercial use "
         "only**, which also limits redistribution. Cite Caesar et al. 2020 and Ettinger et al. 2021.",
         "reproduce": "--train-hdmap` (this model and its no-map variant)",
@@ -256,6 +265,7 @@ def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str
     m = cfg["model"]
     keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20", "cv_ade", "cv_fde")
     groups = [("all", metrics)] + [(c, r) for c, r in metrics["by_class"].items()]
+    groups += [(m, r) for m, r in metrics.get("by_motion", {}).items() if r["agents"]]
     groups += [(f"label {k}", r) for k, r in metrics["by_label"].items() if k.lower() not in metrics["by_class"]]
     table = "\n".join(f"| {g} | {r['agents']} | " + " | ".join(f"{r[k]:.2f}" for k in keys) + " |" for g, r in groups)
     map_line = (

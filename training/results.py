@@ -420,18 +420,19 @@ def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: 
 
 
 #: The seeds of each bundled ensemble's members (``training.ensemble``), chosen on validation (`docs/seed_study.json`).
-#: HD map: the consensus of the first five runs by seed (top-1 ADE 0.870 m) was below each of 14 single runs
-#: (0.871–0.971 m), at five times one network's cost (14 runs: 0.842 m). ETH/UCY: three runs were 3.3–4.4% below their
+#: HD map: one network since the standing agents, the robust prior and the noisy copies (issue 26: one network per
+#: model); its single run was below the earlier five-run consensus on validation, all targets (0.476 against 0.576 m).
+#: ETH/UCY: three runs were 3.3–4.4% below their
 #: members on every fold's validation split, five runs 0.6–1.4% below three on every fold's (rule set before the
 #: runs: lower on average and on four folds of five). ApolloScape: three runs, 2.8% below its members on validation.
-ENSEMBLE_SEEDS = {"hdmap": (0, 1, 2, 3, 4), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1, 2)}
+ENSEMBLE_SEEDS = {"hdmap": (0,), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1, 2)}
 
 
 def train_hdmap(root: Path) -> None:
     """Trains the HD-map model with and without its map, one run per seed of :data:`ENSEMBLE_SEEDS`; bundles the first
     configuration's consensus as ``hdmap`` and keeps the second's as ``training/checkpoints/baselines/hdmap-nomap.pt``.
     """
-    from training.bundle import bundle
+    from training.bundle import bundle, slim_checkpoint
     from training.calibrate import calibrate_checkpoint
     from training.ensemble import ensemble_checkpoint, fit_top_scale
 
@@ -440,8 +441,11 @@ def train_hdmap(root: Path) -> None:
         for config in ("hdmap", "hdmap_nomap")
     }
     bundle(runs["hdmap"], "hdmap", root)
-    ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)
-    fit_top_scale(hdmap.NOMAP, root)
+    if len(runs["hdmap_nomap"]) > 1:
+        ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)
+        fit_top_scale(hdmap.NOMAP, root)
+    else:
+        slim_checkpoint(runs["hdmap_nomap"][0], hdmap.NOMAP)
     calibrate_checkpoint(hdmap.NOMAP, root)
 
 
@@ -490,6 +494,40 @@ every observed position and 10% of the observed steps before the current one dro
 history (the better of its two variants, as above).
 
 {noise}
+
+### What was tried for standing agents and real trackers (validation splits)
+
+Before this, `hdmap` scored and trained only agents that move more than 1 m, and on its validation scenes (6,310
+fully observed agents, 3,246 of them standing) the bundled five-run consensus moved standing agents by 0.92 m at 3 s
+(top-1 FDE; constant velocity 0.02 m), so over every agent it was behind constant velocity (top-1 ADE 0.576 against
+0.509 m), and with tracker-like histories far behind it (noise 0.1 m: 1.710 against 0.887; 0.3 m: 4.417 against
+1.550), its two-step prior taking the noise in full. The velocity study (`python -m training.prior_study --velocity`,
+the prior alone on validation, `docs/prior_study.json`) ranks the estimates; its rule, written before it ran (the
+lowest validation ADE over all targets, averaged over clean, 0.1 m and 0.3 m histories), chose a least-squares line
+over 1.2 s with a 0.3 m/s standing threshold for `hdmap` and over 2 s for `apolloscape` and `sdd`. One network
+trained on every target with that prior and two noisy training copies (0.1 m, 0.3 m, 10% of steps dropped) was, over
+all validation targets, 0.603 m clean (moving 1.194, behind constant velocity's 1.040: the line lags behind
+accelerating vehicles), 0.672 with 0.1 m noise and 1.064 with 0.3 m. A least-squares parabola over 2 s (its slope at
+t_obs; standing still judged on the line, which the engine now does for every fit: rerun that way, the study's
+rule ranks this parabola first for `hdmap`, 0.867 against 0.899 m for the line) lags less, and the same training
+with it gave 0.476 m clean (moving 0.963,
+standing FDE 0.027 m), 0.555 and 0.821 m with noise: below constant velocity in all three and below the consensus it
+replaces (the rule, set before these runs: lower validation top-1 ADE over all targets than the bundled model, clean
+and with 0.3 m noise), so `hdmap` is now that single network. On the moving validation agents alone it is 11% behind
+the five-run consensus (0.963 against 0.868 m). ApolloScape, the same way (least-squares line over 2 s, its validation
+recordings' own temperature, one run): 2.164 m clean against 1.998 for the bundled three-run consensus and 2.503
+against 2.498 with 0.3 m noise; not bundled.
+
+On the test sets, measured after that decision, against the consensus it replaced (the same targets, every agent):
+the held-out nuScenes + Waymo scenes 0.505/1.314 → 0.403/0.956 m top-1 (constant velocity 0.414/1.004), standing
+agents' FDE 0.961 → 0.038 m, moving agents 0.704/1.701 → 0.822/1.964 (constant velocity 0.843/2.059); Argoverse 2
+(never trained on) 0.486/1.251 → 0.56/1.23 (constant velocity 0.448/1.082), standing FDE 0.809 → 0.25, but moving
+agents 0.744/1.872 → 1.14/2.61 (constant velocity 0.88/2.19): on that unseen source the single network is 30% behind
+constant velocity on the moving agents, where the consensus was 16% ahead. With 0.3 m noise the held-out scenes went
+4.34 → 0.83 m (constant velocity 1.43) and Argoverse 2 4.39 → 0.92 (1.46). Its probabilities are less well
+calibrated than the consensus's (worst checked bin 0.11 and 0.15 off on the two driving test sets, table below).
+Left for the distilled single network of issue 26: the moving agents and the calibration, without losing the
+standing agents or the noise.
 
 ## Calibration of the mode probabilities
 

@@ -474,12 +474,18 @@ def contract_cases(tmp: Path) -> list[Case]:
         "classes": [[], ["bus"], "pedestrian", None, [1], ["pedestrian", "pedestrian"]],
         "attention_lambda": [-1, "x", None],
         "map": ["raster", 3, {"height_px": 10}, {**meta["map"], "height_px": 0}, {**meta["map"], "resolution_m": -1}],
-        "prior": ["cv", {"kind": "magic"}, {"kind": "constant_velocity", "window_s": -1}],
+        "prior": [
+            "cv",
+            {"kind": "magic"},
+            {"kind": "constant_velocity", "window_s": -1},
+            {"kind": "constant_velocity", "window_s": 1, "fit": "spline"},
+            {"kind": "constant_velocity", "window_s": 1, "standing_mps": -1},
+        ],
         "graph": ["dense", 3, None],
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 6, 99, "4", None, -1],
+        "contract_version": [0, 7, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",
