@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import numbers
 import os
 import warnings
 from collections.abc import Sequence
@@ -157,9 +158,11 @@ class Predictor:
         k = self.num_modes
         if modes is None:
             return k
+        if isinstance(modes, bool) or not isinstance(modes, numbers.Integral):
+            raise InvalidSpecError(f"modes must be a whole number in 1..={k}, got {modes!r} ({type(modes).__name__})")
         if not 1 <= modes <= k:
             raise InvalidSpecError(f"modes must be in 1..={k} (the model's anchors), got {modes}")
-        return modes
+        return int(modes)
 
     @property
     def num_modes(self) -> int:

@@ -7,13 +7,14 @@ crop around the agents, so a raster map and a vector map look alike and what you
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from dgan.exceptions import DganError, InvalidFrameError, InvalidMapError
+from dgan.exceptions import DganError, InvalidFrameError, InvalidMapError, InvalidSpecError
 from dgan.frame import Frame, RasterMap, VectorMap
 from dgan.predictor import Prediction
 
@@ -214,7 +215,9 @@ def plot(
         raise InvalidFrameError(f"the prediction ({len(prediction)} agents) is not of this frame ({n} agents)")
     t_f = prediction.trajectories.shape[2]
     m_all = prediction.trajectories.shape[1]
-    m = m_all if modes is None else int(np.clip(modes, 1, m_all))
+    if modes is not None and (isinstance(modes, bool) or not isinstance(modes, numbers.Integral) or modes < 1):
+        raise InvalidSpecError(f"modes must be a whole number of at least 1 (or None for all), got {modes!r}")
+    m = m_all if modes is None else min(int(modes), m_all)
     truth = _truths(frame, ground_truth, t_f)
     pts = [frame.positions[i][frame.mask[i]] for i in range(n)]
     drawn = [*pts, *prediction.trajectories[:, :m].reshape(-1, t_f, 2)]

@@ -91,6 +91,14 @@ def test_modes_are_sorted_and_truncated(nomap_model: Path, zara1_frame: dgan.Fra
         predictor.predict(zara1_frame, modes=0)
     with pytest.raises(exc.InvalidSpecError, match="modes"):
         dgan.Predictor(nomap_model, modes=8)
+    # Issue 28: modes of the wrong type are refused where they are given, not at the first predict.
+    for bad in (2.5, "3", True, None.__class__):
+        with pytest.raises(exc.InvalidSpecError, match="whole number"):
+            dgan.Predictor(nomap_model, modes=bad)  # type: ignore[arg-type]
+        with pytest.raises(exc.InvalidSpecError, match="whole number"):
+            predictor.predict(zara1_frame, modes=bad)  # type: ignore[arg-type]
+    two_modes = dgan.Predictor(nomap_model, modes=np.int64(2))  # type: ignore[arg-type]
+    assert two_modes.predict(zara1_frame).trajectories.shape[1] == 2
 
 
 def test_empty_scene_returns_an_empty_prediction(map_model: Path) -> None:
@@ -324,6 +332,13 @@ def test_headings_in_another_convention_are_warned_about_once() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         dgan.Predictor("hdmap").predict(with_headings(frame.headings + 4 * np.pi))
+    # ... also when only one agent moves (issue 28: "disagree by 0°, some exceed 2π" was a false warning). A
+    # parked car and a driving one, headings unwrapped by +2π:
+    t = np.arange(10)[:, None] * 0.2
+    two = np.stack([np.hstack([t * 3.0, 0 * t]), np.full((10, 2), [0.0, 20.0])])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        dgan.Predictor("hdmap").predict(dgan.Frame(two, headings=[2 * np.pi, 8.95], classes=["vehicle"] * 2))
     for bad in (np.degrees(frame.headings), frame.headings + np.pi):
         fresh = dgan.Predictor("hdmap")
         with pytest.warns(exc.HeadingWarning, match="disagree with its agents' direction of motion"):

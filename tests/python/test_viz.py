@@ -69,6 +69,9 @@ def test_plot_a_vector_map_scene_and_errors(tmp_path: Path) -> None:
         dgan.plot(scene.frame, other_pred)
     with pytest.raises(exc.InvalidFrameError, match="ground_truth"):
         dgan.plot(other, other_pred, ground_truth=np.zeros((2, 12, 2)))
+    for bad in (-1, 0, 1.5, "2", True):  # issue 28: plot(modes=-1) was accepted
+        with pytest.raises(exc.InvalidSpecError, match="modes"):
+            dgan.plot(other, other_pred, modes=bad)  # type: ignore[arg-type]
 
 
 def test_plot_over_a_picture_through_its_homography_with_boxes() -> None:

@@ -145,13 +145,15 @@ pub struct HeadingCheck {
 
 impl HeadingCheck {
     /// Whether the headings are most likely in another convention: enough moving agents to judge and a median
-    /// disagreement over [`HEADING_CHECK_MAX_MEDIAN_DEG`], or, with too few to judge, values beyond 2π. Headings
-    /// that follow the motion are radians even when unwrapped past 2π.
+    /// disagreement over [`HEADING_CHECK_MAX_MEDIAN_DEG`], or, with too few to judge, values beyond 2π that the
+    /// moving agents there are (compared modulo 2π) do not confirm. Headings that follow the motion are radians even
+    /// when unwrapped past 2π.
     pub fn disagrees(&self) -> bool {
         if self.moving >= HEADING_CHECK_MIN_MOVING {
             self.median_error_deg > HEADING_CHECK_MAX_MEDIAN_DEG
         } else {
-            self.beyond_two_pi
+            let confirmed = self.moving > 0 && self.median_error_deg <= HEADING_CHECK_MAX_MEDIAN_DEG;
+            self.beyond_two_pi && !confirmed
         }
     }
 }
@@ -272,9 +274,13 @@ mod tests {
         let tau = std::f64::consts::TAU;
         let unwrapped = check_headings(&f([2.0 * tau, 2.0 * tau, up + tau, 0.0, f64::NAN]), 1.0).unwrap();
         assert!(unwrapped.beyond_two_pi && !unwrapped.disagrees());
-        // Too few moving agents to judge: beyond 2π alone decides.
-        let slow = |h: f64| HeadingCheck { moving: 2, median_error_deg: 0.0, beyond_two_pi: h > tau };
-        assert!(slow(90.0).disagrees() && !slow(1.0).disagrees());
+        // Too few moving agents to judge the median: beyond 2π decides, unless the few moving agents agree with the
+        // headings modulo 2π (unwrapped radians, issue 28: "disagree by 0°, some exceed 2π" was a false warning).
+        let slow =
+            |h: f64, moving: usize, err: f64| HeadingCheck { moving, median_error_deg: err, beyond_two_pi: h > tau };
+        assert!(slow(90.0, 0, 0.0).disagrees() && !slow(1.0, 0, 0.0).disagrees());
+        assert!(!slow(8.95, 2, 0.0).disagrees());
+        assert!(slow(90.0, 2, 120.0).disagrees());
         let none = Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap();
         assert_eq!(check_headings(&none, 1.0), None);
     }
