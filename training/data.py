@@ -111,6 +111,11 @@ def mirror(batch: dict[str, Arr], agents: Arr, edges: Arr) -> None:
         batch["map"][agents] = batch["map"][agents][..., ::-1]
 
 
+#: A target that moves less than this many metres from its first observed to its last true position stands (every
+#: moving / standing split: evaluation, the velocity study).
+STANDING_M = 1.0
+
+
 @dataclass
 class Window:
     """One window of a recording: the agents seen at t_obs, their positions over all T_obs + T_f steps (NaN where
@@ -126,6 +131,13 @@ class Window:
     heading: Arr | None  # (N,) at t_obs
     length: Arr | None
     width: Arr | None
+
+    def moving(self) -> Arr:
+        """``(n_targets,)`` whether each target moves at least :data:`STANDING_M` from its first to its last
+        position."""
+        t = self.target
+        moved: Arr = np.linalg.norm(self.positions[t, -1] - self.positions[t, 0], axis=1) >= STANDING_M
+        return moved
 
     def frame(self, info: DatasetInfo, t_obs: int, with_map: bool = True) -> dgan.Frame:
         return dgan.Frame(

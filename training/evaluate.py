@@ -24,14 +24,11 @@ import numpy as np
 
 import dgan
 from training import metrics
-from training.augment import tracker_noise
-from training.data import iter_windows
+from training.data import iter_windows, noisy_window
 from training.datasets import DATASETS, recordings
 
 #: Edges of the probability bins of the reliability diagram.
 CALIBRATION_BINS = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
-#: A target that moves less than this many metres from its first observed to its last true position stands.
-STANDING_M = 1.0
 
 
 @dataclass
@@ -67,14 +64,9 @@ def scored_windows(
     rng = np.random.default_rng(0)
     for rec in recordings(dataset, root, split, fold, with_map=use_map):
         for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
-            moving = np.linalg.norm(w.positions[w.target, -1] - w.positions[w.target, 0], axis=1) >= STANDING_M
+            moving = w.moving()
             if noise != (0.0, 0.0):
-                pos, keep = tracker_noise(w.positions[:, : spec.t_obs], w.mask[:, : spec.t_obs], *noise, rng)
-                w = replace(
-                    w,
-                    positions=np.concatenate([pos, w.positions[:, spec.t_obs :]], axis=1),
-                    mask=np.concatenate([keep, w.mask[:, spec.t_obs :]], axis=1),
-                )
+                w = noisy_window(w, spec.t_obs, noise, rng)
             t = w.target
             unit = rec.unit_m
             obs, obs_mask = w.positions[t, : spec.t_obs], w.mask[t, : spec.t_obs]

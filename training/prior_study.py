@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -114,8 +115,6 @@ def residual_scale_study(root: Path) -> dict[str, dict[str, tuple[int, list[floa
 CONDITIONS = (("clean", 0.0, 0.0), ("noise 0.1 m", 0.1, 0.1), ("noise 0.3 m", 0.3, 0.1))
 #: Datasets of the velocity study (their validation splits).
 VELOCITY_DATASETS = ("hdmap", "apolloscape", "sdd")
-#: An agent that moves less than this from its first observed to its last true position stands.
-STANDING_M = 1.0
 
 
 def velocity_candidates() -> dict[str, dgan.PriorSpec]:
@@ -140,6 +139,7 @@ def velocity_study(root: Path, seed: int = 0) -> dict[str, dict[str, dict[str, d
     for dataset in VELOCITY_DATASETS:
         info = DATASETS[dataset]
         spec = dgan.InputSpec(info.dt_s, info.t_obs, info.t_f, classes=info.classes)
+        specs = {name: replace(spec, prior=prior) for name, prior in cands.items()}
         windows = [
             w
             for r in recordings(dataset, root, "val", with_map=False)
@@ -155,12 +155,11 @@ def velocity_study(root: Path, seed: int = 0) -> dict[str, dict[str, dict[str, d
                 x = dgan.preprocess(frame, spec)
                 t = w.target
                 truth = dgan.to_agent_frame(w.positions[t, info.t_obs :], x["origin"][t], x["heading"][t])
-                moved = np.linalg.norm(w.positions[t, -1] - w.positions[t, 0], axis=1) >= STANDING_M
+                moved = w.moving()
                 klass = np.array([info.label_class[k] for k in w.label[t]])
                 groups.setdefault("moving", []).append(moved)
                 groups.setdefault("class", []).append(klass)
-                for name, prior in cands.items():
-                    pspec = dgan.InputSpec(info.dt_s, info.t_obs, info.t_f, classes=info.classes, prior=prior)
+                for name, pspec in specs.items():
                     r = dgan.kinematic_prior(x["trajectory"][t], x["trajectory_mask"][t], x["state"][t], pspec)
                     err[name].append(np.linalg.norm(np.asarray(r, np.float64) - truth, axis=2))
             moving: npt.NDArray[np.bool_] = np.concatenate(groups["moving"]).astype(bool)

@@ -301,6 +301,8 @@ def main() -> None:
     print(text)
 
 
+#: The driving test sets of ``hdmap`` (dataset, the name every table gives it).
+DRIVING_TEST_SETS = (("hdmap", "nuScenes + Waymo held out"), ("argoverse2", "Argoverse 2 (never trained on)"))
 #: Tracker-like histories of the noisy-track table: Gaussian noise on the observed positions (metres), with this
 #: share of the observed steps before the current one dropped.
 NOISE_SIGMAS_M = (0.1, 0.3)
@@ -314,10 +316,7 @@ def noisy_results(root: Path) -> dict[str, dict[str, Any]]:
 
     jobs = [(f"ETH/UCY {s}", s, "ethucy", s) for s in SCENES]
     jobs += [("Stanford Drone", "sdd", "sdd", ""), ("ApolloScape", "apolloscape", "apolloscape", "")]
-    jobs += [
-        ("nuScenes + Waymo held out", "hdmap", "hdmap", ""),
-        ("Argoverse 2 (never trained on)", "hdmap", "argoverse2", ""),
-    ]
+    jobs += [(name, "hdmap", dataset, "") for dataset, name in DRIVING_TEST_SETS]
     out: dict[str, dict[str, Any]] = {}
     for name, model, dataset, fold in tqdm(jobs, desc="noisy tracks"):
         predictor = dgan.Predictor(model)
@@ -353,7 +352,7 @@ def test_sets(
     out.append(scorecard.TestSet("ETH/UCY average", "m", scorecard.mean_of([res[s] for s in SCENES], "avg"), avg_nomap))
     out.append(scorecard.TestSet("Stanford Drone", "px", multi["sdd"]["multi"], multi["sdd"].get("multi_nomap")))
     out.append(scorecard.TestSet("ApolloScape", "m", multi["apolloscape"]["multi"]))
-    for key, name in (("hdmap", "nuScenes + Waymo held out"), ("argoverse2", "Argoverse 2 (never trained on)")):
+    for key, name in DRIVING_TEST_SETS:
         out.append(scorecard.TestSet(name, "m", hd[key]["map"], hd[key].get("map_absent")))
     return out
 

@@ -194,11 +194,13 @@ impl PriorSpec {
             let mut v = window.and_then(|k| self.window_velocity(traj, &mask, k, dt_s)).unwrap_or(from_state);
             // Standing is judged on the least-squares line over the window, the estimate least moved by noise,
             // whichever fit gives the velocity.
-            let line = Self { fit: VelocityFit::LeastSquares, ..*self };
             let speed = match (self.standing_mps > 0.0, window) {
                 (false, _) => [f64::INFINITY, 0.0],
-                (true, Some(k)) => line.window_velocity(traj, &mask, k, dt_s).unwrap_or(v),
-                (true, None) => v,
+                (true, Some(k)) if self.fit != VelocityFit::LeastSquares => {
+                    let line = Self { fit: VelocityFit::LeastSquares, ..*self };
+                    line.window_velocity(traj, &mask, k, dt_s).unwrap_or(v)
+                }
+                (true, _) => v, // the velocity is the line's already, or there is no window
             };
             if !(v[0].is_finite() && v[1].is_finite()) || speed[0].hypot(speed[1]) < self.standing_mps {
                 v = [0.0, 0.0];
