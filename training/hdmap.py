@@ -13,6 +13,7 @@ import gzip
 import json
 import pickle
 import tempfile
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,7 @@ import numpy as np
 
 import dgan
 from dgan.datasets.hdmaps import bird_eye, read_scenario
+from dgan.exceptions import DatasetWarning
 from training.datasets import DATASETS
 from training.evaluate import evaluate
 from training.multiclass import relative
@@ -103,7 +105,9 @@ def sources_figure(root: Path, out: Path) -> Path:
     fig, axes = plt.subplots(len(PICTURES), 2, figsize=(13, 6.2 * len(PICTURES)), dpi=80)
     for (title, rel, step), (left, right) in zip(PICTURES, axes, strict=True):
         path = root / rel
-        sc = read_scenario(path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DatasetWarning)
+            sc = read_scenario(path)
         centre = np.nanmean(sc.positions[sc.valid[:, step], step], axis=0)
         half = PICTURE_EXTENT_M / 2
         lo, hi = centre - half, centre + half

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import sys
 import time
@@ -32,7 +33,7 @@ SOCIAL_GAN_DT_S = 0.4
 
 def read_scene(path: Path) -> tuple[dict[str, Any], float | None]:
     """A scene file as columns, and the seconds per unit of its time column when the format fixes it."""
-    if path.suffix in (".parquet", ".feather", ".arrow"):
+    if path.suffix in (".parquet", ".feather", ".arrow") and path.is_file():
         try:
             import pyarrow.feather as feather
             import pyarrow.parquet as pq
@@ -43,9 +44,12 @@ def read_scene(path: Path) -> tuple[dict[str, Any], float | None]:
         except (OSError, ValueError) as e:
             raise InvalidFrameError(f"cannot read {path}: {e}") from None
         return dgan.io.columns(table), None
+    if not path.is_file():
+        what = "does not exist" if not path.exists() else "is not a regular file"
+        raise InvalidFrameError(f"cannot read scene {path}: it {what}")
     try:
         text = path.read_text()
-    except (OSError, UnicodeDecodeError) as e:
+    except (OSError, UnicodeDecodeError, MemoryError) as e:
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]
     if "," in first and any(c.isalpha() for c in first):
@@ -89,7 +93,11 @@ def read_map(spec: str, pixel_to_world: str | None) -> dgan.RasterMap | dgan.Vec
     if path.suffix.lower() in (".png", ".jpg", ".jpeg"):
         if pixel_to_world is None:
             raise InvalidMapError("an image map needs --pixel-to-world H.txt (its 3×3 pixel → world homography)")
-        return dgan.RasterMap.from_pixel_to_world(path, np.loadtxt(pixel_to_world))
+        try:
+            homography = np.loadtxt(pixel_to_world, ndmin=2)
+        except (OSError, ValueError) as e:
+            raise InvalidMapError(f"cannot read --pixel-to-world {pixel_to_world}: {e}") from None
+        return dgan.RasterMap.from_pixel_to_world(path, homography)
     try:
         return dgan.VectorMap.from_json(path)
     except InvalidMapError as own:
@@ -175,44 +183,138 @@ def _prediction_json(pred: dgan.Prediction, frame: dgan.Frame, model: str, now: 
     }
 
 
-def write_table(pred: dgan.Prediction, out: Path) -> None:
-    """``--out``: the long table of :meth:`Prediction.to_records` as CSV, parquet or JSON lines, by extension."""
+def write_table(pred: dgan.Prediction, out: Path, scene: str | None = None) -> None:
+    """``--out``: the long table of :meth:`Prediction.to_records` as CSV, parquet or JSON lines, by extension; with
+    ``scene``, a first column ``scene`` holding it. Written beside ``out`` and renamed onto it (a failed write leaves
+    ``out`` as it was)."""
+    write_records({} if scene is None else {"scene": [scene]}, [pred], out)
+
+
+def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction], out: Path) -> None:
+    """The predictions' long tables one after the other (at least one), each led by the columns of ``extra`` (one
+    value per prediction, repeated on its rows)."""
+    from dgan.predictor import write_atomically
+
     suffix = out.suffix.lower()
-    if suffix == ".parquet":
-        pred.to_parquet(out)
-        return
-    cols = pred.to_records()
-    names = list(cols)
-    rows = zip(*(cols[k].tolist() for k in names), strict=True)
-    if suffix in (".jsonl", ".ndjson"):
-        with out.open("w") as f:
-            for row in rows:
-                f.write(json.dumps(dict(zip(names, row, strict=True))) + "\n")
-        return
-    if suffix != ".csv":
+    if suffix not in (".csv", ".parquet", ".jsonl", ".ndjson"):
         raise InvalidFrameError(f"--out must end in .csv, .parquet or .jsonl, got {out.name}")
-    with out.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(names)
-        w.writerows(rows)
+    if suffix == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        tables = []
+        for i, pr in enumerate(preds):
+            t = pr.to_arrow()
+            for j, (k, v) in enumerate(extra.items()):
+                t = t.add_column(j, k, pa.array([v[i]] * t.num_rows, type=pa.string()))
+            tables.append(t)
+        try:
+            table = pa.concat_tables(tables)
+        except pa.ArrowInvalid as e:
+            raise dgan.exceptions.OutputError(f"the scenes' tables do not join (ids of other types?): {e}") from None
+        write_atomically(out, lambda f: pq.write_table(table, f))
+        return
+    names = list(extra) + list(preds[0].to_records())
+    rows: list[tuple[Any, ...]] = []
+    for i, pr in enumerate(preds):
+        cols = {k: v.tolist() for k, v in pr.to_records().items()}
+        cols.update({k: [v[i]] * len(cols["x"]) for k, v in extra.items()})
+        rows.extend(zip(*(cols[k] for k in names), strict=True))
+
+    def write(f: Any) -> None:
+        if suffix == ".csv":
+            text = io.StringIO()
+            w = csv.writer(text)
+            w.writerow(names)
+            w.writerows(rows)
+            f.write(text.getvalue().encode())
+        else:
+            f.write("".join(json.dumps(dict(zip(names, r, strict=True))) + "\n" for r in rows).encode())
+
+    write_atomically(out, write)
+
+
+def _frame_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> tuple[dgan.Frame, float]:
+    """The frame of a scene file at ``--time`` (its last time by default), and that time."""
+    cols, unit = read_scene(scene)
+    time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
+    scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
+    frame = dgan.Frame.from_records(
+        cols,
+        spec=p,
+        time_unit=time_unit,
+        current_time=args.time,
+        map=scene_map,
+        duplicates=args.duplicates,
+        upsample=args.upsample,
+    )
+    now = float(args.time) if args.time is not None else float(np.max(cols["time"]))
+    return frame, now
+
+
+def scene_files(spec: str) -> list[Path] | None:
+    """The scene files ``spec`` names when it is a directory or a glob (sorted), None for one file."""
+    import glob
+
+    path = Path(spec)
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
+    elif any(c in spec for c in "*?[") and not path.exists():
+        files = sorted(Path(p) for p in glob.glob(spec) if Path(p).is_file())
+    else:
+        return None
+    if not files:
+        raise InvalidFrameError(f"no scene files in {spec}")
+    return files
+
+
+def _predict_many(args: argparse.Namespace, p: dgan.Predictor, files: list[Path]) -> int:
+    """``dgan predict MODEL DIR|GLOB --out TABLE``: every scene file, one table with a ``scene`` column."""
+    if args.out is None:
+        raise InvalidFrameError("several scenes (a directory or a glob) need --out TABLE (.parquet, .csv or .jsonl)")
+    preds = []
+    for scene in _progress(files, "scenes"):
+        try:
+            preds.append(p.predict(_frame_of(args, p, scene)[0], unknown_classes=args.unknown_classes))
+        except DganError as e:
+            raise type(e)(f"{scene}: {e}") from None
+    write_records({"scene": [f.name for f in files]}, preds, Path(args.out))
+    agents = sum(len(pr) for pr in preds)
+    print(f"wrote {agents} agents of {len(files)} scenes to {args.out}", file=sys.stderr)
+    return 0
+
+
+def _progress(items: list[Path], what: str) -> Any:
+    """A progress bar on stderr (tqdm where installed, a counter otherwise)."""
+    try:
+        from tqdm import tqdm
+
+        return tqdm(items, unit=what[:-1], desc=what, file=sys.stderr, disable=None)
+    except ImportError:
+
+        def counted() -> Any:
+            for i, item in enumerate(items, 1):
+                yield item
+                print(f"\r{what}: {i}/{len(items)}", end="\n" if i == len(items) else "", file=sys.stderr)
+
+        return counted()
 
 
 def _predict(args: argparse.Namespace) -> int:
     p = dgan.Predictor(args.model, modes=args.modes, execution_provider=args.provider)
-    cols, unit = read_scene(Path(args.scene))
-    time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
-    scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
-    frame = dgan.Frame.from_records(cols, spec=p, time_unit=time_unit, current_time=args.time, map=scene_map)
-    if p.spec.map is not None and scene_map is None and p.spec.map.optional:
+    files = scene_files(args.scene)
+    if files is not None:
+        return _predict_many(args, p, files)
+    frame, now = _frame_of(args, p, Path(args.scene))
+    if p.spec.map is not None and frame.map is None and p.spec.map.optional:
         print(
             f"dgan: note: no --map given; {args.model} runs without a map (its map is optional; "
             "see `dgan info` for the map it was trained with)",
             file=sys.stderr,
         )
     started = time.perf_counter()
-    pred = p.predict(frame)
+    pred = p.predict(frame, unknown_classes=args.unknown_classes)
     ms = (time.perf_counter() - started) * 1e3
-    now = float(args.time) if args.time is not None else float(np.max(cols["time"]))
     if args.out is not None:
         write_table(pred, Path(args.out))
         print(f"wrote {len(pred)} agents × {pred.trajectories.shape[1]} modes to {args.out}", file=sys.stderr)
@@ -222,6 +324,11 @@ def _predict(args: argparse.Namespace) -> int:
         return 0
     if args.out is not None:
         return 0
+    _print_prediction(pred, frame, p, ms, now)
+    return 0
+
+
+def _print_prediction(pred: dgan.Prediction, frame: dgan.Frame, p: dgan.Predictor, ms: float, now: float) -> None:
     print(
         f"{len(frame)} agents at time {now:g}, {len(pred.edges)} attention edges, predicted in {ms:.1f} ms "
         f"(steps of {p.spec.dt_s:g} s, horizon {p.spec.t_f * p.spec.dt_s:g} s)"
@@ -232,7 +339,6 @@ def _predict(args: argparse.Namespace) -> int:
             f"p={pred.probabilities[i, m]:.2f} -> ({ends[m, 0]:.2f}, {ends[m, 1]:.2f})" for m in range(len(ends))
         )
         print(f"agent {agent!s:>5}  {modes}")
-    return 0
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -251,10 +357,14 @@ def build_parser() -> argparse.ArgumentParser:
     info = sub.add_parser("info", help="show a model's contract")
     info.add_argument("model")
     info.set_defaults(func=_info)
-    pred = sub.add_parser("predict", help="predict the agents of a scene file at one time")
+    pred = sub.add_parser(
+        "predict", help="predict the agents of a scene file at one time (or of every file of a directory or glob)"
+    )
     pred.add_argument("model")
     pred.add_argument(
-        "scene", help="Social-GAN txt (frame id x y), CSV with agent_id,time,x,y[,...], or parquet/feather"
+        "scene",
+        help="Social-GAN txt (frame id x y), CSV with agent_id,time,x,y[,...], or parquet/feather; a directory or "
+        "a quoted glob of them predicts each (at its last time, or --time) into one --out table with a scene column",
     )
     pred.add_argument(
         "--time", type=float, default=None, help="current time t_obs in the file's unit (default: the last)"
@@ -272,6 +382,21 @@ def build_parser() -> argparse.ArgumentParser:
     pred.add_argument("--modes", type=int, default=3, help="modes per agent (default 3)")
     pred.add_argument(
         "--provider", default="cpu", help="ONNX Runtime execution provider: cpu (default), cuda or cuda:N"
+    )
+    pred.add_argument(
+        "--duplicates",
+        choices=("error", "first", "last", "mean"),
+        default="error",
+        help="several rows of one agent at one time: refuse (default), keep the first or last, or their mean",
+    )
+    pred.add_argument(
+        "--upsample", action="store_true", help="interpolate data up to 2.5x sparser than the model's step"
+    )
+    pred.add_argument(
+        "--unknown-classes",
+        choices=("error", "ignore"),
+        default="error",
+        help="agents of classes the model does not know: refuse (default) or leave them out",
     )
     pred.add_argument("--json", action="store_true", help="print JSON (times, classes, probabilities) to stdout")
     pred.add_argument("--out", default=None, help="write the long table of modes: .csv, .parquet or .jsonl")
@@ -299,6 +424,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         code: int = args.func(args)
     except DganError as e:
         print(f"dgan: error: {e}", file=sys.stderr)
+        return 2
+    except (OSError, MemoryError) as e:  # an output that cannot be written, a file that cannot be read
+        what = f"{e.strerror}: {e.filename}" if isinstance(e, OSError) and e.strerror and e.filename else repr(e)
+        print(f"dgan: error: {what}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # e.g. `dgan predict ... | head`
         sys.stderr.close()

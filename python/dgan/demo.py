@@ -9,6 +9,7 @@ second picture of one agent's map crop as the network sees it. Classes are told 
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from dgan.exceptions import DganError
+from dgan.exceptions import DatasetWarning, DganError
 from dgan.frame import Frame, RasterMap
 from dgan.predictor import Prediction, Predictor
 from dgan.scenes import APOLLO_TYPES, SDD_LABEL_CLASS, scene_image, scene_map, sdd_raster_map
@@ -134,7 +135,9 @@ def waymo_scene(
     from dgan.datasets.hdmaps import bird_eye, read_waymo_json
 
     step = 40 if now is None else int(now)
-    sc = read_waymo_json(WAYMO_FILE)
+    with warnings.catch_warnings():  # the bundled scene's driveways are known and not drawn
+        warnings.simplefilter("ignore", DatasetWarning)
+        sc = read_waymo_json(WAYMO_FILE)
     span = WAYMO_EVERY * (t_obs - 1)
     if not span <= step <= sc.num_steps - 1 - WAYMO_EVERY:
         raise DganError(f"the Waymo demo scene needs --time in {span}..{sc.num_steps - 1 - WAYMO_EVERY}, got {step}")

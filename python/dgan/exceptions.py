@@ -7,7 +7,9 @@ The native engine maps each of its error kinds to exactly one of these classes.
 from __future__ import annotations
 
 __all__ = [
+    "ColumnWarning",
     "ContractError",
+    "DatasetWarning",
     "DganError",
     "HeadingWarning",
     "InferenceError",
@@ -17,7 +19,9 @@ __all__ = [
     "MapRequiredError",
     "ModelLoadError",
     "ModelNotFoundError",
+    "OutputError",
     "RuntimeLibraryError",
+    "TimeUnitWarning",
     "UnknownClassError",
 ]
 
@@ -76,6 +80,27 @@ class RuntimeLibraryError(DganError, OSError):
 
 class InferenceError(DganError, RuntimeError):
     """ONNX Runtime failed while running a loaded model."""
+
+
+class OutputError(DganError, ValueError):
+    """A prediction that an output format cannot hold: ids of mixed types, or integers past 64 bits, in an Arrow
+    table or parquet file (pandas and numpy hold them)."""
+
+
+class ColumnWarning(UserWarning):
+    """A table has no column of a name :meth:`~dgan.Frame.from_records` reads but one close to it (``Class`` for
+    ``class``): it is not read; pass its name (``cls_column="Class"``) to read it."""
+
+
+class DatasetWarning(UserWarning):
+    """A scenario file read by :mod:`dgan.datasets` holds something its reader leaves out or replaces: map element
+    types that are not drawn (named with their counts), agents whose box has no size (their class default is used)."""
+
+
+class TimeUnitWarning(UserWarning):
+    """No agent of a frame built from a table has two observed steps: the time column is most likely in another
+    unit than ``time_unit`` says (milliseconds read as seconds), and every prediction would start from a single
+    position."""
 
 
 class HeadingWarning(UserWarning):

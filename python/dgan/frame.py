@@ -11,6 +11,7 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan.exceptions import InvalidFrameError, InvalidMapError, UnknownClassError
+from dgan.io import as_given
 
 #: The classes dgan knows, by canonical integer code.
 CLASSES: Final = ("vehicle", "cyclist", "pedestrian")
@@ -131,6 +132,9 @@ class RasterMap:
         assert h is not None
         return h
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (RasterMap, (self.image, self.world_to_pixel))
+
     def __repr__(self) -> str:
         return f"RasterMap(image={self.image.shape})"
 
@@ -204,6 +208,9 @@ class VectorMap:
     def __len__(self) -> int:
         return len(self._map)
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (VectorMap, (self.elements(),))
+
     def __repr__(self) -> str:
         return f"VectorMap({len(self)} elements)"
 
@@ -221,22 +228,21 @@ def _classes(classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int) -> lis
 
 
 def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[Any] | None]:
-    """Integer ids as they are; other ids (strings, say) as codes 0..N with the labels kept."""
+    """Signed integer ids as they are; other ids (strings, uint64 hashes, a mix) as codes 0..N with the ids kept as
+    given."""
     if ids is None:
         return None, None
-    arr = np.asarray(ids)
-    if arr.dtype.kind == "i" or (arr.dtype.kind == "u" and (arr.size == 0 or arr.max() <= np.iinfo(np.int64).max)):
+    arr = as_given(ids)
+    if arr.dtype.kind == "i":
         return _array("ids", arr, np.int64), None
-    if arr.dtype.kind == "u":  # uint64 ids past int64 (hashes): kept as labels
-        arr = arr.astype(object)
     if arr.dtype.kind == "f":
         if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
             raise InvalidFrameError("float ids must be whole finite numbers (NaN or fractional ids are ambiguous)")
         return _array("ids", arr, np.int64), None
-    if arr.dtype.kind not in "OUS" or arr.ndim != 1:
+    if arr.dtype.kind not in "OUSu" or arr.ndim != 1:
         raise InvalidFrameError(f"ids must be a 1-D array of integers or strings, got {arr.dtype} {arr.shape}")
-    labels = np.asarray(arr, dtype=object)
-    if any(v is None or (isinstance(v, float) and not np.isfinite(v)) for v in labels):
+    labels = arr.copy() if arr.dtype.kind == "u" else np.asarray(arr, dtype=object)
+    if labels.dtype == object and any(v is None or (isinstance(v, float) and not np.isfinite(v)) for v in labels):
         raise InvalidFrameError("ids hold None or NaN")
     if len({*labels.tolist()}) != labels.size:
         raise InvalidFrameError("ids repeat")
@@ -266,14 +272,14 @@ class Frame:
         TimeBaseError: a ``dt`` that is not a positive number of seconds.
     """
 
-    __slots__ = ("_frame", "_labels", "_map")
+    __slots__ = ("_frame", "_labels", "_map", "_source")
 
     def __init__(
         self,
         positions: npt.ArrayLike,
         mask: npt.ArrayLike | None = None,
         classes: Sequence[ClassLike] | npt.ArrayLike | None = None,
-        ids: npt.ArrayLike | None = None,
+        ids: npt.ArrayLike | Sequence[object] | None = None,
         headings: npt.ArrayLike | None = None,
         velocities: npt.ArrayLike | None = None,
         lengths: npt.ArrayLike | None = None,
@@ -287,6 +293,7 @@ class Frame:
         n = pos.shape[0] if pos.ndim >= 1 else 0
         codes, self._labels = _ids(ids, n)
         self._map = map
+        self._source: tuple[float | None, bool] | None = None
         self._frame = _dgan.Frame(
             pos,
             _array("mask", mask, np.bool_),
@@ -301,10 +308,22 @@ class Frame:
         )
 
     @classmethod
-    def _wrap(cls, native: _dgan.Frame, labels: npt.NDArray[Any] | None, map: RasterMap | VectorMap | None) -> Frame:
+    def _wrap(
+        cls,
+        native: _dgan.Frame,
+        labels: npt.NDArray[Any] | None,
+        map: RasterMap | VectorMap | None,
+        source: tuple[float | None, bool] | None = None,
+    ) -> Frame:
         out = cls.__new__(cls)
-        out._frame, out._labels, out._map = native, labels, map
+        out._frame, out._labels, out._map, out._source = native, labels, map, source
         return out
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickles as its arrays (for multiprocessing, Ray, Dask): the engine's ids, the ids as given, the map."""
+        f = self._frame
+        state = (f.positions, f.mask, f.classes, f.ids, f.headings, f.velocities, f.lengths, f.widths, f.dt)
+        return (_unpickle_frame, (state, self._labels, self._map, self._source))
 
     @classmethod
     def from_records(
@@ -328,13 +347,15 @@ class Frame:
         velocity: tuple[str, str] = ("vx", "vy"),
         default_class: ClassLike = "pedestrian",
         map: RasterMap | VectorMap | None = None,
+        duplicates: str = "error",
+        upsample: bool = False,
     ) -> Frame:
         """A frame from a long table, one row per agent and time, resampled to a model's time base.
 
         Args:
             records: any table: a dict of arrays, a sequence of records (dicts), a numpy structured array, a pandas
                 or polars DataFrame, a pyarrow Table, or anything with the Arrow stream or dataframe interchange
-                interface (:func:`dgan.io.columns`). Ids may be integers or strings.
+                interface (:func:`dgan.io.columns`). Ids may be integers, strings or a mix; they come back as given.
             t_obs, dt: the frame's steps and the seconds between them; both from ``spec`` (an
                 :class:`~dgan.InputSpec` or a :class:`~dgan.Predictor`) if given. ``dt`` None: the data's own
                 spacing (the smallest gap between distinct times).
@@ -342,102 +363,40 @@ class Frame:
             current_time: the frame's current time t_obs, in the time column's unit (the latest time if None); it
                 must be a time of the table.
             max_gap: the longest gap in seconds between two rows of an agent that is interpolated (1.5 · dt if None).
+            duplicates: several rows of one agent at one time: ``"error"`` (refused), ``"first"`` or ``"last"``
+                (in row order), ``"mean"`` (positions, sizes, velocities averaged; headings by circular mean).
+            upsample: interpolate data up to 2.5× sparser than ``dt`` onto its grid (2 Hz data for a 0.4 s model),
+                bridging gaps up to 1.5× the data's spacing; :attr:`upsampled` records it.
 
         Data denser than ``dt`` or irregular are interpolated linearly at the grid times; steps an agent was not seen
-        are masked out; data sparser than ``dt`` are refused. Agents with a row at ``current_time`` are the frame's
-        agents; optional columns (class, heading, length, width, velocity) are read at that row and may be absent.
+        are masked out. Agents with a row at ``current_time`` are the frame's agents; optional columns (class,
+        heading, length, width, velocity) are read at that row and may be absent: a column of a close name
+        (``Class``) is not read and warns (:class:`~dgan.exceptions.ColumnWarning`). A frame in which no agent has
+        two observed steps warns that the time unit may be wrong (:class:`~dgan.exceptions.TimeUnitWarning`).
 
         Raises:
-            InvalidFrameError: a missing column, a current time with no row, two rows of one agent at one time.
-            TimeBaseError: data sparser than ``dt``, a non-positive ``dt`` or ``time_unit``.
+            InvalidFrameError: a missing column, a current time with no row, repeated (agent, time) rows.
+            TimeBaseError: data sparser than ``dt`` (naming the bundled models whose step fits), a non-positive
+                ``dt`` or ``time_unit``.
         """
-        from dgan.exceptions import TimeBaseError
-        from dgan.io import columns
+        from dgan.records import Names, from_records
 
-        if spec is not None:
-            spec = getattr(spec, "spec", spec)
-            t_obs = spec.t_obs if t_obs is None else t_obs
-            dt = spec.dt_s if dt is None else dt
-        if t_obs is None:
-            raise InvalidFrameError("from_records needs t_obs (or spec=, a model's InputSpec or Predictor)")
-        if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
-            raise TimeBaseError(f"dt must be a positive number of seconds, got {dt!r}")
-        if isinstance(t_obs, bool) or not isinstance(t_obs, (int, np.integer)) or not 1 <= t_obs <= 1000:
-            raise InvalidFrameError(f"t_obs must be an integer in 1..=1000, got {t_obs!r}")
-        if not (isinstance(time_unit, (int, float)) and np.isfinite(time_unit) and time_unit > 0):
-            raise TimeBaseError(f"time_unit must be a positive number of seconds per unit, got {time_unit!r}")
-        cols = columns(records)
-        for required in (agent_id, time, x, y):
-            if required not in cols:
-                raise InvalidFrameError(f"records lack the column {required!r}; they have {list(cols)}")
-
-        def num(name: str) -> npt.NDArray[np.float64] | None:
-            if name not in cols:
-                return None
-            c = cols[name]
-            if c.dtype.kind not in "biuf":
-                raise InvalidFrameError(f"column {name!r} must be numeric, got {c.dtype}")
-            return np.ascontiguousarray(c, dtype=np.float64)
-
-        times, xs, ys = num(time), num(x), num(y)
-        assert times is not None
-        assert xs is not None
-        assert ys is not None
-        if not np.all(np.isfinite(times)):
-            raise InvalidFrameError("the time column holds NaN or infinite values")
-        raw_ids = cols[agent_id]
-        if raw_ids.dtype.kind in "iu":
-            codes, labels = np.ascontiguousarray(raw_ids, dtype=np.int64), None
-        else:
-            if raw_ids.dtype.kind == "f" and not np.all(np.isfinite(raw_ids)):
-                raise InvalidFrameError(f"the id column {agent_id!r} holds NaN or infinite values")
-            if any(v is None for v in raw_ids.tolist()):
-                raise InvalidFrameError(f"the id column {agent_id!r} holds None")
-            try:
-                uniq, inverse = np.unique(raw_ids, return_inverse=True)
-            except TypeError:
-                raise InvalidFrameError(f"the id column {agent_id!r} mixes types that cannot be ordered") from None
-            codes, labels = np.ascontiguousarray(inverse.ravel(), dtype=np.int64), uniq.astype(object)
-            if raw_ids.dtype.kind == "f" and np.all(uniq == np.round(uniq)):
-                labels = uniq.astype(np.int64)
-        uniq_t = np.unique(times)
-        if uniq_t.size == 0:
-            return cls(np.zeros((0, t_obs, 2)), map=map, dt=dt)
-        if dt is None:
-            gaps = np.diff(uniq_t)
-            dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
-        now = float(uniq_t.max()) if current_time is None else float(current_time)
-        tol = 1e-6 * dt / time_unit
-        if not np.any(np.abs(uniq_t - now) <= tol):
-            raise InvalidFrameError(
-                f"no row at current_time {now:g}; the table spans {uniq_t[0]:g}..{uniq_t[-1]:g} "
-                f"({uniq_t.size} distinct times)"
-            )
-        now = float(uniq_t[np.argmin(np.abs(uniq_t - now))])
-        klass = cols.get(cls_column)
-        rows = {
-            "ids": codes,
-            "times": np.ascontiguousarray(times * time_unit),
-            "xs": xs,
-            "ys": ys,
-            "classes": None if klass is None else klass.tolist(),
-            "headings": num(heading),
-            "lengths": num(length),
-            "widths": num(width),
-            "vxs": num(velocity[0]) if velocity[1] in cols else None,
-            "vys": num(velocity[1]) if velocity[0] in cols else None,
-        }
-        native = _dgan.frame_from_rows(
-            rows,
-            now * time_unit,
-            int(t_obs),
-            float(dt),
-            max_gap,
-            default_class,
+        names = Names(agent_id, time, x, y, cls_column, heading, length, width, *velocity)
+        return from_records(
+            cls,
+            records,
+            t_obs=t_obs,
+            dt=dt,
+            spec=spec,
+            time_unit=time_unit,
+            current_time=current_time,
+            max_gap=max_gap,
+            names=names,
+            default_class=default_class,
+            map=map,
+            duplicates=duplicates,
+            upsample=upsample,
         )
-        frame_labels = None if labels is None else labels[native.ids]
-        out = cls._wrap(native, frame_labels, None)
-        return out if map is None else out.with_map(map)
 
     def __len__(self) -> int:
         return len(self._frame)
@@ -461,6 +420,43 @@ class Frame:
     def agent_ids(self) -> npt.NDArray[Any]:
         """``(N,)`` the ids as given: integers, or the strings (an object array)."""
         return self._frame.ids if self._labels is None else self._labels
+
+    def select(self, rows: npt.ArrayLike) -> Frame:
+        """The frame of the agents at ``rows`` (integer indices or a boolean mask), in that order, with their ids,
+        states and the map."""
+        f = self._frame
+        index = np.arange(len(self))[np.asarray(rows)] if len(self) else np.zeros(0, dtype=np.int64)
+        classes = [f.classes[i] for i in index]
+
+        def pick(a: npt.NDArray[Any]) -> npt.NDArray[Any]:
+            return np.ascontiguousarray(a[index])
+
+        native = _dgan.Frame(
+            pick(f.positions),
+            pick(f.mask),
+            classes,
+            pick(f.ids),
+            pick(f.headings),
+            pick(f.velocities),
+            pick(f.lengths),
+            pick(f.widths),
+            None,
+            f.dt,
+        )
+        labels = None if self._labels is None else self._labels[index]
+        out = Frame._wrap(native, labels, None, self._source)
+        return out if self._map is None else out.with_map(self._map)
+
+    @property
+    def source_dt(self) -> float | None:
+        """For a frame of :meth:`from_records`: the median spacing in seconds of the rows it resampled (None when no
+        agent had two rows in the window, or for a frame built from arrays)."""
+        return None if self._source is None else self._source[0]
+
+    @property
+    def upsampled(self) -> bool:
+        """Whether :meth:`from_records` interpolated data sparser than ``dt`` onto its grid (``upsample=True``)."""
+        return self._source is not None and self._source[1]
 
     @property
     def dt(self) -> float | None:
@@ -500,7 +496,7 @@ class Frame:
     def without_map(self) -> Frame:
         """The same agents, histories and states without a map: how a model with an optional map is run on a scene
         whose map is unknown (a model whose map is required raises :class:`~dgan.exceptions.MapRequiredError`)."""
-        return Frame._wrap(self._frame.without_map(), self._labels, None)
+        return Frame._wrap(self._frame.without_map(), self._labels, None, self._source)
 
     def with_map(self, map: RasterMap | VectorMap | None) -> Frame:
         """The same agents with ``map`` (None: :meth:`without_map`)."""
@@ -508,7 +504,19 @@ class Frame:
             return self.without_map()
         if not isinstance(map, (RasterMap, VectorMap)):
             raise InvalidMapError(f"map must be a dgan.RasterMap or dgan.VectorMap, got {type(map).__name__}")
-        return Frame._wrap(self._frame.with_map(map._map), self._labels, map)
+        return Frame._wrap(self._frame.with_map(map._map), self._labels, map, self._source)
 
     def __repr__(self) -> str:
         return f"Frame(agents={len(self)}, steps={self.positions.shape[1]}, dt={self.dt}, map={self._map!r})"
+
+
+def _unpickle_frame(
+    state: tuple[Any, ...],
+    labels: npt.NDArray[Any] | None,
+    map: RasterMap | VectorMap | None,
+    source: tuple[float | None, bool] | None,
+) -> Frame:
+    pos, mask, classes, codes, headings, velocities, lengths, widths, dt = state
+    native = _dgan.Frame(pos, mask, classes, codes, headings, velocities, lengths, widths, None, dt)
+    out = Frame._wrap(native, labels, None, source)
+    return out if map is None else out.with_map(map)

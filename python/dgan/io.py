@@ -8,6 +8,7 @@ polars or pyarrow unless the table is one of theirs (or the output asks for one)
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -22,9 +23,36 @@ if TYPE_CHECKING:
 Columns = dict[str, npt.NDArray[Any]]
 
 
+def as_given(values: Any) -> npt.NDArray[Any]:
+    """``values`` as an array that keeps them as given: a list mixing strings with numbers stays a list of both (an
+    object array; numpy alone would turn ``1`` into ``'1'``), and a list of integers past int64 is uint64 (or an
+    object array past 64 bits), never rounded to floats."""
+    arr = np.asarray(values)
+    if isinstance(values, np.ndarray) or arr.dtype.kind not in "USfO" or arr.ndim != 1:
+        return arr
+    items = list(values)
+    if arr.dtype.kind in "US" and all(isinstance(v, (str, bytes)) for v in items):
+        return arr
+    if (
+        arr.dtype.kind in "fO"
+        and items
+        and all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in items)
+    ):
+        for dtype in (np.int64, np.uint64):
+            try:
+                return np.array(items, dtype=dtype)
+            except OverflowError:
+                pass
+    elif arr.dtype.kind == "f":
+        return arr
+    out = np.empty(len(items), dtype=object)
+    out[:] = items
+    return out
+
+
 def _numpy(name: str, values: Any) -> npt.NDArray[Any]:
     try:
-        out = np.asarray(values)
+        out = as_given(values)
     except (TypeError, ValueError) as e:
         raise InvalidFrameError(f"column {name!r} cannot be read as an array: {e}") from None
     if out.ndim != 1:

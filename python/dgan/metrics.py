@@ -38,6 +38,16 @@ __all__ = [
 ]
 
 
+def _finite(name: str, a: Arr, axes: tuple[int, ...]) -> None:
+    bad = ~np.all(np.isfinite(a), axis=axes)
+    if np.any(bad):
+        rows = np.flatnonzero(bad)
+        raise InvalidFrameError(
+            f"{name} holds NaN or infinite values for {rows.size} agent(s), e.g. row {rows[0]}: score only the agents "
+            "with a full ground truth (select them first; a NaN would silently make the mean NaN)"
+        )
+
+
 def _check(pred: Arr, gt: Arr) -> tuple[Arr, Arr]:
     p, g = np.asarray(pred, dtype=np.float64), np.asarray(gt, dtype=np.float64)
     if p.ndim != 4 or p.shape[-1] != 2:
@@ -46,6 +56,8 @@ def _check(pred: Arr, gt: Arr) -> tuple[Arr, Arr]:
         raise InvalidFrameError(
             f"ground truth must have shape (N, T, 2) = {(p.shape[0], p.shape[2], 2)}, got {g.shape}"
         )
+    _finite("the ground truth", g, (1, 2))
+    _finite("the predictions", p, (1, 2, 3))
     return p, g
 
 
@@ -131,7 +143,23 @@ def summary(pred: Arr, gt: Arr, prob: Arr | None = None, ks: tuple[int, ...] = (
 def constant_velocity(trajectory: Arr, mask: Arr, t_f: int, window: int = 1) -> Arr:
     """``(N, 1, T_f, 2)``: each agent keeps a constant velocity (zero with one observed step). ``window`` = 1: the
     velocity of its last two observed steps; ``window`` = k > 1: its mean velocity over the last k steps (from the
-    earliest observed step among them; the last two steps when none is)."""
+    earliest observed step among them; the last two steps when none is).
+
+    Raises:
+        InvalidFrameError: shapes that disagree (``trajectory`` ``(N, T, 2)``, ``mask`` ``(N, T)``), an agent without
+            an observed step, a non-finite observed position.
+    """
+    trajectory, mask = np.asarray(trajectory, dtype=np.float64), np.asarray(mask)
+    if trajectory.ndim != 3 or trajectory.shape[-1] != 2:
+        raise InvalidFrameError(f"trajectory must have shape (N, T, 2), got {trajectory.shape}")
+    if mask.shape != trajectory.shape[:2]:
+        raise InvalidFrameError(f"mask must have shape (N, T) = {trajectory.shape[:2]}, got {mask.shape}")
+    mask = mask.astype(bool)
+    empty = np.flatnonzero(~mask.any(axis=1))
+    if empty.size:
+        raise InvalidFrameError(f"{empty.size} agent(s) have no observed step, e.g. row {empty[0]}")
+    if not np.all(np.isfinite(trajectory[mask])):
+        raise InvalidFrameError("the trajectory holds NaN or infinite values at observed steps")
     n = len(trajectory)
     out = np.zeros((n, 1, t_f, 2))
     for i in range(n):

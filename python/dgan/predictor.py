@@ -16,7 +16,14 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._runtime import onnxruntime_library as onnxruntime_library_path
-from dgan.exceptions import HeadingWarning, InvalidFrameError, InvalidSpecError, ModelNotFoundError
+from dgan.exceptions import (
+    HeadingWarning,
+    InvalidFrameError,
+    InvalidSpecError,
+    ModelNotFoundError,
+    OutputError,
+    UnknownClassError,
+)
 from dgan.frame import Frame, typename
 from dgan.spec import InputSpec
 
@@ -69,21 +76,30 @@ class Prediction:
 
     def to_arrow(self) -> Any:
         """:meth:`to_records` as a pyarrow Table (needs pyarrow); its schema metadata holds ``dt_s`` and the
-        classes."""
+        classes.
+
+        Raises:
+            OutputError: ids an Arrow column cannot hold (integers mixed with strings, integers past 64 bits).
+        """
         import pyarrow as pa
 
         cols = self.to_records()
-        ids = cols["agent_id"]
         arrays = {k: pa.array(v.tolist() if v.dtype == object else v) for k, v in cols.items() if k != "agent_id"}
-        table = pa.table({"agent_id": pa.array(ids.tolist() if ids.dtype == object else ids), **arrays})
+        table = pa.table({"agent_id": _arrow_ids(cols["agent_id"]), **arrays})
         meta = {b"dgan.dt_s": str(self.dt_s).encode(), b"dgan.classes": ",".join(self.classes).encode()}
         return table.replace_schema_metadata(meta)
 
     def to_parquet(self, path: str | os.PathLike[str]) -> None:
-        """Writes :meth:`to_arrow` to a parquet file (needs pyarrow)."""
+        """Writes :meth:`to_arrow` to a parquet file (needs pyarrow). The file is written beside ``path`` and then
+        renamed onto it, so a failed write leaves ``path`` as it was (a path that is not a regular file, such as a
+        device or a pipe, is written in place and never removed).
+
+        Raises:
+            OutputError: as :meth:`to_arrow`. OSError: the file cannot be written.
+        """
         import pyarrow.parquet as pq
 
-        pq.write_table(self.to_arrow(), os.fspath(path))
+        write_atomically(path, lambda f: pq.write_table(self.to_arrow(), f))
 
     @property
     def most_likely(self) -> npt.NDArray[np.float64]:
@@ -141,6 +157,19 @@ class Predictor:
         for key, value in (("max_edges", max_edges), ("max_input_bytes", max_input_bytes)):
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 2**62:
                 raise InvalidSpecError(f"{key} must be a positive integer, got {value!r}")
+        # What pickling rebuilds the predictor from: a bundled model by name (found in the receiver's own dgan),
+        # a file by its absolute path.
+        bundled = isinstance(model, str) and _resolve(model) != Path(model)
+        self._options: dict[str, Any] = {
+            "model": model if bundled else os.path.abspath(os.fspath(model)),
+            "modes": modes,
+            "threads": threads,
+            "sessions": sessions,
+            "onnxruntime_library": None if onnxruntime_library is None else os.fspath(lib),
+            "execution_provider": execution_provider,
+            "max_edges": max_edges,
+            "max_input_bytes": max_input_bytes,
+        }
         self._predictor = _dgan.Predictor(
             os.fspath(_resolve(model)),
             os.fspath(lib),
@@ -200,20 +229,39 @@ class Predictor:
     def path(self) -> Path:
         return Path(self._predictor.path)
 
-    def predict(self, frame: Frame, *, modes: int | None = None) -> Prediction:
+    def predict(self, frame: Frame, *, modes: int | None = None, unknown_classes: str = "error") -> Prediction:
         """Predicts every agent of ``frame``. Releases the GIL while the engine runs.
 
         An empty frame gives an empty prediction.
 
+        Args:
+            unknown_classes: what to do with agents of a class the model does not know (a vehicle for a pedestrian
+                model): ``"error"`` refuses the frame; ``"ignore"`` predicts the agents of the model's classes, with
+                their ids in the prediction, and leaves the others out of the scene (neither predicted nor anyone's
+                neighbour: the model has never seen them).
+
         Raises:
             InvalidFrameError: the frame does not fit the model (e.g. a different T_obs).
-            UnknownClassError: a class the model does not know.
+            UnknownClassError: a class the model does not know (with ``unknown_classes="error"``).
             InferenceError: ONNX Runtime failed.
         """
         m = self._modes if modes is None else self._check_modes(modes)
-        out = self._predictor.predict(_native(frame), m)
+        frame = self._known(frame, unknown_classes)
+        try:
+            out = self._predictor.predict(_native(frame), m)
+        except UnknownClassError as e:
+            raise UnknownClassError(f"{e}; unknown_classes='ignore' predicts only the agents of its classes") from None
         self._check_headings(frame)
         return self._prediction(out, frame)
+
+    def _known(self, frame: Frame, unknown_classes: str) -> Frame:
+        """``frame``, or with ``unknown_classes="ignore"`` its agents of the model's classes."""
+        if unknown_classes not in ("error", "ignore"):
+            raise InvalidSpecError(f"unknown_classes must be 'error' or 'ignore', got {unknown_classes!r}")
+        if unknown_classes == "error" or not isinstance(frame, Frame):
+            return frame
+        keep = np.fromiter((c in self.classes for c in frame.classes), dtype=bool, count=len(frame))
+        return frame if keep.all() else frame.select(keep)
 
     def _check_headings(self, frame: Frame) -> None:
         """Warns once (:class:`~dgan.exceptions.HeadingWarning`) if ``frame``'s measured headings, which this model
@@ -240,30 +288,92 @@ class Predictor:
         out["agent_ids"] = frame.agent_ids
         return Prediction(classes=self.classes, dt_s=self._spec.dt_s, **out)
 
-    def predict_batch(self, frames: Sequence[Frame], *, modes: int | None = None) -> list[Prediction]:
+    def predict_batch(
+        self, frames: Sequence[Frame], *, modes: int | None = None, unknown_classes: str = "error"
+    ) -> list[Prediction]:
         """Predicts several frames: each preprocessed in parallel, consecutive frames' graphs joined (disjoint) into
-        network calls of up to 256 agents (``dgan_core::runtime::BATCH_AGENTS_PER_CALL``). Equal to :meth:`predict`
+        network calls of up to 256 agents (``dgan_core::runtime::BATCH_AGENTS_PER_CALL``) and ``max_input_bytes``
+        of inputs. Equal to :meth:`predict`
         on each frame, up to float rounding; 0.96–1.54× the throughput of a loop of :meth:`predict` for 64 real
         frames of the bundled models. Releases the GIL while the engine runs.
 
+        ``unknown_classes`` as :meth:`predict`.
+
         Raises:
-            InvalidFrameError, UnknownClassError, MapRequiredError: as :meth:`predict`, for any frame.
+            InvalidFrameError, UnknownClassError, MapRequiredError, SceneTooLargeError: as :meth:`predict`, for any
+                frame; the message names the first bad frame by its index ("frame 2 of the batch: ...").
         """
         m = self._modes if modes is None else self._check_modes(modes)
         if isinstance(frames, Frame) or not isinstance(frames, Sequence):
             raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {typename(frames)}")
-        outs = self._predictor.predict_batch([_native(f) for f in frames], m)
+        frames = [self._known(f, unknown_classes) for f in frames]
+        outs = self._predictor.predict_batch([_native(f, f"frame {i} of the batch") for i, f in enumerate(frames)], m)
         for f in frames:
             self._check_headings(f)
         return [self._prediction(o, f) for o, f in zip(outs, frames, strict=True)]
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickles as its model and options (for multiprocessing, Ray, Dask, Spark): the receiver loads the model
+        again, from its own bundled copy for a bundled name, from the same path otherwise."""
+        return (_unpickle_predictor, (self._options,))
 
     def __repr__(self) -> str:
         return f"Predictor({str(self.path)!r}, classes={self.classes}, modes={self._modes})"
 
 
-def _native(frame: Any) -> _dgan.Frame:
+def _unpickle_predictor(options: dict[str, Any]) -> Predictor:
+    opts = dict(options)
+    return Predictor(opts.pop("model"), **opts)
+
+
+def _arrow_ids(ids: npt.NDArray[Any]) -> Any:
+    """The agent-id column of an Arrow table: one type, or :class:`OutputError`."""
+    import pyarrow as pa
+
+    if ids.dtype != object:
+        return pa.array(ids)
+    values = ids.tolist()
+    if all(isinstance(v, str) for v in values):
+        return pa.array(values, type=pa.string())
+    if all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in values):
+        ints = [int(v) for v in values]
+        if all(-(2**63) <= v < 2**63 for v in ints):
+            return pa.array(ints, type=pa.int64())
+        if all(0 <= v < 2**64 for v in ints):
+            return pa.array(ints, type=pa.uint64())
+        raise OutputError("agent ids past 64 bits cannot be an Arrow column; give them as strings")
+    kinds = sorted({type(v).__name__ for v in values})
+    raise OutputError(
+        f"agent ids mix {' and '.join(kinds)}; an Arrow or parquet column holds one type: give the frame ids of one "
+        "type (e.g. strings), or use to_records() / to_pandas(), which keep them as given"
+    )
+
+
+def write_atomically(path: str | os.PathLike[str], write: Any) -> None:
+    """Calls ``write(file)`` on a temporary file beside ``path``, then renames it onto ``path``: a failure leaves
+    ``path`` as it was. A path that exists and is not a regular file (a device, a pipe) is opened and written in
+    place, and never removed."""
+    target = Path(path)
+    if target.exists() and not target.is_file():
+        with open(target, "wb") as f:
+            write(f)
+        return
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            write(f)
+        os.replace(tmp, target)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise OSError(e.errno, f"cannot write {target}: {e.strerror or e}", os.fspath(target)) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _native(frame: Any, what: str = "") -> _dgan.Frame:
     if not isinstance(frame, Frame):
-        raise InvalidFrameError(f"expected a dgan.Frame, got {typename(frame)}")
+        raise InvalidFrameError(f"{what}{': ' if what else ''}expected a dgan.Frame, got {typename(frame)}")
     return frame._frame
 
 

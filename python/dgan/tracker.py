@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -10,6 +11,7 @@ import numpy.typing as npt
 from dgan import _dgan
 from dgan.exceptions import InvalidFrameError
 from dgan.frame import ClassLike, Frame, RasterMap, VectorMap, typename
+from dgan.io import as_given
 from dgan.predictor import Prediction, Predictor
 
 
@@ -56,8 +58,9 @@ class Tracker:
         self._map = map
         spec = predictor.spec
         self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, max_gap, default_class)
-        # Integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids get
-        # codes by first appearance, and the frame gives the ids back.
+        # Signed integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids
+        # (strings, uint64 hashes, a mix of integers and strings) get codes by first appearance, and the frame gives
+        # the ids back as given: the integer 1 and the string '1' are two agents.
         self._integer_ids = False
         self._codes: dict[Any, int] = {}
         self._labels: list[Any] = []
@@ -83,7 +86,7 @@ class Tracker:
     def update(
         self,
         time: float,
-        ids: npt.ArrayLike,
+        ids: npt.ArrayLike | Sequence[object],
         positions: npt.ArrayLike,
         *,
         classes: list[ClassLike] | None = None,
@@ -100,7 +103,7 @@ class Tracker:
         """
         if ids is None or isinstance(ids, (str, bytes)):
             raise InvalidFrameError("ids must be a sequence of ids (integers or strings)")
-        id_array = np.asarray(ids)
+        id_array = as_given(ids)
         n = int(id_array.size)
         try:
             pos2 = np.ascontiguousarray(positions, dtype=np.float64)
@@ -120,7 +123,7 @@ class Tracker:
                 raise InvalidFrameError(f"velocities must have shape ({n}, 2), got {vel.shape}")
         if classes is not None and len(classes) != n:
             raise InvalidFrameError(f"{len(classes)} classes given for {n} detections")
-        if id_array.dtype.kind in "iu" and not self._labels:
+        if id_array.dtype.kind == "i" and not self._labels:
             self._integer_ids = True
             codes = np.ascontiguousarray(id_array.ravel(), dtype=np.int64)
         elif self._integer_ids and n:
@@ -151,6 +154,7 @@ class Tracker:
         out = Frame._wrap(native, labels, None)
         return out if self._map is None else out.with_map(self._map)
 
-    def predict(self, *, modes: int | None = None) -> Prediction:
-        """The predictions of every agent detected at the latest tick."""
-        return self._predictor.predict(self.frame(), modes=modes)
+    def predict(self, *, modes: int | None = None, unknown_classes: str = "error") -> Prediction:
+        """The predictions of every agent detected at the latest tick (``unknown_classes`` as
+        :meth:`Predictor.predict`)."""
+        return self._predictor.predict(self.frame(), modes=modes, unknown_classes=unknown_classes)

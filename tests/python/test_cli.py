@@ -5,8 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
-from conftest import DATA, ROOT, shared_data
+from conftest import DATA, ROOT, shared_data, zara1_records
 
 import dgan
 from dgan.cli import main
@@ -210,3 +211,93 @@ def test_demo_needs_only_the_runtime_and_leaves_nothing_tracked(tmp_path: Path) 
     for name in ("dgan_demo.png", "dgan_demo_crop.png"):
         ignored = subprocess.run(["git", "check-ignore", "-q", name], cwd=ROOT, check=False)
         assert ignored.returncode == 0, f"{name} is not ignored by git"
+
+
+def test_unreadable_inputs_and_outputs_exit_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
+    notnumbers = tmp_path / "H.txt"
+    notnumbers.write_text("a b c\n")
+    kept = tmp_path / "kept.csv"
+    kept.write_text("kept")
+    (tmp_path / "folder.csv").mkdir()
+    cases = [
+        (["predict", "zara1", "/dev/zero"], "cannot read scene /dev/zero: it is not a regular file"),
+        (["predict", "zara1", str(tmp_path / "none.txt")], "it does not exist"),
+        (
+            ["predict", "zara1", str(SCENE), "--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(notnumbers)],
+            "cannot read --pixel-to-world",
+        ),
+        (
+            ["predict", "zara1", str(SCENE), "--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(tmp_path / "no")],
+            "cannot read --pixel-to-world",
+        ),
+        (["predict", "zara1", str(SCENE), "--out", str(tmp_path / "no" / "x.csv")], "cannot write"),
+        (["predict", "zara1", str(SCENE), "--out", str(tmp_path / "folder.csv")], "Is a directory"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("dgan: error: "), err
+        assert message in err[-1], err
+        assert "Traceback" not in "\n".join(err)
+    assert kept.read_text() == "kept"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "H.txt",
+        "folder.csv",
+        "kept.csv",
+    ]
+
+
+def test_predict_a_directory_or_glob_of_scenes_into_one_table(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import pyarrow.parquet as pq
+
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    for name in ("a.txt", "b.txt"):
+        (scenes / name).write_text(SCENE.read_text())
+    out = tmp_path / "all.parquet"
+    assert main(["predict", "zara1", str(scenes), "--out", str(out), "--modes", "2"]) == 0
+    table = pq.read_table(out)
+    one = dgan.Predictor("zara1", modes=2).predict(
+        dgan.Frame.from_records(zara1_records(), spec=dgan.Predictor("zara1"), time_unit=0.04)
+    )
+    assert table.num_rows == 2 * len(one.to_records()["x"])
+    assert table.column_names[0] == "scene"
+    assert set(table.column("scene").to_pylist()) == {"a.txt", "b.txt"}
+    assert main(["predict", "zara1", str(scenes / "*.txt"), "--out", str(tmp_path / "all.csv")]) == 0
+    assert "wrote 28 agents of 2 scenes" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(scenes)]) == 2
+    assert "need --out" in capsys.readouterr().err
+
+
+def test_predict_options_for_repeated_rows_sparse_data_and_other_classes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rows = ["agent_id,time,x,y,class"]
+    for t in np.arange(0.0, 4.01, 0.5):
+        rows += [f"1,{t:g},{1.2 * t:g},0,pedestrian", f"2,{t:g},{8 * t:g},5,vehicle"]
+    rows.append("1,4,4.8,0.1,pedestrian")  # a repeated row
+    path = tmp_path / "street.csv"
+    path.write_text("\n".join(rows) + "\n")
+    assert main(["predict", "zara1", str(path)]) == 2
+    assert "duplicates=" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(path), "--duplicates", "last"]) == 2
+    assert "upsample=True" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(path), "--duplicates", "last", "--upsample"]) == 2
+    assert "unknown_classes='ignore'" in capsys.readouterr().err
+    argv = [
+        "predict",
+        "zara1",
+        str(path),
+        "--duplicates",
+        "last",
+        "--upsample",
+        "--unknown-classes",
+        "ignore",
+        "--json",
+    ]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [a["id"] for a in doc["agents"]] == [1]

@@ -6,8 +6,10 @@ from __future__ import annotations
 import gzip
 import json
 import pickle
+import warnings
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -126,7 +128,7 @@ def test_bad_files_are_clear_errors(tmp_path: Path) -> None:
         read_scenario(pkl)
     trunc = tmp_path / "t.pkl"
     trunc.write_bytes(pickle.dumps({"tracks": {}})[:5])
-    with pytest.raises(InvalidFrameError, match="cannot read ScenarioNet pickle"):
+    with pytest.raises(InvalidFrameError, match="cannot read ScenarioNet scenario"):
         read_scenario(trunc)
     with pytest.raises(InvalidFrameError, match="unknown scenario format"):
         read_scenario(tmp_path / "scene.csv")
@@ -158,7 +160,13 @@ def test_readers_sit_behind_a_registry_outside_the_runtime_import() -> None:
     code = "import sys, dgan; print('dgan.datasets.hdmaps' in sys.modules, 'pyarrow' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["False", "False"]
-    assert datasets.formats() == ("argoverse2_scenario", "argoverse2_sensor_log", "scenarionet", "waymo_json")
+    assert datasets.formats() == (
+        "argoverse2_scenario",
+        "argoverse2_sensor_log",
+        "interaction",
+        "scenarionet",
+        "waymo_json",
+    )
     sc = datasets.read(WAYMO_FILE, "waymo_json")
     assert len(sc.ids) > 0
     assert datasets.read(WAYMO_FILE).ids.tolist() == sc.ids.tolist()
@@ -201,3 +209,91 @@ def test_waymo_json_headings_are_radians_whatever_the_file_holds(tmp_path: Path,
     sc = read_waymo_json(path)
     np.testing.assert_allclose(sc.heading[sc.valid], original.heading[original.valid], atol=1e-9)
     assert moving_heading_error_deg(sc) < 5.0
+
+
+def _nuscenes(name: str = "sd_nuscenes_v1.0-mini_scene-0061.pkl") -> dict[str, Any]:
+    with (data_root() / "nuscenes_mini_scenarionet" / name).open("rb") as fh:
+        out: dict[str, Any] = pickle.load(fh)
+    return out
+
+
+def _predicts_at_every_step(sc: hdmaps.Scenario) -> int:
+    """Predicts ``hdmap`` at every step of a scenario with a full 10-step history at 5 Hz; no warning at all."""
+    p = dgan.Predictor("hdmap", sessions=1)
+    every = max(1, round(p.spec.dt_s / sc.dt_s))
+    steps = range(every * (p.spec.t_obs - 1), sc.num_steps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for step in steps:
+            if sc.valid[:, step].any():
+                p.predict(sc.frame(step, p.spec.t_obs, every=every))
+    return len(steps)
+
+
+def _variant(d: dict[str, Any], how: str) -> dict[str, Any]:
+    """Another vintage of a ScenarioNet / MetaDrive scenario, made from a real one."""
+    import copy
+
+    v = copy.deepcopy(d)
+    if how == "size":  # sizes as one (T, 3) array
+        for tr in v["tracks"].values():
+            st = tr["state"]
+            st["size"] = np.concatenate([np.reshape(st.pop(k), (-1, 1)) for k in ("length", "width", "height")], 1)
+    elif how == "top_level_ts":
+        v["ts"] = v["metadata"].pop("ts")
+        v["metadata"].pop("sample_rate")
+    elif how == "cross_walk":
+        v["map_features"]["cw"] = {"type": "CROSS_WALK", "polygon": np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]])}
+    return v
+
+
+@pytest.mark.parametrize("how", ["size", "top_level_ts", "cross_walk"])
+@pytest.mark.parametrize("suffix", [".pkl", ".pkl.gz", ".json", ".json.gz"])
+def test_scenarionet_and_metadrive_vintages_read_and_predict(tmp_path: Path, how: str, suffix: str) -> None:
+    v = _variant(_nuscenes(), how)
+    path = tmp_path / f"scene{suffix}"
+    if suffix.startswith(".json"):
+        text = json.dumps(v, default=lambda a: a.tolist() if isinstance(a, np.ndarray) else str(a))
+        path.write_bytes(gzip.compress(text.encode()) if suffix.endswith(".gz") else text.encode())
+    else:
+        raw = pickle.dumps(v)
+        path.write_bytes(gzip.compress(raw) if suffix.endswith(".gz") else raw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sc = read_scenario(path)
+    assert sc.dt_s == pytest.approx(0.1)
+    assert np.isfinite(sc.length[sc.valid]).all()
+    if how == "cross_walk":
+        assert kinds(sc)["crosswalk"] == 1
+    if suffix == ".pkl":
+        assert _predicts_at_every_step(sc) > 100
+
+
+def test_unmapped_element_types_and_sizeless_boxes_warn_with_names_and_counts(tmp_path: Path) -> None:
+    v = _nuscenes()
+    v["map_features"]["s1"] = {"type": "STOP_SIGN", "position": np.zeros(3)}
+    v["map_features"]["s2"] = {"type": "STOP_SIGN", "position": np.ones(3)}
+    v["map_features"]["b"] = {"type": "SPEED_BUMP", "polygon": np.zeros((4, 3))}
+    next(iter(v["tracks"].values()))["state"]["length"][:] = 0.0
+    path = tmp_path / "s.pkl"
+    path.write_bytes(pickle.dumps(v))
+    with pytest.warns(dgan.exceptions.DatasetWarning) as record:
+        sc = read_scenario(path)
+    messages = [str(w.message) for w in record]
+    assert any("STOP_SIGN ×2, SPEED_BUMP ×1" in m for m in messages), messages
+    assert any("box of zero, negative or infinite size; their class" in m for m in messages), messages
+    assert any(np.isnan(sc.length[i][sc.valid[i]]).all() for i in range(len(sc.ids)))
+
+
+def test_a_nocturne_file_with_a_zero_sized_box_predicts_at_every_step(tmp_path: Path) -> None:
+    with gzip.open(WAYMO_FILE, "rt") as fh:
+        d = json.load(fh)
+    agents = [o for o in d["objects"] if o.get("type") in ("vehicle", "pedestrian", "cyclist")]
+    agents[0]["length"] = 0.0
+    agents[1]["width"] = 0.0
+    path = tmp_path / "nocturne.json"
+    path.write_text(json.dumps(d))
+    with pytest.warns(dgan.exceptions.DatasetWarning, match=r"2 agent\(s\) have a box of zero") as record:
+        sc = read_scenario(path)
+    assert all("driveway" in str(w.message) or "box of zero" in str(w.message) for w in record)
+    assert _predicts_at_every_step(sc) > 60

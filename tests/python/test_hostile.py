@@ -256,7 +256,6 @@ def records_cases() -> list[Case]:
         ("conflicting rows", conflict, "two rows at time"),
         ("NaN ids", {**rec, "agent_id": np.r_[np.nan, rec["agent_id"][1:].astype(float)]}, "NaN"),
         ("None ids", {**rec, "agent_id": np.array([None, *rec["agent_id"][1:]], dtype=object)}, "None"),
-        ("mixed ids", {**rec, "agent_id": np.array(["a", *rec["agent_id"][1:]], dtype=object)}, "mixes types"),
         ("unknown class", {**rec, "class": np.array(["bus"] * len(rec["x"]), dtype=object)}, "bus"),
     ]:
         err = exc.UnknownClassError if label == "unknown class" else exc.InvalidFrameError
@@ -359,12 +358,21 @@ def predictor_cases(tmp: Path) -> list[Case]:
             "KiB, above the limit of 97.7 KiB",
         ),
         (
-            "a batch beyond the input budget",
+            "a batch whose third frame is beyond the input budget",
             lambda: dgan.Predictor("zara1", max_input_bytes=10**6).predict_batch(
-                [dgan.Frame(np.cumsum(np.full((30, 8, 2), 0.4), axis=1) + np.arange(30)[:, None, None] * 50)] * 4
+                [dgan.Frame(np.zeros((2, 8, 2)))] * 2
+                + [dgan.Frame(np.cumsum(np.full((100, 8, 2), 0.4), axis=1) + np.arange(100)[:, None, None] * 50)]
             ),
             exc.SceneTooLargeError,
-            "the 4 frames joined \\(120 agents\\) need .* MiB",
+            "frame 2 of the batch: .* 1.2 MiB, above the limit",
+        ),
+        (
+            "a batch whose second frame has other steps",
+            lambda: dgan.Predictor("zara1").predict_batch(
+                [dgan.Frame(np.zeros((2, 8, 2))), dgan.Frame(np.zeros((2, 5, 2)))]
+            ),
+            exc.InvalidFrameError,
+            "frame 1 of the batch: the frame has 5 observed steps",
         ),
     ]
     cases += [(f"Predictor {label}", fn, err, msg) for label, fn, err, msg in frames]

@@ -91,3 +91,18 @@ def test_unsealed_and_wrongly_sealed_contracts(tmp_path: Path) -> None:
     np.testing.assert_array_equal(a.trajectories, dgan.Predictor("zara1").predict(frame).trajectories)
     with pytest.raises(exc.ContractError, match="already sealed"):
         dgan._dgan.seal_model(tmp_path / "placeholder.onnx")
+
+
+def test_a_resealed_model_with_absurd_anchors_is_refused_at_load(tmp_path: Path) -> None:
+    """The seal proves integrity, not origin: a re-sealed edit loads unless its contract is out of bounds."""
+    model = onnx.load(str(dgan.models.path("zara1")))
+    meta = {p.key: p for p in model.metadata_props}
+    contract = json.loads(meta["dgan_contract"].value)
+    contract["anchors"]["pedestrian"][0][3] = [1.7e308, 0.0]
+    contract["weights_sha256"] = "0" * 64  # re-sealed below, as anyone can
+    meta["dgan_contract"].value = json.dumps(contract)
+    path = tmp_path / "far.onnx"
+    onnx.save(model, str(path))
+    dgan._dgan.seal_model(str(path))
+    with pytest.raises(dgan.exceptions.ContractError, match="anchors are finite metres within"):
+        dgan.Predictor(path)

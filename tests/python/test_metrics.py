@@ -106,3 +106,16 @@ def test_metrics_refuse_bad_shapes() -> None:
         metrics.min_ade(np.zeros((2, 3, 12, 2)), np.zeros((2, 12, 2)), k=0)
     with pytest.raises(exc.InvalidFrameError, match="probabilities"):
         metrics.brier_min_fde(np.zeros((2, 3, 12, 2)), np.zeros((2, 12, 2)), np.zeros((2, 2)), k=3)
+
+
+def test_bad_ground_truth_masks_and_histories_are_clear_errors() -> None:
+    gt = np.zeros((2, 3, 2))
+    gt[1, 1, 0] = np.nan
+    with pytest.raises(exc.InvalidFrameError, match=r"ground truth holds NaN .* row 1"):
+        metrics.summary(np.zeros((2, 2, 3, 2)), gt)
+    with pytest.raises(exc.InvalidFrameError, match=r"mask must have shape \(N, T\) = \(2, 4\), got \(2, 3\)"):
+        metrics.constant_velocity(np.zeros((2, 4, 2)), np.ones((2, 3), bool), 3)
+    mask = np.ones((2, 4), bool)
+    mask[1] = False
+    with pytest.raises(exc.InvalidFrameError, match=r"1 agent.* no observed step, e.g. row 1"):
+        metrics.constant_velocity(np.zeros((2, 4, 2)), mask, 3)

@@ -355,3 +355,68 @@ def test_headings_in_another_convention_are_warned_about_once() -> None:
         a = apollo.predict(reversed_frame)
     b = apollo.predict(dgan.Frame(f.positions, mask=f.mask, classes=list(f.classes), dt=f.dt))
     np.testing.assert_allclose(a.trajectories, b.trajectories, atol=1e-5)
+
+
+def test_predictor_frame_and_prediction_pickle(tmp_path: Path) -> None:
+    import pickle
+
+    p = dgan.Predictor("hdmap", modes=3, sessions=1)
+    vm = dgan.VectorMap([("lane_centerline", [[0.0, 0.0], [30.0, 0.0]]), ("crosswalk", [[5, -3], [8, -3], [8, 3]])])
+    frame = dgan.Frame(
+        np.cumsum(np.full((3, 10, 2), 0.5), axis=1), classes=["vehicle", "cyclist", "pedestrian"], ids=["car", 7, "p"]
+    ).with_map(vm)
+    pred = p.predict(frame)
+    q, f2, pred2 = (pickle.loads(pickle.dumps(x)) for x in (p, frame, pred))
+    assert q._options == p._options
+    assert q.path == p.path
+    assert q.num_modes == p.num_modes
+    assert f2.agent_ids.tolist() == ["car", 7, "p"]
+    assert isinstance(f2.map, dgan.VectorMap)
+    assert len(f2.map) == 2
+    np.testing.assert_array_equal(q.predict(f2).trajectories, pred.trajectories)
+    np.testing.assert_array_equal(pred2.trajectories, pred.trajectories)
+    assert pred2.agent_ids.tolist() == ["car", 7, "p"]
+    local = dgan.Predictor(dgan.models.path("zara1"), sessions=1)
+    assert pickle.loads(pickle.dumps(local)).path == local.path
+    raster = pickle.loads(pickle.dumps(dgan.scene_map("zara1")))
+    np.testing.assert_array_equal(raster.image, dgan.scene_map("zara1").image)
+
+
+def test_a_failed_parquet_write_leaves_the_path_as_it_was(tmp_path: Path) -> None:
+    p = dgan.Predictor("zara1", sessions=1)
+    pred = p.predict(dgan.Frame(np.cumsum(np.full((2, 8, 2), 0.3), axis=1), ids=[1, "a"]), modes=1)
+    kept = tmp_path / "kept.parquet"
+    kept.write_bytes(b"old")
+    with pytest.raises(exc.OutputError, match="mix int and str"):
+        pred.to_parquet(kept)
+    assert kept.read_bytes() == b"old"
+    assert [x.name for x in tmp_path.iterdir()] == ["kept.parquet"]
+    with pytest.raises(OSError, match="No space left"):
+        p.predict(dgan.Frame(np.zeros((1, 8, 2))), modes=1).to_parquet("/dev/full")
+    assert Path("/dev/full").exists()
+    assert not Path("/dev/full").is_file()
+
+
+def test_predict_batch_splits_what_does_not_fit_one_call_and_names_a_bad_frame() -> None:
+    p = dgan.Predictor("zara1", max_input_bytes=10**6, sessions=1)
+    frame = dgan.Frame(np.cumsum(np.full((30, 8, 2), 0.4), axis=1) + np.arange(30)[:, None, None] * 50)
+    one = p.predict(frame)
+    for out in p.predict_batch([frame] * 4):  # 120 agents joined exceed 10⁶ bytes: split, not refused
+        np.testing.assert_allclose(out.trajectories, one.trajectories, atol=1e-5)
+    with pytest.raises(exc.InvalidFrameError, match=r"frame 2 of the batch: expected a dgan\.Frame"):
+        p.predict_batch([frame, frame, "frame"])  # type: ignore[list-item]
+
+
+def test_unknown_classes_ignore_predicts_the_model_s_own() -> None:
+    p = dgan.Predictor("zara1", sessions=1)
+    pos = np.cumsum(np.full((3, 8, 2), 0.4), axis=1) + np.arange(3)[:, None, None]
+    street = dgan.Frame(pos, classes=["pedestrian", "vehicle", "pedestrian"], ids=["a", "car", "b"])
+    with pytest.raises(exc.UnknownClassError, match="unknown_classes='ignore'"):
+        p.predict(street)
+    pred = p.predict(street, unknown_classes="ignore")
+    assert pred.agent_ids.tolist() == ["a", "b"]
+    alone = p.predict(dgan.Frame(pos[[0, 2]], ids=["a", "b"]))
+    np.testing.assert_array_equal(pred.trajectories, alone.trajectories)
+    assert [x.agent_ids.tolist() for x in p.predict_batch([street], unknown_classes="ignore")] == [["a", "b"]]
+    with pytest.raises(exc.InvalidSpecError, match="'error' or 'ignore'"):
+        p.predict(street, unknown_classes="drop")

@@ -18,6 +18,9 @@ def test_spec_validation() -> None:
     assert dgan.InputSpec.from_dict(json_round_trip(SPEC)) == SPEC
     with pytest.raises(exc.InvalidSpecError, match="dt_s"):
         dgan.InputSpec(dt_s=-1.0, t_obs=8, t_f=12)
+    for dt in (1e-300, 1e9):  # a step that would overflow speeds, or a prior of light-years
+        with pytest.raises(exc.InvalidSpecError, match=r"dt_s must be a number of seconds in 0\.001\.\.=3600"):
+            dgan.InputSpec(dt_s=dt, t_obs=8, t_f=12)
     with pytest.raises(exc.InvalidSpecError, match=r"t_obs must be in 1..=1000 steps, got 0"):
         dgan.InputSpec(dt_s=0.4, t_obs=0, t_f=12)
     # Bounds before any allocation: a spec (or a model's metadata) claiming 10^9 future steps is refused.

@@ -18,6 +18,8 @@ pub const CONTRACT_VERSION: u32 = 6;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
 pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 6] = [1, 2, 3, 4, 5, 6];
+/// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
+pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
 pub const MAX_ANCHORS_PER_CLASS: usize = 1024;
 
@@ -256,6 +258,12 @@ impl ModelContract {
                     )));
                 }
                 for (t, p) in anchor.iter().enumerate() {
+                    if !p.iter().all(|v| v.is_finite() && v.abs() <= MAX_ANCHOR_M) {
+                        return Err(DganError::Contract(format!(
+                            "anchor {k} of {class} has the point {p:?} at step {t}; anchors are finite metres within \
+                             ±{MAX_ANCHOR_M}"
+                        )));
+                    }
                     arr[[k, t, 0]] = p[0];
                     arr[[k, t, 1]] = p[1];
                 }
@@ -386,6 +394,17 @@ mod tests {
         assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
         assert_eq!(c.expected_inputs().len(), 5);
         assert_eq!(c.expected_outputs().unwrap()[1].dims, vec![Dim::Agents, Dim::Fixed(3)]);
+    }
+
+    #[test]
+    fn anchors_and_time_steps_out_of_bounds_are_refused() {
+        let far = json().replace("[[[1, 0], [2, 0]]]", "[[[1, 0], [1.7e308, 0]]]");
+        let err = ModelContract::from_json(&far).and_then(|c| c.anchors().map(|_| ())).unwrap_err();
+        assert!(err.to_string().contains("anchors are finite metres within"), "{err}");
+        for dt in ["1e-300", "1e9"] {
+            let err = ModelContract::from_json(&json().replace("\"dt_s\": 0.4", &format!("\"dt_s\": {dt}")));
+            assert!(err.unwrap_err().to_string().contains("dt_s must be a number of seconds in"), "{dt}");
+        }
     }
 
     #[test]

@@ -21,6 +21,17 @@ pub enum DganError {
     /// A frame's time base differs from the model's, or data cannot be resampled to it (too sparse, unordered).
     #[error("time base: {0}")]
     TimeBase(String),
+    /// Data sampled more sparsely than a model's grid allows (see [`history::frame_at_with`](crate::history)):
+    /// refused rather than stretched. Python: `TimeBaseError` with the spacing as `spacing_s`.
+    #[error("time base: {}", sparse_message(*spacing_s, *dt_s, *upsampling))]
+    SparseData {
+        /// The data's median spacing within the window, seconds.
+        spacing_s: f64,
+        /// The model's step, seconds.
+        dt_s: f64,
+        /// Whether upsampling (up to [`UPSAMPLE_LIMIT`](crate::history::UPSAMPLE_LIMIT)× sparser) was allowed.
+        upsampling: bool,
+    },
     /// A raster or vector map that cannot be used (bad image shape, singular homography, degenerate geometry).
     #[error("invalid map: {0}")]
     InvalidMap(String),
@@ -47,6 +58,41 @@ pub enum DganError {
     /// ONNX Runtime failed while running a loaded, contract-checked model.
     #[error("inference failed: {0}")]
     Inference(String),
+}
+
+fn sparse_message(spacing_s: f64, dt_s: f64, upsampling: bool) -> String {
+    let ratio = spacing_s / dt_s;
+    let limit = crate::history::UPSAMPLE_LIMIT;
+    let how = if upsampling || ratio > limit * (1.0 + crate::history::SPARSE_SLACK) {
+        format!("more than {limit}× sparser cannot be resampled to its grid without inventing motion")
+    } else {
+        format!("upsampling (upsample=True in Python) interpolates data up to {limit}× sparser onto its grid")
+    };
+    format!(
+        "the data are sampled every {spacing_s:.4} s (median), {ratio:.2}× the model's dt = {dt_s} s, sparser than \
+         its grid; {how}"
+    )
+}
+
+impl DganError {
+    /// The same error with `what` ("frame 3 of the batch") before its message; errors without a message of their
+    /// own (a missing file, a sparse time base) are returned as they are.
+    #[must_use]
+    pub fn context(self, what: &str) -> Self {
+        let at = |m: String| format!("{what}: {m}");
+        match self {
+            Self::InvalidFrame(m) => Self::InvalidFrame(at(m)),
+            Self::UnknownClass(m) => Self::UnknownClass(at(m)),
+            Self::MapRequired(m) => Self::MapRequired(at(m)),
+            Self::SceneTooLarge(m) => Self::SceneTooLarge(at(m)),
+            Self::TimeBase(m) => Self::TimeBase(at(m)),
+            Self::InvalidMap(m) => Self::InvalidMap(at(m)),
+            Self::InvalidSpec(m) => Self::InvalidSpec(at(m)),
+            Self::Contract(m) => Self::Contract(at(m)),
+            Self::Inference(m) => Self::Inference(at(m)),
+            other => other,
+        }
+    }
 }
 
 /// Result alias of the engine.

@@ -7,8 +7,9 @@
 //! - an agent is in the frame when it has a detection at the current time;
 //! - a grid time that matches a detection takes it; one between two detections at most `max_gap_s` apart is
 //!   interpolated linearly; anything else is masked out (the agent was not seen then);
-//! - data sparser than the grid (median spacing more than 5% above `dt_s`) cannot be resampled and are refused with
-//!   [`DganError::TimeBase`], never silently stretched.
+//! - data sparser than the grid (median spacing more than 5% above `dt_s`) are refused with
+//!   [`DganError::SparseData`], never silently stretched, unless upsampling is asked for ([`frame_at_with`]): then
+//!   data up to [`UPSAMPLE_LIMIT`]× sparser are interpolated onto the grid, bridging gaps up to 1.5× their spacing.
 
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
@@ -21,6 +22,41 @@ pub const TIME_TOLERANCE: f64 = 1e-6;
 
 /// How much sparser than the grid the data may be (median spacing ≤ `dt_s · (1 + SPARSE_SLACK)`).
 pub const SPARSE_SLACK: f64 = 0.05;
+
+/// How much sparser than the grid data may be when upsampling is asked for (median spacing ≤
+/// `dt_s · UPSAMPLE_LIMIT · (1 + SPARSE_SLACK)`): 2 Hz data on a 0.4 s grid, 0.8 s data on a 0.5 s grid.
+pub const UPSAMPLE_LIMIT: f64 = 2.5;
+
+/// What [`tracks_from_rows_with`] does with several rows of one agent at one time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Duplicates {
+    /// Refuse the table ([`DganError::InvalidFrame`]): it is ambiguous.
+    #[default]
+    Error,
+    /// Keep the first of them, in the table's row order.
+    First,
+    /// Keep the last of them, in the table's row order.
+    Last,
+    /// Their mean: positions, sizes and velocities averaged (NaN ignored), headings by their circular mean; the
+    /// first row's class.
+    Mean,
+}
+
+impl std::str::FromStr for Duplicates {
+    type Err = DganError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "error" => Ok(Self::Error),
+            "first" => Ok(Self::First),
+            "last" => Ok(Self::Last),
+            "mean" => Ok(Self::Mean),
+            _ => Err(DganError::InvalidSpec(format!(
+                "duplicates must be one of \"error\", \"first\", \"last\", \"mean\"; got {s:?}"
+            ))),
+        }
+    }
+}
 
 /// One agent seen at one time: where, and whatever state the source gives.
 #[derive(Debug, Clone, PartialEq)]
@@ -140,19 +176,12 @@ fn median_spacing(tracks: &[(i64, &[Detection])]) -> Option<f64> {
     Some(*m)
 }
 
-/// The frame at `now_s` from each agent's detections, sorted by time (checked), one track per id.
-///
-/// Agents without a detection at `now_s` are left out; ids keep the order given. `default_class` is used where a
-/// detection carries no class. The frame's time base is `base.dt_s`.
-pub fn frame_at(
-    tracks: &[(i64, &[Detection])],
+/// Each track's detections a frame at `now_s` on `base` can use (checked sorted).
+fn windows_at<'a>(
+    tracks: &[(i64, &'a [Detection])],
     now_s: f64,
     base: &TimeBase,
-    default_class: AgentClass,
-) -> Result<Frame> {
-    if !now_s.is_finite() {
-        return Err(DganError::TimeBase(format!("the current time must be finite, got {now_s}")));
-    }
+) -> Result<Vec<(i64, &'a [Detection])>> {
     let eps = base.eps();
     let window_start = base.window_start(now_s);
     let mut windows: Vec<(i64, &[Detection])> = Vec::with_capacity(tracks.len());
@@ -169,15 +198,72 @@ pub fn frame_at(
         let hi = track.partition_point(|d| d.time_s <= now_s + eps);
         windows.push((*id, &track[lo..hi]));
     }
-    if let Some(spacing) = median_spacing(&windows) {
+    Ok(windows)
+}
+
+/// A frame built from detections, with how the data's rate met the grid.
+#[derive(Debug, Clone)]
+pub struct Resampled {
+    /// The frame on the model's grid.
+    pub frame: Frame,
+    /// The data's median spacing within the window in seconds (`None` when no agent had two detections there).
+    pub spacing_s: Option<f64>,
+    /// Whether the data were sparser than the grid and interpolated onto it.
+    pub upsampled: bool,
+}
+
+/// The frame at `now_s` from each agent's detections, sorted by time (checked), one track per id.
+///
+/// Agents without a detection at `now_s` are left out; ids keep the order given. `default_class` is used where a
+/// detection carries no class. The frame's time base is `base.dt_s`. Data sparser than the grid are refused
+/// ([`DganError::SparseData`]); [`frame_at_with`] can upsample them.
+pub fn frame_at(
+    tracks: &[(i64, &[Detection])],
+    now_s: f64,
+    base: &TimeBase,
+    default_class: AgentClass,
+) -> Result<Frame> {
+    frame_at_with(tracks, now_s, base, default_class, false).map(|r| r.frame)
+}
+
+/// [`frame_at`], and with `upsample` data up to [`UPSAMPLE_LIMIT`]× sparser than the grid are interpolated onto
+/// it: the gap bridged grows to at least 1.5× the data's median spacing (one missing detection is still not bridged).
+pub fn frame_at_with(
+    tracks: &[(i64, &[Detection])],
+    now_s: f64,
+    base: &TimeBase,
+    default_class: AgentClass,
+    upsample: bool,
+) -> Result<Resampled> {
+    if !now_s.is_finite() {
+        return Err(DganError::TimeBase(format!("the current time must be finite, got {now_s}")));
+    }
+    let mut base = *base;
+    let mut windows = windows_at(tracks, now_s, &base)?;
+    let spacing_s = median_spacing(&windows);
+    let mut upsampled = false;
+    if let Some(spacing) = spacing_s {
         if spacing > base.dt_s * (1.0 + SPARSE_SLACK) {
-            return Err(DganError::TimeBase(format!(
-                "the data are sampled every {spacing:.4} s (median), sparser than the model's dt = {} s; they cannot \
-                 be resampled to its time base without inventing motion (use a model of a coarser time base)",
-                base.dt_s
-            )));
+            if !upsample || spacing > base.dt_s * UPSAMPLE_LIMIT * (1.0 + SPARSE_SLACK) {
+                return Err(DganError::SparseData { spacing_s: spacing, dt_s: base.dt_s, upsampling: upsample });
+            }
+            upsampled = true;
+            base.max_gap_s = base.max_gap_s.max(1.5 * spacing);
+            windows = windows_at(tracks, now_s, &base)?;
         }
     }
+    let frame = frame_from_windows(windows, now_s, &base, default_class)?;
+    Ok(Resampled { frame, spacing_s, upsampled })
+}
+
+/// The frame of the agents seen at `now_s`, each sampled at the grid times.
+fn frame_from_windows(
+    windows: Vec<(i64, &[Detection])>,
+    now_s: f64,
+    base: &TimeBase,
+    default_class: AgentClass,
+) -> Result<Frame> {
+    let eps = base.eps();
     let current: Vec<(i64, &[Detection])> =
         windows.into_iter().filter(|(_, w)| w.last().is_some_and(|d| (d.time_s - now_s).abs() <= eps)).collect();
     let (n, t) = (current.len(), base.t_obs);
@@ -215,8 +301,17 @@ pub fn frame_at(
 
 /// Rows of a long table (one per agent and time, any order) grouped into tracks sorted by id, then time.
 ///
-/// Two rows of one agent at the same time are refused, even when equal: the table is ambiguous.
+/// Two rows of one agent at the same time are refused, even when equal: the table is ambiguous
+/// ([`tracks_from_rows_with`] can keep one or their mean).
 pub fn tracks_from_rows(rows: Vec<(i64, Detection)>) -> Result<Vec<(i64, Vec<Detection>)>> {
+    tracks_from_rows_with(rows, Duplicates::Error)
+}
+
+/// [`tracks_from_rows`], with several rows of one agent at one time resolved by `duplicates`.
+pub fn tracks_from_rows_with(
+    rows: Vec<(i64, Detection)>,
+    duplicates: Duplicates,
+) -> Result<Vec<(i64, Vec<Detection>)>> {
     let mut by_id: BTreeMap<i64, Vec<Detection>> = BTreeMap::new();
     for (id, d) in rows {
         if !d.time_s.is_finite() {
@@ -226,16 +321,62 @@ pub fn tracks_from_rows(rows: Vec<(i64, Detection)>) -> Result<Vec<(i64, Vec<Det
     }
     let mut out = Vec::with_capacity(by_id.len());
     for (id, mut track) in by_id {
+        // Stable: rows at one time keep the table's order, which "first" and "last" follow.
         track.sort_by(|a, b| a.time_s.total_cmp(&b.time_s));
         if let Some(w) = track.windows(2).find(|w| w[0].time_s == w[1].time_s) {
-            return Err(DganError::InvalidFrame(format!(
-                "agent {id} has two rows at time {} s; keep one row per agent and time",
-                w[0].time_s
-            )));
+            if duplicates == Duplicates::Error {
+                return Err(DganError::InvalidFrame(format!(
+                    "agent {id} has two rows at time {} s; keep one row per agent and time, or choose how \
+                     (duplicates=\"first\", \"last\" or \"mean\" in Python)",
+                    w[0].time_s
+                )));
+            }
+            track = merge_duplicates(track, duplicates);
         }
         out.push((id, track));
     }
     Ok(out)
+}
+
+/// A track sorted by time with every run of equal times merged into one detection.
+fn merge_duplicates(track: Vec<Detection>, how: Duplicates) -> Vec<Detection> {
+    let mut out: Vec<Detection> = Vec::with_capacity(track.len());
+    let mut group: Vec<Detection> = Vec::new();
+    for d in track {
+        if group.first().is_some_and(|g| g.time_s != d.time_s) {
+            out.push(merge(std::mem::take(&mut group), how));
+        }
+        group.push(d);
+    }
+    if !group.is_empty() {
+        out.push(merge(group, how));
+    }
+    out
+}
+
+fn merge(mut group: Vec<Detection>, how: Duplicates) -> Detection {
+    match how {
+        Duplicates::Last => group.pop().expect("a group holds a detection"),
+        Duplicates::Mean if group.len() > 1 => {
+            let mean = |f: &dyn Fn(&Detection) -> f64| {
+                let v: Vec<f64> = group.iter().map(f).filter(|x| !x.is_nan()).collect();
+                if v.is_empty() {
+                    f64::NAN
+                } else {
+                    v.iter().sum::<f64>() / v.len() as f64
+                }
+            };
+            let (s, c) = (mean(&|d| d.heading.sin()), mean(&|d| d.heading.cos()));
+            let mut out = group[0].clone();
+            out.position = [mean(&|d| d.position[0]), mean(&|d| d.position[1])];
+            out.heading = if s.is_nan() { f64::NAN } else { s.atan2(c) };
+            out.length = mean(&|d| d.length);
+            out.width = mean(&|d| d.width);
+            out.velocity = [mean(&|d| d.velocity[0]), mean(&|d| d.velocity[1])];
+            out
+        }
+        _ => group.swap_remove(0),
+    }
 }
 
 /// Streams of detections, one tick at a time, kept at a model's time base: agents appear, vanish and return; the
@@ -363,11 +504,56 @@ mod tests {
         let base = TimeBase::new(4, 0.4).unwrap();
         let (a, ta) = line(1, &[0.0, 0.5, 1.0, 1.5], 1.0);
         let err = frame_at(&[(a, &ta)], 1.5, &base, AgentClass::Pedestrian).unwrap_err();
-        assert!(matches!(err, DganError::TimeBase(_)), "{err}");
+        assert!(matches!(err, DganError::SparseData { upsampling: false, .. }), "{err}");
+        assert!(err.to_string().contains("upsample=True"), "{err}");
         let (b, tb) = line(1, &[0.0, 0.4, 0.4], 1.0);
         assert!(matches!(frame_at(&[(b, &tb)], 0.4, &base, AgentClass::Pedestrian), Err(DganError::TimeBase(_))));
         assert!(TimeBase::new(4, 0.0).is_err());
         assert!(TimeBase::new(0, 0.4).is_err());
+    }
+
+    #[test]
+    fn upsampling_interpolates_data_up_to_the_limit_onto_the_grid() {
+        let base = TimeBase::new(8, 0.4).unwrap();
+        let times: Vec<f64> = (0..=8).map(|i| f64::from(i) * 0.5).collect(); // 2 Hz on a 0.4 s grid
+        let (a, ta) = line(1, &times, 1.5);
+        let r = frame_at_with(&[(a, &ta)], 4.0, &base, AgentClass::Pedestrian, true).unwrap();
+        assert!(r.upsampled);
+        assert_eq!(r.spacing_s, Some(0.5));
+        assert!(r.frame.mask().iter().all(|&m| m));
+        for k in 0..8 {
+            let t = 4.0 - (7 - k) as f64 * 0.4;
+            assert!((r.frame.positions()[[0, k, 0]] - 1.5 * t).abs() < 1e-9);
+        }
+        let dense = frame_at_with(&[(a, &ta)], 4.0, &TimeBase::new(8, 0.5).unwrap(), AgentClass::Pedestrian, true);
+        assert!(!dense.unwrap().upsampled);
+        let times: Vec<f64> = (0..=4).map(|i| f64::from(i) * 1.2).collect(); // 3× sparser
+        let (b, tb) = line(2, &times, 1.0);
+        let err = frame_at_with(&[(b, &tb)], 4.8, &base, AgentClass::Pedestrian, true).unwrap_err();
+        assert!(matches!(err, DganError::SparseData { upsampling: true, .. }), "{err}");
+        assert!(err.to_string().contains("more than 2.5× sparser"), "{err}");
+    }
+
+    #[test]
+    fn duplicate_rows_are_refused_or_merged_as_asked() {
+        let rows = || {
+            let mut a = Detection::at(1.0, 0.0, 0.0);
+            a.heading = 3.1;
+            let mut b = Detection::at(1.0, 2.0, 4.0);
+            b.heading = -3.1;
+            vec![(5, Detection::at(0.0, 9.0, 9.0)), (5, a), (5, b)]
+        };
+        let err = tracks_from_rows(rows()).unwrap_err();
+        assert!(err.to_string().contains("duplicates="), "{err}");
+        let pos = |how: Duplicates| tracks_from_rows_with(rows(), how).unwrap()[0].1[1].position;
+        assert_eq!(pos(Duplicates::First), [0.0, 0.0]);
+        assert_eq!(pos(Duplicates::Last), [2.0, 4.0]);
+        assert_eq!(pos(Duplicates::Mean), [1.0, 2.0]);
+        let mean = &tracks_from_rows_with(rows(), Duplicates::Mean).unwrap()[0].1;
+        assert_eq!(mean.len(), 2);
+        assert!((mean[1].heading.abs() - std::f64::consts::PI).abs() < 1e-9, "{}", mean[1].heading);
+        assert!("median".parse::<Duplicates>().is_err());
+        assert_eq!("mean".parse::<Duplicates>().unwrap(), Duplicates::Mean);
     }
 
     #[test]

@@ -50,7 +50,10 @@ pub use class::AgentClass;
 pub use contract::ModelContract;
 pub use error::{DganError, Result};
 pub use frame::Frame;
-pub use history::{frame_at, tracks_from_rows, Detection, TimeBase, Tracker};
+pub use history::{
+    frame_at, frame_at_with, tracks_from_rows, tracks_from_rows_with, Detection, Duplicates, Resampled, TimeBase,
+    Tracker,
+};
 pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
 pub use preprocess::Limits;
 pub use prior::{PriorKind, PriorSpec, VelocityFit};

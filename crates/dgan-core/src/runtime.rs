@@ -203,6 +203,11 @@ fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
     }
 }
 
+/// The neighbours per agent a frame's network inputs are padded to (0 without a neighbour list).
+fn degree_of(p: &Preprocessed) -> usize {
+    p.inputs.neighbors.as_ref().map_or(0, |nb| nb.index.ncols())
+}
+
 fn check_modes(modes: usize) -> Result<()> {
     if modes == 0 {
         return Err(DganError::InvalidSpec("modes must be at least 1".into()));
@@ -391,41 +396,38 @@ impl Predictor {
             return Ok(vec![]);
         }
         let spec = &self.contract.input;
-        let pres = frames.par_iter().map(|f| preprocess_within(f, spec, &self.limits)).collect::<Result<Vec<_>>>()?;
+        let pres: Vec<Result<Preprocessed>> =
+            frames.par_iter().map(|f| preprocess_within(f, spec, &self.limits)).collect();
+        // The first bad frame by index, whichever thread finished first, named in its error.
+        let pres = pres
+            .into_iter()
+            .enumerate()
+            .map(|(i, p)| p.map_err(|e| e.context(&format!("frame {i} of the batch"))))
+            .collect::<Result<Vec<_>>>()?;
         let mut out = Vec::with_capacity(frames.len());
         let mut pres = pres.into_iter().peekable();
         let mut start = 0;
         while start < frames.len() {
-            let mut group = vec![];
-            let mut agents = 0;
-            while let Some(p) = pres.next_if(|p| group.is_empty() || agents + p.poses.len() <= BATCH_AGENTS_PER_CALL) {
+            let (mut group, mut agents, mut degree) = (vec![], 0, 0);
+            while let Some(p) =
+                pres.next_if(|p| group.is_empty() || self.joins(agents + p.poses.len(), degree.max(degree_of(p))))
+            {
                 agents += p.poses.len();
+                degree = degree.max(degree_of(&p));
                 group.push(p);
             }
             let end = start + group.len();
-            self.check_joined(&group)?;
             out.extend(self.run_and_decode(&frames[start..end], group, modes)?);
             start = end;
         }
         Ok(out)
     }
 
-    /// Refuses a joined graph of several frames whose network inputs exceed `max_input_bytes`: all the agents, each
-    /// padded to the largest degree of any of the frames.
-    fn check_joined(&self, pres: &[Preprocessed]) -> Result<()> {
-        let frames = pres.len();
-        let agents: usize = pres.iter().map(|p| p.poses.len()).sum();
-        let degree = pres.iter().filter_map(|p| p.inputs.neighbors.as_ref().map(|nb| nb.index.ncols())).max();
-        let bytes = Limits::input_bytes(&self.contract.input, agents, degree.unwrap_or(0));
-        if frames > 1 && bytes > self.limits.max_input_bytes {
-            return Err(DganError::SceneTooLarge(format!(
-                "the {frames} frames joined ({agents} agents) need {} of network inputs, above the limit of {} \
-                 (max_input_bytes of the Predictor); predict them in smaller batches",
-                crate::preprocess::human_bytes(bytes),
-                crate::preprocess::human_bytes(self.limits.max_input_bytes)
-            )));
-        }
-        Ok(())
+    /// Whether frames of `agents` agents in all, padded to `degree` neighbours, join into one network call: at most
+    /// [`BATCH_AGENTS_PER_CALL`] agents and `max_input_bytes` of inputs (each frame alone is within the limits).
+    fn joins(&self, agents: usize, degree: usize) -> bool {
+        agents <= BATCH_AGENTS_PER_CALL
+            && Limits::input_bytes(&self.contract.input, agents, degree) <= self.limits.max_input_bytes
     }
 
     fn run_and_decode(&self, frames: &[Frame], pres: Vec<Preprocessed>, modes: usize) -> Result<Vec<Prediction>> {

@@ -117,12 +117,17 @@ pub enum GraphLayout {
     Padded,
 }
 
+/// The shortest step a model may declare, seconds (1 kHz): below it speeds and the prior overflow.
+pub const MIN_DT_S: f64 = 1e-3;
+/// The longest step a model may declare, seconds (an hour).
+pub const MAX_DT_S: f64 = 3600.0;
+
 impl InputSpec {
     /// Checks every field.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(DganError::InvalidSpec(m));
-        if !(self.dt_s.is_finite() && self.dt_s > 0.0) {
-            return bad(format!("dt_s must be a positive number of seconds, got {}", self.dt_s));
+        if !(self.dt_s.is_finite() && (MIN_DT_S..=MAX_DT_S).contains(&self.dt_s)) {
+            return bad(format!("dt_s must be a number of seconds in {MIN_DT_S}..={MAX_DT_S}, got {}", self.dt_s));
         }
         for (key, v) in [("t_obs", self.t_obs), ("t_f", self.t_f)] {
             if !(1..=MAX_STEPS).contains(&v) {

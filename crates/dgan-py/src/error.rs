@@ -11,7 +11,7 @@ fn class_name(err: &DganError) -> &'static str {
         DganError::InvalidFrame(_) => "InvalidFrameError",
         DganError::UnknownClass(_) => "UnknownClassError",
         DganError::MapRequired(_) => "MapRequiredError",
-        DganError::TimeBase(_) => "TimeBaseError",
+        DganError::TimeBase(_) | DganError::SparseData { .. } => "TimeBaseError",
         DganError::SceneTooLarge(_) => "SceneTooLargeError",
         DganError::InvalidMap(_) => "InvalidMapError",
         DganError::InvalidSpec(_) => "InvalidSpecError",
@@ -32,7 +32,14 @@ pub fn to_py(err: DganError) -> PyErr {
             .and_then(|m| m.getattr(name))
             .and_then(|c| c.cast_into::<PyType>().map_err(PyErr::from));
         match class {
-            Ok(cls) => PyErr::from_type(cls, err.to_string()),
+            Ok(cls) => {
+                let out = PyErr::from_type(cls, err.to_string());
+                if let DganError::SparseData { spacing_s, .. } = err {
+                    // What the Python side needs to name the models whose step fits the data.
+                    let _ = out.value(py).setattr("spacing_s", spacing_s);
+                }
+                out
+            }
             Err(e) => PyRuntimeError::new_err(format!("{err} (and dgan.exceptions.{name} is unavailable: {e})")),
         }
     })

@@ -2,7 +2,7 @@
 
 use crate::error::{invalid_frame, IntoPyResult};
 use crate::frame::{parse_classes, PyFrame};
-use dgan_core::{frame_at, tracks_from_rows, AgentClass, Detection, TimeBase, Tracker};
+use dgan_core::{frame_at_with, tracks_from_rows_with, AgentClass, Detection, Duplicates, TimeBase, Tracker};
 use numpy::PyReadonlyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -110,9 +110,11 @@ fn parse_default_class(class: &Bound<'_, PyAny>) -> PyResult<AgentClass> {
 }
 
 /// The frame at `now` (seconds) of a long table's rows (`columns` as [`Columns`], plus `times`, float64 seconds):
-/// grouped by id, resampled to `t_obs` steps `dt` apart.
+/// grouped by id (repeated times resolved by `duplicates`), resampled to `t_obs` steps `dt` apart (data up to 2.5×
+/// sparser interpolated with `upsample`). Returns the frame, the data's median spacing and whether it was upsampled.
 #[pyfunction]
-#[pyo3(signature = (columns, now, t_obs, dt, max_gap, default_class))]
+#[pyo3(signature = (columns, now, t_obs, dt, max_gap, default_class, duplicates="error", upsample=false))]
+#[allow(clippy::too_many_arguments)]
 pub fn frame_from_rows<'py>(
     py: Python<'py>,
     columns: &Bound<'py, PyDict>,
@@ -121,19 +123,22 @@ pub fn frame_from_rows<'py>(
     dt: f64,
     max_gap: Option<f64>,
     default_class: Bound<'py, PyAny>,
-) -> PyResult<PyFrame> {
+    duplicates: &str,
+    upsample: bool,
+) -> PyResult<(PyFrame, Option<f64>, bool)> {
     let default_class = parse_default_class(&default_class)?;
+    let duplicates: Duplicates = duplicates.parse().py()?;
     let base = time_base(t_obs, dt, max_gap)?;
     let times = required_floats(columns, "times")?;
     let rows = Columns::from_dict(columns)?.detections(times.as_slice()?)?;
-    let frame = py
+    let out = py
         .detach(|| {
-            let tracks = tracks_from_rows(rows)?;
+            let tracks = tracks_from_rows_with(rows, duplicates)?;
             let views: Vec<(i64, &[Detection])> = tracks.iter().map(|(i, t)| (*i, t.as_slice())).collect();
-            frame_at(&views, now, &base, default_class)
+            frame_at_with(&views, now, &base, default_class, upsample)
         })
         .py()?;
-    Ok(PyFrame { inner: frame })
+    Ok((PyFrame { inner: out.frame }, out.spacing_s, out.upsampled))
 }
 
 fn time_base(t_obs: usize, dt: f64, max_gap: Option<f64>) -> PyResult<TimeBase> {

@@ -7,7 +7,7 @@ whose :meth:`~dgan.datasets.hdmaps.Scenario.frame` cuts a :class:`dgan.Frame` at
 
 >>> from dgan import datasets
 >>> datasets.formats()
-('argoverse2_scenario', 'argoverse2_sensor_log', 'scenarionet', 'waymo_json')
+('argoverse2_scenario', 'argoverse2_sensor_log', 'interaction', 'scenarionet', 'waymo_json')
 >>> scenario = datasets.read("waymo_motion_samples/gpudrive_json/<id>.json.gz")  # doctest: +SKIP
 
 The ETH/UCY, Stanford Drone and ApolloScape readers that training uses live in ``training.datasets``.
@@ -33,6 +33,7 @@ _REGISTRY: dict[str, str] = {
     "waymo_json": "dgan.datasets.hdmaps:read_waymo_json",
     "argoverse2_scenario": "dgan.datasets.hdmaps:read_av2_scenario",
     "argoverse2_sensor_log": "dgan.datasets.hdmaps:read_av2_sensor_log",
+    "interaction": "dgan.datasets.lanelet2:read_interaction",
 }
 
 

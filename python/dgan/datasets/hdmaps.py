@@ -33,6 +33,8 @@ import gzip
 import json
 import os
 import pickle
+import warnings
+from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,7 +43,7 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from dgan.exceptions import InvalidFrameError, InvalidMapError
+from dgan.exceptions import DatasetWarning, InvalidFrameError, InvalidMapError
 from dgan.frame import Frame, VectorMap
 
 Arr = npt.NDArray[Any]
@@ -198,12 +200,21 @@ class _Tracks:
         self.ids: list[int] = []
         self.labels: list[str] = []
         self.cols: dict[str, list[Arr]] = {k: [] for k in ("positions", "valid", "heading", "length", "width")}
+        self.sizeless = 0  # agents with a length or width given but not a positive number where valid
+        self.unmapped: Counter[str] = Counter()  # map element types not drawn
 
     def add(self, agent: int, label: str, xy: Arr, valid: Arr, heading: Arr, length: Arr, width: Arr) -> None:
-        """One agent's ``(T, 2)`` positions (anything where invalid), ``(T,)`` validity, heading and size."""
+        """One agent's ``(T, 2)`` positions (anything where invalid), ``(T,)`` validity, heading and size. A size
+        that is not a positive number (a box of zero size) is unknown: NaN, the class default in a frame."""
         self.ids.append(agent)
         self.labels.append(label)
-        values = (np.where(valid[:, None], xy, np.nan), valid, heading, length, width)
+        sizes, sizeless = [], False
+        for size in (length, width):
+            size = np.asarray(size, dtype=np.float64)
+            sizeless |= bool(np.any(valid & ~np.isnan(size) & ~(np.isfinite(size) & (size > 0))))  # given, not a size
+            sizes.append(np.where(np.isfinite(size) & (size > 0), size, np.nan))
+        self.sizeless += sizeless
+        values = (np.where(valid[:, None], xy, np.nan), valid, heading, *sizes)
         for col, value in zip(self.cols.values(), values, strict=True):
             col.append(value)
 
@@ -212,6 +223,14 @@ class _Tracks:
     ) -> Scenario:
         if not self.ids:
             raise InvalidFrameError(f"{path}: no vehicle, cyclist or pedestrian tracks")
+        if self.sizeless:
+            warnings.warn(
+                f"{path.name}: {self.sizeless} agent(s) have a box of zero, negative or infinite size; their class "
+                "default is used",
+                DatasetWarning,
+                stacklevel=3,
+            )
+        warn_unmapped(path, self.unmapped)
         col = {k: np.stack(v) for k, v in self.cols.items()}
         return Scenario(
             name=name,
@@ -229,6 +248,14 @@ class _Tracks:
         )
 
 
+def warn_unmapped(path: Path, unmapped: Counter[str]) -> None:
+    """Warns (:class:`~dgan.exceptions.DatasetWarning`) of the map element types a reader did not draw, with their
+    counts."""
+    if unmapped:
+        listed = ", ".join(f"{kind} ×{n}" for kind, n in unmapped.most_common())
+        warnings.warn(f"{path.name}: map elements not drawn (no engine kind): {listed}", DatasetWarning, stacklevel=4)
+
+
 def _usable(elements: Iterable[Element]) -> list[Element]:
     """Drops degenerate elements (too few distinct points for their kind) rather than rejecting the whole map."""
     out = []
@@ -242,11 +269,21 @@ def _usable(elements: Iterable[Element]) -> list[Element]:
 # ---- ScenarioNet (nuScenes, Waymo) -----------------------------------------------------------------------------------
 
 
-def scenarionet_map(features: Mapping[str, Mapping[str, Any]]) -> list[Element]:
-    """ScenarioNet ``map_features`` → engine elements (see the module's table)."""
+#: Older or other spellings of ScenarioNet / MetaDrive map types, by the name this reader knows.
+SCENARIONET_TYPE_ALIASES: Final = {
+    "CROSS_WALK": "CROSSWALK",
+    "ROAD_EDGE_SIDEWALK": "ROAD_EDGE_BOUNDARY",
+    "BOUNDARY_LINE": "ROAD_EDGE_BOUNDARY",
+}
+
+
+def scenarionet_map(features: Mapping[str, Mapping[str, Any]], unmapped: Counter[str] | None = None) -> list[Element]:
+    """ScenarioNet ``map_features`` → engine elements (see the module's table); the types not drawn are counted in
+    ``unmapped``."""
     out: list[Element] = []
     for key, f in features.items():
-        kind = str(f.get("type", ""))
+        kind = str(f.get("type", "")).upper()
+        kind = SCENARIONET_TYPE_ALIASES.get(kind, kind)
         if key.startswith("boundary_") or kind == "ROAD_EDGE_BOUNDARY":  # nuScenes keys its road edges boundary_<n>
             out.append(("road_edge", _xy(f["polyline"], key)))
         elif kind == "ROAD_EDGE_MEDIAN":
@@ -259,41 +296,80 @@ def scenarionet_map(features: Mapping[str, Mapping[str, Any]]) -> list[Element]:
             dashed = "BROKEN" in kind
             out.append(("lane_line_dashed" if dashed else "lane_line_solid", _xy(f["polyline"], key)))
         elif kind == "CROSSWALK":
-            out.append(("crosswalk", _xy(f["polygon"], key)))
+            out.append(("crosswalk", _xy(f.get("polygon", f.get("polyline")), key)))
+        elif unmapped is not None:
+            unmapped[kind or "(no type)"] += 1
     return out
 
 
-def read_scenarionet(path: str | os.PathLike[str], source: str | None = None) -> Scenario:
-    """A ScenarioNet scenario pickle (nuScenes or Waymo)."""
-    path = Path(path)
+def _load_scenarionet(path: Path) -> Any:
+    """The object of a ScenarioNet / MetaDrive file: a pickle (``.pkl``, ``.pkl.gz``) or JSON (``.json``,
+    ``.json.gz``)."""
+    name = path.name.lower()
+    opener: Any = gzip.open if name.endswith(".gz") else open
     try:
-        with path.open("rb") as fh:
-            d = pickle.load(fh)  # ScenarioNet's own format; see the module's note
-    except (OSError, pickle.UnpicklingError, EOFError) as e:
-        raise InvalidFrameError(f"cannot read ScenarioNet pickle {path}: {e}") from None
-    if not isinstance(d, dict) or not {"tracks", "map_features", "metadata"} <= d.keys():
-        raise InvalidFrameError(f"{path}: not a ScenarioNet scenario (needs tracks, map_features, metadata)")
-    meta = d["metadata"]
-    src = source or ("nuscenes" if "nuscenes" in str(meta.get("dataset", path.name)).lower() else "waymo")
+        with opener(path, "rb") as fh:
+            if name.endswith((".json", ".json.gz")):
+                return json.loads(fh.read())
+            return pickle.load(fh)  # ScenarioNet's own format; see the module's note
+    except (OSError, pickle.UnpicklingError, EOFError, json.JSONDecodeError, UnicodeDecodeError, ValueError) as e:
+        raise InvalidFrameError(f"cannot read ScenarioNet scenario {path}: {e}") from None
+
+
+def _time_step(d: Mapping[str, Any], meta: Mapping[str, Any], path: Path) -> float:
+    """Seconds per step: ``sample_rate``, or the median spacing of ``ts`` (in the metadata or at the top level)."""
     if "sample_rate" in meta:
-        dt = float(meta["sample_rate"])
-    else:  # Waymo conversions give the timestamps only
-        dt = round(float(np.median(np.diff(np.asarray(meta.get("ts", [0.0, 0.1]), dtype=np.float64)))), 3)
-    elements = scenarionet_map(d["map_features"])
+        return float(meta["sample_rate"])
+    ts = meta.get("ts", d.get("ts"))
+    if ts is None or np.size(ts) < 2:
+        raise InvalidFrameError(f"{path}: no time base (neither metadata.sample_rate nor two timestamps ts)")
+    return round(float(np.median(np.diff(np.asarray(ts, dtype=np.float64).ravel()))), 3)
+
+
+def _sizes(st: Mapping[str, Any], t: int) -> tuple[Arr, Arr]:
+    """A track's length and width per step: ``length``/``width`` (``(T,)``, ``(T, 1)`` or one value) or ``size``
+    (``(T, ≥2)`` or ``(≥2,)``: length, width[, height]); NaN where the file has none."""
+    if "length" in st and "width" in st:
+        ln, wd = (np.asarray(st[k], dtype=np.float64).ravel() for k in ("length", "width"))
+    elif "size" in st:
+        size = np.asarray(st["size"], dtype=np.float64)
+        size = np.broadcast_to(size, (t, size.shape[-1])) if size.ndim == 1 else size.reshape(t, -1)
+        ln, wd = size[:, 0], size[:, 1]
+    else:
+        return np.full(t, np.nan), np.full(t, np.nan)
+    return np.broadcast_to(ln, (t,)).copy() if ln.size == 1 else ln, np.broadcast_to(
+        wd, (t,)
+    ).copy() if wd.size == 1 else wd
+
+
+def read_scenarionet(path: str | os.PathLike[str], source: str | None = None) -> Scenario:
+    """A ScenarioNet / MetaDrive scenario (nuScenes, Waymo, ...): a pickle (``.pkl``, ``.pkl.gz``) or its JSON
+    (``.json``, ``.json.gz``). Vintages differ: sizes as ``length``/``width``/``height`` or ``size``, timestamps
+    ``ts`` in the metadata or at the top level, type names such as ``CROSS_WALK``; map types that are not drawn are
+    named in a :class:`~dgan.exceptions.DatasetWarning` with their counts."""
+    path = Path(path)
+    d = _load_scenarionet(path)
+    if not isinstance(d, dict) or not {"tracks", "map_features"} <= d.keys():
+        raise InvalidFrameError(f"{path}: not a ScenarioNet scenario (needs tracks and map_features)")
+    meta = d.get("metadata") or {}
+    src = source or ("nuscenes" if "nuscenes" in str(meta.get("dataset", path.name)).lower() else "waymo")
+    dt = _time_step(d, meta, path)
     tracks = _Tracks()
+    elements = scenarionet_map(d["map_features"], tracks.unmapped)
     for k, (_tid, tr) in enumerate(sorted(d["tracks"].items(), key=lambda kv: str(kv[0]))):
         st = tr["state"]
         ok = np.asarray(st["valid"]).astype(bool).ravel()
-        p = np.asarray(st["position"], dtype=np.float64)[:, :2]
+        p = np.asarray(st["position"], dtype=np.float64).reshape(len(ok), -1)[:, :2]
         hd = np.asarray(st["heading"], dtype=np.float64).ravel()
-        ln = np.asarray(st["length"], dtype=np.float64).ravel()
-        wd = np.asarray(st["width"], dtype=np.float64).ravel()
-        if tr["type"] in SCENARIONET_STATIC:
+        ln, wd = _sizes(st, len(ok))
+        kind = str(tr["type"]).upper()
+        if kind in SCENARIONET_STATIC:
             if ok.any():
                 t = int(np.flatnonzero(ok)[0])
-                elements.append(("obstacle", box(p[t], hd[t], max(ln[t], 0.3), max(wd[t], 0.3))))
+                size = [x if np.isfinite(x) else 0.3 for x in (ln[t], wd[t])]
+                elements.append(("obstacle", box(p[t], hd[t], max(size[0], 0.3), max(size[1], 0.3))))
             continue
-        cls = SCENARIONET_CLASSES.get(str(tr["type"]))
+        cls = SCENARIONET_CLASSES.get(kind)
         if cls is not None:
             tracks.add(k, cls, p, ok, hd, ln, wd)
     name = str(d.get("id", path.stem))
@@ -310,8 +386,9 @@ WAYMO_MEDIAN: Final = 16
 WAYMO_INVALID: Final = -10000.0
 
 
-def waymo_json_map(roads: Sequence[Mapping[str, Any]]) -> list[Element]:
-    """GPUDrive ``roads`` → engine elements. Road lines of the older files have no subtype and count as solid."""
+def waymo_json_map(roads: Sequence[Mapping[str, Any]], unmapped: Counter[str] | None = None) -> list[Element]:
+    """GPUDrive ``roads`` → engine elements. Road lines of the older files have no subtype and count as solid. The
+    types not drawn (driveways, stop signs, speed bumps) are counted in ``unmapped``."""
     out: list[Element] = []
     for j, r in enumerate(roads):
         kind, sub = r.get("type"), r.get("map_element_id")
@@ -330,6 +407,8 @@ def waymo_json_map(roads: Sequence[Mapping[str, Any]]) -> list[Element]:
             out.append(("obstacle", widen(pts, MEDIAN_WIDTH_M)) if sub == WAYMO_MEDIAN else ("road_edge", pts))
         elif kind == "crosswalk":
             out.append(("crosswalk", _xy(r["geometry"], what)))
+        elif unmapped is not None:
+            unmapped[str(kind)] += 1
     return out
 
 
@@ -378,10 +457,10 @@ def read_waymo_json(path: str | os.PathLike[str]) -> Scenario:
     to_rad = _waymo_heading_scale([(p, ok, hd) for _, _, _, p, ok, hd in objects])
     for k, o, cls, p, ok, hd in objects:
         t = len(p)
-        length, width = np.full(t, float(o["length"])), np.full(t, float(o["width"]))
+        length, width = (np.full(t, float(o.get(k) if o.get(k) is not None else np.nan)) for k in ("length", "width"))
         tracks.add(int(o.get("id", k)), cls, p, ok, hd * to_rad, length, width)
     name = str(d.get("scenario_id") or d.get("name") or path.name.split(".")[0])
-    return tracks.scenario(path, name, "waymo", 0.1, waymo_json_map(d["roads"]))
+    return tracks.scenario(path, name, "waymo", 0.1, waymo_json_map(d["roads"], tracks.unmapped))
 
 
 # ---- Argoverse 2 -----------------------------------------------------------------------------------------------------
@@ -435,9 +514,18 @@ def _pyarrow() -> Any:
     return pyarrow
 
 
-def _long_rows(tracks: _Tracks, track: Arr, step: Arr, num_steps: int, labels: Arr, xy: Arr, *cols: Arr) -> None:
+def _long_rows(
+    tracks: _Tracks,
+    track: Arr,
+    step: Arr,
+    num_steps: int,
+    labels: Arr,
+    xy: Arr,
+    *cols: Arr,
+    unknown_heading: float = 0.0,
+) -> None:
     """Adds long rows (track index, step, label, positions, heading, length, width; NaN length and width for the
-    class defaults) to ``tracks``, one agent per track index."""
+    class defaults) to ``tracks``, one agent per track index; a NaN heading becomes ``unknown_heading``."""
     for t in np.unique(track):
         rows = track == t
         ok = np.zeros(num_steps, bool)
@@ -448,7 +536,15 @@ def _long_rows(tracks: _Tracks, track: Arr, step: Arr, num_steps: int, labels: A
             g[step[rows]] = c[rows]
             grid.append(g)
         heading, length, width = grid[1:]
-        tracks.add(int(t), str(labels[rows][0]), grid[0], ok, np.nan_to_num(heading), length, width)
+        tracks.add(
+            int(t),
+            str(labels[rows][0]),
+            grid[0],
+            ok,
+            np.where(np.isnan(heading), unknown_heading, heading),
+            length,
+            width,
+        )
 
 
 def read_av2_scenario(folder: str | os.PathLike[str]) -> Scenario:
@@ -533,18 +629,33 @@ def read_av2_sensor_log(folder: str | os.PathLike[str]) -> Scenario:
 
 
 def read_scenario(path: str | os.PathLike[str]) -> Scenario:
-    """Any supported source by its path: ``*.pkl`` (ScenarioNet), ``*.json``/``*.json.gz`` (GPUDrive Waymo), an
-    Argoverse 2 scenario folder (``scenario_*.parquet``) or sensor-log folder (``annotations.feather``)."""
+    """Any supported source by its path: ``*.pkl``/``*.pkl.gz`` (ScenarioNet, MetaDrive), ``*.json``/``*.json.gz``
+    (GPUDrive/Nocturne Waymo, or ScenarioNet's JSON), an Argoverse 2 scenario folder (``scenario_*.parquet``) or
+    sensor-log folder (``annotations.feather``)."""
     path = Path(path)
     if path.is_dir():
         if (path / "annotations.feather").is_file():
             return read_av2_sensor_log(path)
         return read_av2_scenario(path)
-    if path.suffix == ".pkl":
+    name = path.name.lower()
+    if name.endswith((".pkl", ".pkl.gz")):
         return read_scenarionet(path)
-    if path.name.endswith((".json", ".json.gz")):
-        return read_waymo_json(path)
-    raise InvalidFrameError(f"unknown scenario format: {path} (expected .pkl, .json[.gz] or an Argoverse 2 folder)")
+    if name.endswith((".json", ".json.gz")):
+        return read_waymo_json(path) if _is_gpudrive(path) else read_scenarionet(path)
+    raise InvalidFrameError(
+        f"unknown scenario format: {path} (expected .pkl[.gz], .json[.gz] or an Argoverse 2 folder)"
+    )
+
+
+def _is_gpudrive(path: Path) -> bool:
+    """Whether a JSON scenario is GPUDrive/Nocturne's (``objects`` and ``roads``) rather than ScenarioNet's."""
+    opener: Any = gzip.open if path.name.lower().endswith(".gz") else open
+    try:
+        with opener(path, "rt") as fh:
+            head = fh.read(1 << 16)
+    except (OSError, EOFError, UnicodeDecodeError):
+        return True  # the GPUDrive reader reports what is wrong with the file
+    return '"objects"' in head or ('"map_features"' not in head and '"tracks"' not in head)
 
 
 def bird_eye(

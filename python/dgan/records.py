@@ -1,0 +1,273 @@
+"""Long tables → frames: the work behind :meth:`dgan.Frame.from_records` (ids, time grid, column checks, advice).
+
+The resampling itself (grouping rows into tracks, repeated times, interpolation onto the model's grid, upsampling)
+is the engine's ``dgan_core::history``, shared with the streaming :class:`~dgan.Tracker`.
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+import re
+import warnings
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan import _dgan
+from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
+from dgan.io import Columns, columns
+
+if TYPE_CHECKING:
+    from dgan.frame import ClassLike, Frame, RasterMap, VectorMap
+
+#: How repeated (agent, time) rows may be resolved (the engine's ``Duplicates``).
+DUPLICATES: Final = ("error", "first", "last", "mean")
+#: Data at most this many times sparser than a model's step are interpolated with ``upsample=True``
+#: (``dgan_core::history::UPSAMPLE_LIMIT``; the slack of 5% is the engine's too).
+UPSAMPLE_LIMIT: Final = 2.5
+_SLACK: Final = 1.05
+
+
+@dataclass(frozen=True)
+class Names:
+    """The table's column names :meth:`~dgan.Frame.from_records` reads, by what they hold, and the argument that
+    names each."""
+
+    agent_id: str = "agent_id"
+    time: str = "time"
+    x: str = "x"
+    y: str = "y"
+    cls: str = "class"
+    heading: str = "heading"
+    length: str = "length"
+    width: str = "width"
+    vx: str = "vx"
+    vy: str = "vy"
+
+    def required(self) -> dict[str, str]:
+        return {"agent_id": self.agent_id, "time": self.time, "x": self.x, "y": self.y}
+
+    def optional(self) -> dict[str, str]:
+        return {
+            "cls_column": self.cls,
+            "heading": self.heading,
+            "length": self.length,
+            "width": self.width,
+            "velocity": self.vx,
+            "velocity ": self.vy,
+        }
+
+
+def _close(name: str, candidates: list[str], cutoff: float = 0.8) -> str | None:
+    """The candidate that is ``name`` but for case, or the one closest to it (difflib ratio ≥ ``cutoff``)."""
+    for c in candidates:
+        if c.lower() == name.lower():
+            return c
+    best = difflib.get_close_matches(name, candidates, n=1, cutoff=cutoff)
+    return best[0] if best else None
+
+
+def check_columns(cols: Columns, names: Names) -> None:
+    """Refuses a missing required column (naming a close match) and warns (:class:`ColumnWarning`) of an optional
+    column that is absent while one close to it is there, unread."""
+    for arg, name in names.required().items():
+        if name not in cols:
+            close = _close(name, list(cols), cutoff=0.6)
+            hint = f"; did you mean {close!r} ({arg}={close!r})?" if close else ""
+            raise InvalidFrameError(f"records lack the column {name!r}; they have {list(cols)}{hint}")
+    known = set(names.required().values()) | set(names.optional().values())
+    unread = [c for c in cols if c not in known]
+    for arg, name in names.optional().items():
+        close = None if name in cols else _close(name, unread)
+        if close is not None:
+            warnings.warn(
+                f"the table has no column {name!r} but has {close!r}, which is not read; pass "
+                f"{arg.strip()}={close!r} to read it" + (" (as a (vx, vy) pair)" if arg.startswith("velocity") else ""),
+                ColumnWarning,
+                stacklevel=4,
+            )
+
+
+def record_ids(raw: npt.NDArray[Any], name: str) -> tuple[npt.NDArray[np.int64], npt.NDArray[Any] | None]:
+    """The engine's integer codes of an id column and the ids as given (None when the codes are the ids).
+
+    Signed integers are their own codes. Other ids (strings, unsigned 64-bit hashes, whole floats, a mix of
+    integers and strings) get codes in sorted order (order of first appearance for a mix that cannot be sorted), and
+    come back exactly as given: type and value."""
+    kind = raw.dtype.kind
+    if kind == "i":
+        return np.ascontiguousarray(raw, dtype=np.int64), None
+    if kind == "b":
+        raise InvalidFrameError(f"the id column {name!r} holds booleans; ids are integers or strings")
+    if kind == "f" and not np.all(np.isfinite(raw)):
+        raise InvalidFrameError(f"the id column {name!r} holds NaN or infinite values")
+    if kind == "O" and any(v is None or (isinstance(v, float) and not np.isfinite(v)) for v in raw.tolist()):
+        raise InvalidFrameError(f"the id column {name!r} holds None or NaN")
+    try:
+        uniq, inverse = np.unique(raw, return_inverse=True)
+    except TypeError:  # integers and strings mixed: codes by first appearance
+        index: dict[Any, int] = {}
+        codes = np.fromiter((index.setdefault(v, len(index)) for v in raw.tolist()), dtype=np.int64, count=raw.size)
+        labels = np.empty(len(index), dtype=object)
+        labels[:] = list(index)
+        return codes, labels
+    codes = np.ascontiguousarray(inverse.ravel(), dtype=np.int64)
+    if kind == "f" and np.all(uniq == np.round(uniq)):
+        return codes, uniq.astype(np.int64)  # whole floats: integer ids read through a column with NaNs elsewhere
+    return codes, (uniq.astype(object) if kind in "US" else uniq)
+
+
+def _numeric(cols: Columns, name: str) -> npt.NDArray[np.float64] | None:
+    if name not in cols:
+        return None
+    c = cols[name]
+    if c.dtype.kind not in "biuf":
+        raise InvalidFrameError(f"column {name!r} must be numeric, got {c.dtype}")
+    return np.ascontiguousarray(c, dtype=np.float64)
+
+
+@functools.lru_cache(maxsize=1)
+def _bundled_steps() -> tuple[tuple[str, float], ...]:
+    from dgan import models
+
+    return tuple((name, models.info(name).dt_s) for name in models.list())
+
+
+def sparse_advice(spacing_s: float, upsample: bool) -> str:
+    """Which bundled models' steps fit data sampled every ``spacing_s`` seconds, as a sentence."""
+    steps = _bundled_steps()
+    direct = [f"{n} ({dt:g} s)" for n, dt in steps if spacing_s <= dt * _SLACK]
+    up = [f"{n} ({dt:g} s)" for n, dt in steps if dt * _SLACK < spacing_s <= dt * UPSAMPLE_LIMIT * _SLACK]
+    if direct:
+        return f"bundled models whose step fits these data: {', '.join(direct)}"
+    if up and not upsample:
+        return f"no bundled model's step fits them as they are; with upsample=True: {', '.join(up)}"
+    coarsest = max((dt for _, dt in steps), default=float("nan"))
+    return f"no bundled model's step fits them (the coarsest is {coarsest:g} s)"
+
+
+def _named(error: InvalidFrameError, labels: npt.NDArray[Any] | None) -> InvalidFrameError:
+    """The engine's error with the agent it names by code ("agent 3") named by its id as given."""
+    if labels is None:
+        return error
+    text = re.sub(r"\bagent (\d+)\b", lambda m: f"agent {labels[int(m.group(1))]!r}", str(error), count=1)
+    return type(error)(text)
+
+
+def _check_options(t_obs: Any, dt: Any, time_unit: Any, duplicates: Any, upsample: Any) -> None:
+    if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        raise TimeBaseError(f"dt must be a positive number of seconds, got {dt!r}")
+    if isinstance(t_obs, bool) or not isinstance(t_obs, (int, np.integer)) or not 1 <= t_obs <= 1000:
+        raise InvalidFrameError(f"t_obs must be an integer in 1..=1000, got {t_obs!r}")
+    if not (isinstance(time_unit, (int, float)) and np.isfinite(time_unit) and time_unit > 0):
+        raise TimeBaseError(f"time_unit must be a positive number of seconds per unit, got {time_unit!r}")
+    if not isinstance(duplicates, str) or duplicates not in DUPLICATES:
+        raise InvalidSpecError(f"duplicates must be one of {DUPLICATES}, got {duplicates!r}")
+    if not isinstance(upsample, (bool, np.bool_)):
+        raise InvalidSpecError(f"upsample must be True or False, got {upsample!r}")
+
+
+def _current_time(uniq_t: npt.NDArray[np.float64], current_time: float | None, tol: float) -> float:
+    now = float(uniq_t.max()) if current_time is None else float(current_time)
+    if not np.any(np.abs(uniq_t - now) <= tol):
+        raise InvalidFrameError(
+            f"no row at current_time {now:g}; the table spans {uniq_t[0]:g}..{uniq_t[-1]:g} "
+            f"({uniq_t.size} distinct times)"
+        )
+    return float(uniq_t[np.argmin(np.abs(uniq_t - now))])
+
+
+def _median_gap(codes: npt.NDArray[np.int64], times: npt.NDArray[np.float64]) -> float:
+    """The median gap between consecutive distinct times of one agent in the table (inf when none has two)."""
+    order = np.lexsort((times, codes))
+    c, t = codes[order], times[order]
+    gaps = np.diff(t)[(np.diff(c) == 0) & (np.diff(t) > 0)]
+    return float(np.median(gaps)) if gaps.size else float("inf")
+
+
+def _warn_time_unit(frame: Frame, time_unit: float, gap_s: float) -> None:
+    """Warns when agents have several rows in the table, so far apart that none has two observed steps in the frame:
+    the time column is most likely in another unit (a recording's first tick, with one row per agent, is not)."""
+    window_s = frame.mask.shape[1] * (frame.dt or 0.0)
+    many = np.isfinite(gap_s) and gap_s > window_s
+    if many and len(frame) and frame.mask.shape[1] >= 2 and not np.any(frame.mask.sum(axis=1) >= 2):
+        warnings.warn(
+            f"no agent of the frame has two observed steps of its {frame.mask.shape[1]}: the time column may be in "
+            f"another unit than time_unit={time_unit:g} s per unit (milliseconds read as seconds?); every prediction "
+            "would start from a single position",
+            TimeUnitWarning,
+            stacklevel=4,
+        )
+
+
+def from_records(
+    cls: type[Frame],
+    records: Any,
+    *,
+    t_obs: int | None,
+    dt: float | None,
+    spec: Any,
+    time_unit: float,
+    current_time: float | None,
+    max_gap: float | None,
+    names: Names,
+    default_class: ClassLike,
+    map: RasterMap | VectorMap | None,
+    duplicates: str,
+    upsample: bool,
+) -> Frame:
+    """:meth:`dgan.Frame.from_records` (documented there)."""
+    if spec is not None:
+        spec = getattr(spec, "spec", spec)
+        t_obs = spec.t_obs if t_obs is None else t_obs
+        dt = spec.dt_s if dt is None else dt
+    if t_obs is None:
+        raise InvalidFrameError("from_records needs t_obs (or spec=, a model's InputSpec or Predictor)")
+    _check_options(t_obs, dt, time_unit, duplicates, upsample)
+    cols = columns(records)
+    check_columns(cols, names)
+    times, xs, ys = _numeric(cols, names.time), _numeric(cols, names.x), _numeric(cols, names.y)
+    assert times is not None
+    assert xs is not None
+    assert ys is not None
+    if not np.all(np.isfinite(times)):
+        raise InvalidFrameError("the time column holds NaN or infinite values")
+    codes, labels = record_ids(cols[names.agent_id], names.agent_id)
+    uniq_t = np.unique(times)
+    if uniq_t.size == 0:
+        return cls(np.zeros((0, t_obs, 2)), map=map, dt=dt)
+    if dt is None:
+        gaps = np.diff(uniq_t)
+        dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
+    now = _current_time(uniq_t, current_time, 1e-6 * dt / time_unit)
+    klass = cols.get(names.cls)
+    seconds = np.ascontiguousarray(times * time_unit)
+    rows = {
+        "ids": codes,
+        "times": seconds,
+        "xs": xs,
+        "ys": ys,
+        "classes": None if klass is None else klass.tolist(),
+        "headings": _numeric(cols, names.heading),
+        "lengths": _numeric(cols, names.length),
+        "widths": _numeric(cols, names.width),
+        "vxs": _numeric(cols, names.vx) if names.vy in cols else None,
+        "vys": _numeric(cols, names.vy) if names.vx in cols else None,
+    }
+    try:
+        native, spacing, upsampled = _dgan.frame_from_rows(
+            rows, now * time_unit, int(t_obs), float(dt), max_gap, default_class, duplicates, bool(upsample)
+        )
+    except TimeBaseError as e:
+        spacing_s = getattr(e, "spacing_s", None)
+        if spacing_s is None:
+            raise _named(e, labels) from None
+        raise TimeBaseError(f"{e}; {sparse_advice(spacing_s, bool(upsample))}") from None
+    except InvalidFrameError as e:
+        raise _named(e, labels) from None
+    out = cls._wrap(native, None if labels is None else labels[native.ids], None, (spacing, upsampled))
+    _warn_time_unit(out, time_unit, _median_gap(codes, seconds))
+    return out if map is None else out.with_map(map)
