@@ -11,7 +11,10 @@ median over ``--repeat`` runs after warm-up:
 - ``bare ORT``: an `onnxruntime.InferenceSession` (one thread) on the same preprocessed tensors;
 - ``torch``: the training code's model from the same checkpoint (`training/checkpoints/<name>.pt`), eager, one
   thread, on the same tensors, plus `decode_torch`; ``torch pipeline`` adds the engine's preprocessing to it;
-- ``vs torch``: torch pipeline / predict (above 1: the engine is faster).
+- ``vs torch``: torch pipeline / predict (above 1: the engine is faster);
+- ``MFLOP/agent``: the network's operations per agent on this call, counted node by node from the shapes it runs
+  (`benches/flops.py`), and ``GFLOP/s`` of the bare session: those operations over its time, against the same run's
+  single-thread float32 sgemm (numpy, 1024², printed first).
 
 Then the throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of
 `predict`. The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark,
@@ -31,6 +34,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # numpy's sgemm reference on one thread, as the sessions run
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,6 +43,9 @@ sys.path.insert(0, str(ROOT))
 
 import dgan  # noqa: E402
 from dgan.demo import scene_for  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "benches"))
+from flops import graph_flops, sgemm_gflops  # noqa: E402
 
 SPACING_M = 60.0
 
@@ -123,6 +131,9 @@ def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any
         row["predict"] = median_ms(partial(predictor.predict, f), repeat)
         row["preprocess"] = median_ms(partial(dgan.preprocess, f, spec), repeat)
         row["ort"] = median_ms(partial(session.run, None, feed), repeat)
+        flops = graph_flops(predictor.path, feed).total
+        row["mflop_per_agent"] = flops / n / 1e6
+        row["gflops"] = flops / (row["ort"] * 1e-3) / 1e9
         if torch_run is not None:
             row["torch"] = median_ms(partial(torch_run, x), repeat)
             row["torch_pipeline"] = row["preprocess"] + row["torch"]
@@ -137,6 +148,7 @@ def fmt_row(r: dict[str, Any]) -> str:
     cells += [f"{r[k]:.2f}" for k in ("predict", "preprocess", "ort")]
     cells += [f"{r[k]:.2f}" if k in r else "-" for k in ("torch", "torch_pipeline")]
     cells.append(f"{r['vs_torch']:.2f}×" if "vs_torch" in r else "-")
+    cells += [f"{r['mflop_per_agent']:.2f}", f"{r['gflops']:.1f}"]
     return "| " + " | ".join(cells) + " |"
 
 
@@ -199,8 +211,12 @@ def main() -> None:
     ap.add_argument("--calls", type=int, default=200, help="predictions per throughput measurement")
     a = ap.parse_args()
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
-    print("\n| model | N | E | predict ms | preprocess ms | bare ORT ms | torch ms | torch pipeline ms | vs torch |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print(f"single-thread sgemm (numpy float32, 1024²): {sgemm_gflops():.1f} GFLOP/s")
+    print(
+        "\n| model | N | E | predict ms | preprocess ms | bare ORT ms | torch ms | torch pipeline ms | vs torch "
+        "| MFLOP/agent | bare ORT GFLOP/s |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in a.models:
         bench_model(name, a.agents, a.repeat)
     print("\n| model | N | 1 thread /s | 2 threads /s | 2 vs 1 |")
