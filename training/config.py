@@ -94,6 +94,11 @@ class TrainConfig:
     # One anchor of each class held at a zero residual, the kinematic prior itself, so that "nothing to add" is a mode
     # the classifier can pick (training.anchors.kmeans_anchors); the other anchors are k-means around it.
     zero_anchor: bool = False
+    # Ensemble distillation: a teacher checkpoint (a consensus of several runs, training.ensemble, or one run) whose
+    # most probable mode on each training batch is a second target of the same loss, weighing distill_weight beside
+    # the data's (its inputs must be the student's: the same data and prior settings). "" = no teacher.
+    distill: str = ""
+    distill_weight: float = 1.0
 
 
 @dataclass(frozen=True)

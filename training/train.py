@@ -18,7 +18,7 @@ import os
 import random
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -200,6 +200,33 @@ def fit_anchors(cfg: Config, train: Windows, spec: dgan.InputSpec, num_classes: 
     return np.concatenate(out), class_of
 
 
+@dataclass(frozen=True)
+class Teacher:
+    """A trained model whose most probable mode is a second target of the student's loss (``train.distill``)."""
+
+    model: torch.nn.Module
+    anchors: torch.Tensor
+    class_of: torch.Tensor
+    temperature: float
+
+    @classmethod
+    def load(cls, path: str, spec: dgan.InputSpec) -> Teacher:
+        from training.export import load_checkpoint
+
+        model, tspec, anchors, class_of, _, temperature = load_checkpoint(Path(path))
+        if tspec.to_json() != spec.to_json():
+            raise ValueError(f"train.distill: {path} takes other inputs than this configuration ({tspec.to_json()})")
+        return cls(model.eval(), torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long(), temperature)
+
+    @torch.no_grad()
+    def top_residual(self, b: dict[str, torch.Tensor]) -> torch.Tensor:
+        """``(targets, T_f, 2)`` the teacher's most probable mode of each target, as a residual from the prior."""
+        cl, al, off = self.model(*forward_inputs(b))
+        t = b["target"]
+        modes, _ = decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, self.temperature)
+        return modes[:, 0]
+
+
 def forward_loss(
     net: torch.nn.Module,
     b: dict[str, torch.Tensor],
@@ -207,9 +234,11 @@ def forward_loss(
     class_of: torch.Tensor,
     cfg: Config,
     weight_of_class: torch.Tensor | None = None,
+    teacher: Teacher | None = None,
 ) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
     """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior),
-    each weighted by its class's ``weight_of_class`` if given (``train.class_balance``); also the targets' outputs."""
+    each weighted by its class's ``weight_of_class`` if given (``train.class_balance``); also the targets' outputs.
+    With a ``teacher``, the same loss towards its most probable mode is added, weighing ``train.distill_weight``."""
     cl, al, off = net(*forward_inputs(b))
     t = b["target"]
     outs = (cl[t], al[t], off[t])
@@ -217,9 +246,16 @@ def forward_loss(
     classes = b["class_index"][t]
     weights = None if weight_of_class is None else weight_of_class[classes]
     tr = cfg.train
-    loss, parts = dgan_loss(
-        *outs, residual, classes, anchors, class_of, tr.alpha, tr.beta, weights, tr.cls_target, tr.anchor_pool
-    )
+
+    def loss_to(target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+        return dgan_loss(
+            *outs, target, classes, anchors, class_of, tr.alpha, tr.beta, weights, tr.cls_target, tr.anchor_pool
+        )
+
+    loss, parts = loss_to(residual)
+    if teacher is not None:
+        distilled, _ = loss_to(teacher.top_residual(b))
+        loss = loss + tr.distill_weight * distilled
     return loss, parts, outs
 
 
@@ -362,6 +398,7 @@ def train_epoch(
     cfg: Config,
     weight_of_class: torch.Tensor | None,
     rng: np.random.Generator,
+    teacher: Teacher | None = None,
 ) -> dict[str, float]:
     """One pass over the batches of training windows that the tqdm ``bar`` iterates (mirrored at random, maps dropped
     at the configured rate); the summed loss and its classification and regression parts."""
@@ -369,7 +406,7 @@ def train_epoch(
     for idx in bar:
         flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
         b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout, rng)
-        loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg, weight_of_class)
+        loss, parts, _ = forward_loss(net, b, anchors, class_of, cfg, weight_of_class, teacher)
         opt.zero_grad()
         loss.backward()  # type: ignore[no-untyped-call]
         torch.nn.utils.clip_grad_norm_(net.parameters(), 5.0)
@@ -416,6 +453,7 @@ def main(argv: list[str] | None = None) -> Path:
         train_classes = torch.from_numpy(train.class_index[train.target]).long()
         weight_of_class = class_weights(train_classes, len(spec.classes), cfg.train.class_balance)
     model = build_model(cfg, spec, len(anchors))
+    teacher = Teacher.load(cfg.train.distill, spec) if cfg.train.distill else None
     opt, sched = optimiser(cfg, model)
     start_epoch, best = resume(ckpt, model, opt, sched)
     net: torch.nn.Module = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
@@ -440,7 +478,7 @@ def main(argv: list[str] | None = None) -> Path:
         t0 = time.perf_counter()
         batches = epoch_batches(windows, cfg, epoch, rank, world)
         bar = tqdm(batches, desc=f"epoch {epoch + 1}/{cfg.train.epochs}", disable=not bars, leave=False)
-        totals = train_epoch(net, opt, bar, train, spec, anchors, class_of, cfg, weight_of_class, rng)
+        totals = train_epoch(net, opt, bar, train, spec, anchors, class_of, cfg, weight_of_class, rng, teacher)
         sched.step()
         if not show:
             continue

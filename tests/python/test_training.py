@@ -378,3 +378,38 @@ def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
         load_windows(
             replace(sdd_val, data=replace(sdd_val.data, root=str(data_root()))), input_spec(sdd_val), "val", False
         )
+
+
+def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None:
+    from dgan.demo import scene_for
+    from training.loss import dgan_loss
+    from training.train import INPUTS, Teacher, forward_loss, to_tensors
+
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", {"train.distill_weight": 2.5})
+    spec = input_spec(cfg)
+    with pytest.raises(ValueError, match="takes other inputs"):
+        Teacher.load(str(ROOT / "training" / "checkpoints" / "hdmap.pt"), spec)
+    teacher = Teacher.load(str(ROOT / "training" / "checkpoints" / "apolloscape.pt"), spec)
+    frame = scene_for(spec).frame
+    x = dgan.preprocess(frame, spec)
+    b = to_tensors({k: x[k] for k in (*INPUTS, "prior") if k in x})
+    n = len(frame)
+    b["target"] = torch.ones(n, dtype=torch.bool)
+    b["class_index"] = torch.tensor([spec.classes.index(c) for c in frame.classes])
+    b["future"] = b["prior"] + 0.3
+    torch.manual_seed(0)
+    k_c = 4
+    anchors = torch.randn(k_c * len(spec.classes), spec.t_f, 2)
+    class_of = torch.arange(len(spec.classes)).repeat_interleave(k_c)
+    student = build_model(cfg, spec, len(anchors)).eval()
+    top = teacher.top_residual(b)
+    assert top.shape == (n, spec.t_f, 2)
+    assert torch.isfinite(top).all()
+    alone, _, outs = forward_loss(student, b, anchors, class_of, cfg)
+    taught, _, _ = forward_loss(student, b, anchors, class_of, cfg, teacher=teacher)
+    tr = cfg.train
+    classes = b["class_index"]
+    second, _ = dgan_loss(
+        *outs, top, classes, anchors, class_of, tr.alpha, tr.beta, None, tr.cls_target, tr.anchor_pool
+    )
+    torch.testing.assert_close(taught, alone + 2.5 * second)
