@@ -347,16 +347,8 @@ def _demo(args: argparse.Namespace) -> int:
     return run(args.model, args.time, args.modes, Path(args.out))
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="dgan", description="DGAN multi-modal trajectory prediction")
-    parser.add_argument("--version", action="version", version=f"dgan {dgan.__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-    models = sub.add_parser("models", help="list the bundled models")
-    models.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    models.set_defaults(func=_models)
-    info = sub.add_parser("info", help="show a model's contract")
-    info.add_argument("model")
-    info.set_defaults(func=_info)
+def _predict_parser(sub: Any) -> None:
+    """``dgan predict``'s arguments."""
     pred = sub.add_parser(
         "predict", help="predict the agents of a scene file at one time (or of every file of a directory or glob)"
     )
@@ -401,6 +393,19 @@ def build_parser() -> argparse.ArgumentParser:
     pred.add_argument("--json", action="store_true", help="print JSON (times, classes, probabilities) to stdout")
     pred.add_argument("--out", default=None, help="write the long table of modes: .csv, .parquet or .jsonl")
     pred.set_defaults(func=_predict)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="dgan", description="DGAN multi-modal trajectory prediction")
+    parser.add_argument("--version", action="version", version=f"dgan {dgan.__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    models = sub.add_parser("models", help="list the bundled models")
+    models.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    models.set_defaults(func=_models)
+    info = sub.add_parser("info", help="show a model's contract")
+    info.add_argument("model")
+    info.set_defaults(func=_info)
+    _predict_parser(sub)
     demo = sub.add_parser("demo", help="predict a bundled real scene with a bundled model and draw it")
     demo.add_argument(
         "--model", default="zara1", help="a bundled model name (zara1, sdd, apolloscape ...) or an .onnx path"

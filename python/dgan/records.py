@@ -129,6 +129,19 @@ def _numeric(cols: Columns, name: str) -> npt.NDArray[np.float64] | None:
     return np.ascontiguousarray(c, dtype=np.float64)
 
 
+def _optional_rows(cols: Columns, names: Names) -> dict[str, Any]:
+    """The optional per-row columns the engine reads (None where the table has none)."""
+    klass = cols.get(names.cls)
+    return {
+        "classes": None if klass is None else klass.tolist(),
+        "headings": _numeric(cols, names.heading),
+        "lengths": _numeric(cols, names.length),
+        "widths": _numeric(cols, names.width),
+        "vxs": _numeric(cols, names.vx) if names.vy in cols else None,
+        "vys": _numeric(cols, names.vy) if names.vx in cols else None,
+    }
+
+
 @functools.lru_cache(maxsize=1)
 def _bundled_steps() -> tuple[tuple[str, float], ...]:
     from dgan import models
@@ -243,20 +256,8 @@ def from_records(
         gaps = np.diff(uniq_t)
         dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
     now = _current_time(uniq_t, current_time, 1e-6 * dt / time_unit)
-    klass = cols.get(names.cls)
     seconds = np.ascontiguousarray(times * time_unit)
-    rows = {
-        "ids": codes,
-        "times": seconds,
-        "xs": xs,
-        "ys": ys,
-        "classes": None if klass is None else klass.tolist(),
-        "headings": _numeric(cols, names.heading),
-        "lengths": _numeric(cols, names.length),
-        "widths": _numeric(cols, names.width),
-        "vxs": _numeric(cols, names.vx) if names.vy in cols else None,
-        "vys": _numeric(cols, names.vy) if names.vx in cols else None,
-    }
+    rows = {"ids": codes, "times": seconds, "xs": xs, "ys": ys, **_optional_rows(cols, names)}
     try:
         native, spacing, upsampled = _dgan.frame_from_rows(
             rows, now * time_unit, int(t_obs), float(dt), max_gap, default_class, duplicates, bool(upsample)
