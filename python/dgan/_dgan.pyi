@@ -8,6 +8,9 @@ import numpy.typing as npt
 
 __all__ = [
     "CONTRACT_VERSION",
+    "DUPLICATES",
+    "SPARSE_SLACK",
+    "UPSAMPLE_LIMIT",
     "Frame",
     "Predictor",
     "RasterMap",
@@ -30,6 +33,12 @@ __all__ = [
 __version__: str
 #: The model contract version the exporter writes (``dgan_core::contract::CONTRACT_VERSION``).
 CONTRACT_VERSION: int
+#: The choices of ``frame_from_rows``' ``duplicates`` (``dgan_core::Duplicates::ALL``).
+DUPLICATES: list[str]
+#: Data at most this many times sparser than the grid are upsampled (``dgan_core::history::UPSAMPLE_LIMIT``).
+UPSAMPLE_LIMIT: float
+#: Relative slack of the spacing checks (``dgan_core::history::SPARSE_SLACK``).
+SPARSE_SLACK: float
 
 @final
 class Frame:

@@ -26,6 +26,7 @@ import numpy as np
 
 import dgan
 from dgan.exceptions import DganError, InvalidFrameError, InvalidMapError
+from dgan.records import DUPLICATES
 
 #: Seconds between the annotations of a Social-GAN layout file (ETH/UCY), whatever its frame numbering.
 SOCIAL_GAN_DT_S = 0.4
@@ -377,7 +378,7 @@ def _predict_parser(sub: Any) -> None:
     )
     pred.add_argument(
         "--duplicates",
-        choices=("error", "first", "last", "mean"),
+        choices=DUPLICATES,
         default="error",
         help="several rows of one agent at one time: refuse (default), keep the first or last, or their mean",
     )

@@ -319,11 +319,27 @@ class Frame:
         out._frame, out._labels, out._map, out._source = native, labels, map, source
         return out
 
+    def _state(self, index: npt.NDArray[np.int64] | None = None) -> tuple[Any, ...]:
+        """What the native frame is rebuilt from (:func:`_native_from`), of every agent or of those at ``index``."""
+        f = self._frame
+        arrays: tuple[npt.NDArray[Any], ...] = (
+            f.positions,
+            f.mask,
+            f.ids,
+            f.headings,
+            f.velocities,
+            f.lengths,
+            f.widths,
+        )
+        classes = f.classes
+        if index is not None:
+            arrays = tuple(np.ascontiguousarray(a[index]) for a in arrays)
+            classes = [classes[i] for i in index]
+        return arrays, classes, f.dt
+
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickles as its arrays (for multiprocessing, Ray, Dask): the engine's ids, the ids as given, the map."""
-        f = self._frame
-        state = (f.positions, f.mask, f.classes, f.ids, f.headings, f.velocities, f.lengths, f.widths, f.dt)
-        return (_unpickle_frame, (state, self._labels, self._map, self._source))
+        return (_unpickle_frame, (self._state(), self._labels, self._map, self._source))
 
     @classmethod
     def from_records(
@@ -424,28 +440,9 @@ class Frame:
     def select(self, rows: npt.ArrayLike) -> Frame:
         """The frame of the agents at ``rows`` (integer indices or a boolean mask), in that order, with their ids,
         states and the map."""
-        f = self._frame
         index = np.arange(len(self))[np.asarray(rows)] if len(self) else np.zeros(0, dtype=np.int64)
-        classes = [f.classes[i] for i in index]
-
-        def pick(a: npt.NDArray[Any]) -> npt.NDArray[Any]:
-            return np.ascontiguousarray(a[index])
-
-        native = _dgan.Frame(
-            pick(f.positions),
-            pick(f.mask),
-            classes,
-            pick(f.ids),
-            pick(f.headings),
-            pick(f.velocities),
-            pick(f.lengths),
-            pick(f.widths),
-            None,
-            f.dt,
-        )
         labels = None if self._labels is None else self._labels[index]
-        out = Frame._wrap(native, labels, None, self._source)
-        return out if self._map is None else out.with_map(self._map)
+        return _unpickle_frame(self._state(index), labels, self._map, self._source)
 
     @property
     def source_dt(self) -> float | None:
@@ -516,7 +513,8 @@ def _unpickle_frame(
     map: RasterMap | VectorMap | None,
     source: tuple[float | None, bool] | None,
 ) -> Frame:
-    pos, mask, classes, codes, headings, velocities, lengths, widths, dt = state
+    """A frame from :meth:`Frame._state` and what the Python side keeps (for pickling and :meth:`Frame.select`)."""
+    (pos, mask, codes, headings, velocities, lengths, widths), classes, dt = state
     native = _dgan.Frame(pos, mask, classes, codes, headings, velocities, lengths, widths, None, dt)
     out = Frame._wrap(native, labels, None, source)
     return out if map is None else out.with_map(map)

@@ -24,11 +24,11 @@ if TYPE_CHECKING:
     from dgan.frame import ClassLike, Frame, RasterMap, VectorMap
 
 #: How repeated (agent, time) rows may be resolved (the engine's ``Duplicates``).
-DUPLICATES: Final = ("error", "first", "last", "mean")
-#: Data at most this many times sparser than a model's step are interpolated with ``upsample=True``
-#: (``dgan_core::history::UPSAMPLE_LIMIT``; the slack of 5% is the engine's too).
-UPSAMPLE_LIMIT: Final = 2.5
-_SLACK: Final = 1.05
+DUPLICATES: Final = tuple(_dgan.DUPLICATES)
+#: Data at most this many times sparser than a model's step are interpolated with ``upsample=True``, with the
+#: engine's relative slack (``dgan_core::history``).
+UPSAMPLE_LIMIT: Final = _dgan.UPSAMPLE_LIMIT
+_SLACK: Final = 1.0 + _dgan.SPARSE_SLACK
 
 
 @dataclass(frozen=True)
@@ -50,15 +50,16 @@ class Names:
     def required(self) -> dict[str, str]:
         return {"agent_id": self.agent_id, "time": self.time, "x": self.x, "y": self.y}
 
-    def optional(self) -> dict[str, str]:
-        return {
-            "cls_column": self.cls,
-            "heading": self.heading,
-            "length": self.length,
-            "width": self.width,
-            "velocity": self.vx,
-            "velocity ": self.vy,
-        }
+    def optional(self) -> list[tuple[str, str]]:
+        """(argument, column) of each optional column; both velocity columns are named by ``velocity``."""
+        return [
+            ("cls_column", self.cls),
+            ("heading", self.heading),
+            ("length", self.length),
+            ("width", self.width),
+            ("velocity", self.vx),
+            ("velocity", self.vy),
+        ]
 
 
 def _close(name: str, candidates: list[str], cutoff: float = 0.8) -> str | None:
@@ -78,14 +79,14 @@ def check_columns(cols: Columns, names: Names) -> None:
             close = _close(name, list(cols), cutoff=0.6)
             hint = f"; did you mean {close!r} ({arg}={close!r})?" if close else ""
             raise InvalidFrameError(f"records lack the column {name!r}; they have {list(cols)}{hint}")
-    known = set(names.required().values()) | set(names.optional().values())
+    known = set(names.required().values()) | {name for _, name in names.optional()}
     unread = [c for c in cols if c not in known]
-    for arg, name in names.optional().items():
+    for arg, name in names.optional():
         close = None if name in cols else _close(name, unread)
         if close is not None:
             warnings.warn(
                 f"the table has no column {name!r} but has {close!r}, which is not read; pass "
-                f"{arg.strip()}={close!r} to read it" + (" (as a (vx, vy) pair)" if arg.startswith("velocity") else ""),
+                f"{arg}={close!r} to read it" + (" (as a (vx, vy) pair)" if arg == "velocity" else ""),
                 ColumnWarning,
                 stacklevel=4,
             )
@@ -177,7 +178,7 @@ def _check_options(t_obs: Any, dt: Any, time_unit: Any, duplicates: Any, upsampl
         raise InvalidFrameError(f"t_obs must be an integer in 1..=1000, got {t_obs!r}")
     if not (isinstance(time_unit, (int, float)) and np.isfinite(time_unit) and time_unit > 0):
         raise TimeBaseError(f"time_unit must be a positive number of seconds per unit, got {time_unit!r}")
-    if not isinstance(duplicates, str) or duplicates not in DUPLICATES:
+    if not isinstance(duplicates, str):  # which names are valid is the engine's to say
         raise InvalidSpecError(f"duplicates must be one of {DUPLICATES}, got {duplicates!r}")
     if not isinstance(upsample, (bool, np.bool_)):
         raise InvalidSpecError(f"upsample must be True or False, got {upsample!r}")

@@ -42,19 +42,20 @@ pub enum Duplicates {
     Mean,
 }
 
+impl Duplicates {
+    /// Every choice, by the name [`FromStr`](std::str::FromStr) reads (and the Python option takes).
+    pub const ALL: [(&'static str, Self); 4] =
+        [("error", Self::Error), ("first", Self::First), ("last", Self::Last), ("mean", Self::Mean)];
+}
+
 impl std::str::FromStr for Duplicates {
     type Err = DganError;
 
     fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "error" => Ok(Self::Error),
-            "first" => Ok(Self::First),
-            "last" => Ok(Self::Last),
-            "mean" => Ok(Self::Mean),
-            _ => Err(DganError::InvalidSpec(format!(
-                "duplicates must be one of \"error\", \"first\", \"last\", \"mean\"; got {s:?}"
-            ))),
-        }
+        Self::ALL.iter().find(|(name, _)| *name == s).map(|(_, d)| *d).ok_or_else(|| {
+            let names: Vec<String> = Self::ALL.iter().map(|(n, _)| format!("{n:?}")).collect();
+            DganError::InvalidSpec(format!("duplicates must be one of {}; got {s:?}", names.join(", ")))
+        })
     }
 }
 

@@ -21,6 +21,9 @@ fn init_onnxruntime(path: Option<std::path::PathBuf>) -> PyResult<std::path::Pat
 fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("CONTRACT_VERSION", dgan_core::contract::CONTRACT_VERSION)?;
+    m.add("DUPLICATES", dgan_core::Duplicates::ALL.map(|(name, _)| name).to_vec())?;
+    m.add("UPSAMPLE_LIMIT", dgan_core::history::UPSAMPLE_LIMIT)?;
+    m.add("SPARSE_SLACK", dgan_core::history::SPARSE_SLACK)?;
     m.add_class::<frame::PyFrame>()?;
     m.add_class::<frame::PyRasterMap>()?;
     m.add_class::<frame::PyVectorMap>()?;

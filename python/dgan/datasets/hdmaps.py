@@ -331,15 +331,12 @@ def _sizes(st: Mapping[str, Any], t: int) -> tuple[Arr, Arr]:
     (``(T, ≥2)`` or ``(≥2,)``: length, width[, height]); NaN where the file has none."""
     if "length" in st and "width" in st:
         ln, wd = (np.asarray(st[k], dtype=np.float64).ravel() for k in ("length", "width"))
-    elif "size" in st:
+        return (np.full(t, ln[0]) if ln.size == 1 else ln), (np.full(t, wd[0]) if wd.size == 1 else wd)
+    if "size" in st:
         size = np.asarray(st["size"], dtype=np.float64)
         size = np.broadcast_to(size, (t, size.shape[-1])) if size.ndim == 1 else size.reshape(t, -1)
-        ln, wd = size[:, 0], size[:, 1]
-    else:
-        return np.full(t, np.nan), np.full(t, np.nan)
-    return np.broadcast_to(ln, (t,)).copy() if ln.size == 1 else ln, np.broadcast_to(
-        wd, (t,)
-    ).copy() if wd.size == 1 else wd
+        return size[:, 0].copy(), size[:, 1].copy()
+    return np.full(t, np.nan), np.full(t, np.nan)
 
 
 def read_scenarionet(path: str | os.PathLike[str], source: str | None = None) -> Scenario:
