@@ -203,13 +203,27 @@ def batch_throughput(name: str, count: int, repeat: int) -> None:
     print(f"| {name} | {count} | {agents:.1f} | {loop:.2f} | {batch:.2f} | {loop / batch:.2f}× |", flush=True)
 
 
+def flops_table(models: list[str], agents: list[int]) -> None:
+    """MFLOP per agent of each model's network on its bundled scene tiled to each N (counted, not timed)."""
+    print("| model | N | MFLOP per agent (dense + other) |\n|---|---|---|")
+    for name in models:
+        p = dgan.Predictor(name, sessions=1)
+        for n in agents:
+            f = graph_flops(p.path, dgan.preprocess(tiled(scene_for(p.spec).frame, n), p.spec))
+            print(f"| {name} | {n} | {f.total / n / 1e6:.2f} ({f.dense / n / 1e6:.2f} + {f.other / n / 1e6:.2f}) |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", nargs="*", default=list(dgan.models.list()))
     ap.add_argument("--agents", nargs="*", type=int, default=[8, 32, 128, 256])
     ap.add_argument("--repeat", type=int, default=30)
     ap.add_argument("--calls", type=int, default=200, help="predictions per throughput measurement")
+    ap.add_argument("--flops", action="store_true", help="only the operations per agent (no timing)")
     a = ap.parse_args()
+    if a.flops:
+        flops_table(a.models, a.agents)
+        return
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
     print(f"single-thread sgemm (numpy float32, 1024²): {sgemm_gflops():.1f} GFLOP/s")
     print(

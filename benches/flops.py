@@ -9,12 +9,11 @@ multiply-add counts 2:
 - ``LSTM`` / ``GRU``: per step and direction 2 · gates · H · (input + H) per sequence, plus the gate arithmetic;
 - everything else: one per output element (a softmax or reduction: per input element), counted apart as ``other``.
 
-    python benches/flops.py MODEL [--agents 32]   # MFLOP per agent of a bundled model on its bundled scene
+    python benches/bench.py --flops [--models ...] [--agents 32]   # MFLOP per agent on the bundled scenes
 """
 
 from __future__ import annotations
 
-import argparse
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -139,30 +138,3 @@ def sgemm_gflops(n: int = 1024, repeat: int = 5) -> float:
         a @ b
         times.append(time.perf_counter() - t0)
     return 2 * n**3 / float(np.median(times)) / 1e9
-
-
-def main() -> None:
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench import tiled
-
-    import dgan
-    from dgan.demo import scene_for
-
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("models", nargs="*", default=list(dgan.models.list()))
-    ap.add_argument("--agents", type=int, default=32)
-    a = ap.parse_args()
-    print("| model | N | MFLOP per agent (dense + other) |")
-    print("|---|---|---|")
-    for name in a.models:
-        p = dgan.Predictor(name, sessions=1)
-        x = dgan.preprocess(tiled(scene_for(p.spec).frame, a.agents), p.spec)
-        f = graph_flops(p.path, x)
-        print(f"| {name} | {a.agents} | {f.total / a.agents / 1e6:.2f} ({f.dense / a.agents / 1e6:.2f} + "
-              f"{f.other / a.agents / 1e6:.2f}) |")  # fmt: skip
-
-
-if __name__ == "__main__":
-    main()

@@ -21,16 +21,14 @@ pub enum DganError {
     /// A frame's time base differs from the model's, or data cannot be resampled to it (too sparse, unordered).
     #[error("time base: {0}")]
     TimeBase(String),
-    /// Data sampled more sparsely than a model's grid allows (see [`history::frame_at_with`](crate::history)):
-    /// refused rather than stretched. Python: `TimeBaseError` with the spacing as `spacing_s`.
-    #[error("time base: {}", sparse_message(*spacing_s, *dt_s, *upsampling))]
+    /// Data sampled more sparsely than a model's grid allows (see `history::frame_at_with`): refused rather than
+    /// stretched. Python: `TimeBaseError` with the spacing as `spacing_s`.
+    #[error("time base: {message}")]
     SparseData {
         /// The data's median spacing within the window, seconds.
         spacing_s: f64,
-        /// The model's step, seconds.
-        dt_s: f64,
-        /// Whether upsampling (up to [`UPSAMPLE_LIMIT`](crate::history::UPSAMPLE_LIMIT)× sparser) was allowed.
-        upsampling: bool,
+        /// What is wrong and what would fit.
+        message: String,
     },
     /// A raster or vector map that cannot be used (bad image shape, singular homography, degenerate geometry).
     #[error("invalid map: {0}")]
@@ -58,20 +56,6 @@ pub enum DganError {
     /// ONNX Runtime failed while running a loaded, contract-checked model.
     #[error("inference failed: {0}")]
     Inference(String),
-}
-
-fn sparse_message(spacing_s: f64, dt_s: f64, upsampling: bool) -> String {
-    let ratio = spacing_s / dt_s;
-    let limit = crate::history::UPSAMPLE_LIMIT;
-    let how = if upsampling || ratio > limit * (1.0 + crate::history::SPARSE_SLACK) {
-        format!("more than {limit}× sparser cannot be resampled to its grid without inventing motion")
-    } else {
-        format!("upsampling (upsample=True in Python) interpolates data up to {limit}× sparser onto its grid")
-    };
-    format!(
-        "the data are sampled every {spacing_s:.4} s (median), {ratio:.2}× the model's dt = {dt_s} s, sparser than \
-         its grid; {how}"
-    )
 }
 
 impl DganError {

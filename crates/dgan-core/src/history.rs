@@ -202,6 +202,20 @@ fn windows_at<'a>(
     Ok(windows)
 }
 
+/// Why data sampled every `spacing_s` cannot fill a grid `dt_s` apart, and what would.
+fn sparse_message(spacing_s: f64, dt_s: f64, upsampling: bool) -> String {
+    let ratio = spacing_s / dt_s;
+    let how = if upsampling || ratio > UPSAMPLE_LIMIT * (1.0 + SPARSE_SLACK) {
+        format!("more than {UPSAMPLE_LIMIT}× sparser cannot be resampled to its grid without inventing motion")
+    } else {
+        format!("upsampling (upsample=True in Python) interpolates data up to {UPSAMPLE_LIMIT}× sparser onto its grid")
+    };
+    format!(
+        "the data are sampled every {spacing_s:.4} s (median), {ratio:.2}× the model's dt = {dt_s} s, sparser than \
+         its grid; {how}"
+    )
+}
+
 /// A frame built from detections, with how the data's rate met the grid.
 #[derive(Debug, Clone)]
 pub struct Resampled {
@@ -246,7 +260,8 @@ pub fn frame_at_with(
     if let Some(spacing) = spacing_s {
         if spacing > base.dt_s * (1.0 + SPARSE_SLACK) {
             if !upsample || spacing > base.dt_s * UPSAMPLE_LIMIT * (1.0 + SPARSE_SLACK) {
-                return Err(DganError::SparseData { spacing_s: spacing, dt_s: base.dt_s, upsampling: upsample });
+                let message = sparse_message(spacing, base.dt_s, upsample);
+                return Err(DganError::SparseData { spacing_s: spacing, message });
             }
             upsampled = true;
             base.max_gap_s = base.max_gap_s.max(1.5 * spacing);
@@ -505,7 +520,7 @@ mod tests {
         let base = TimeBase::new(4, 0.4).unwrap();
         let (a, ta) = line(1, &[0.0, 0.5, 1.0, 1.5], 1.0);
         let err = frame_at(&[(a, &ta)], 1.5, &base, AgentClass::Pedestrian).unwrap_err();
-        assert!(matches!(err, DganError::SparseData { upsampling: false, .. }), "{err}");
+        assert!(matches!(err, DganError::SparseData { .. }), "{err}");
         assert!(err.to_string().contains("upsample=True"), "{err}");
         let (b, tb) = line(1, &[0.0, 0.4, 0.4], 1.0);
         assert!(matches!(frame_at(&[(b, &tb)], 0.4, &base, AgentClass::Pedestrian), Err(DganError::TimeBase(_))));
@@ -531,7 +546,7 @@ mod tests {
         let times: Vec<f64> = (0..=4).map(|i| f64::from(i) * 1.2).collect(); // 3× sparser
         let (b, tb) = line(2, &times, 1.0);
         let err = frame_at_with(&[(b, &tb)], 4.8, &base, AgentClass::Pedestrian, true).unwrap_err();
-        assert!(matches!(err, DganError::SparseData { upsampling: true, .. }), "{err}");
+        assert!(matches!(err, DganError::SparseData { .. }), "{err}");
         assert!(err.to_string().contains("more than 2.5× sparser"), "{err}");
     }
 
