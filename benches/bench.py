@@ -42,10 +42,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import dgan  # noqa: E402
+from benches.flops import graph_flops, sgemm_gflops  # noqa: E402
 from dgan.demo import scene_for  # noqa: E402
-
-sys.path.insert(0, str(ROOT / "benches"))
-from flops import graph_flops, sgemm_gflops  # noqa: E402
 
 SPACING_M = 60.0
 
@@ -88,9 +86,9 @@ def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
     try:
         import torch
 
+        from training.data.batches import INPUTS
         from training.export import load_checkpoint
-        from training.loss import decode_torch
-        from training.train import INPUTS
+        from training.losses import decode_torch
     except ImportError:
         return None
     torch.set_num_threads(1)

@@ -1,4 +1,4 @@
-"""Anchors: k-means (scikit-learn) of agent-centric ground-truth futures, per class."""
+"""Anchors: k-means (scikit-learn) of agent-centric ground-truth futures' residuals from the prior, per class."""
 
 from __future__ import annotations
 
@@ -6,6 +6,10 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+import dgan
+from training.config import Config
+from training.data.windows import Windows
 
 Arr = npt.NDArray[Any]
 
@@ -34,3 +38,33 @@ def kmeans_anchors(futures: Arr, k: int, seed: int = 0, zero: bool = False, roun
     # Order by final distance travelled, so anchor indices read from slow to fast.
     order = np.argsort(np.linalg.norm(centres[:, -1], axis=1), kind="stable")
     return centres[order]
+
+
+def anchor_windows(cfg: Config, parts: list[Windows], train: Windows) -> Windows:
+    """The training windows whose futures the anchors are fitted on: all of ``train`` (the concatenation of
+    ``parts``), or with ``data.extra_in_anchors`` false the dataset's own windows ``parts[0]`` alone."""
+    return train if cfg.data.extra_in_anchors else parts[0]
+
+
+def residual_futures(w: Windows, spec: dgan.InputSpec) -> np.ndarray:
+    """``(A, T_f, 2)`` every agent's future minus its kinematic prior (agent frame): what the anchors model."""
+    prior = dgan.kinematic_prior(w.trajectory, w.trajectory_mask, w.state, spec)
+    out: np.ndarray = w.future - prior
+    return out
+
+
+def fit_anchors(cfg: Config, train: Windows, spec: dgan.InputSpec, num_classes: int) -> tuple[np.ndarray, np.ndarray]:
+    """K_c k-means anchors of the residuals from the prior for every class (from all of its targets, also in a
+    per-class run, so that the model contract holds) and the class of each anchor."""
+    out = []
+    residual = residual_futures(train, spec)
+    for c in range(num_classes):
+        fut = residual[train.target & (train.class_index == c)]
+        if cfg.train.mirror:
+            flipped = fut.copy()
+            flipped[..., 1] *= -1
+            fut = np.concatenate([fut, flipped])
+        k, seed = cfg.train.anchors_per_class, cfg.train.seed
+        out.append(kmeans_anchors(fut, k, seed, cfg.train.zero_anchor).astype(np.float32))
+    class_of = np.repeat(np.arange(num_classes), cfg.train.anchors_per_class)
+    return np.concatenate(out), class_of

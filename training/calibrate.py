@@ -3,7 +3,7 @@ fitted on a validation split. The event is the best mode (the mode closest to th
 reliability diagram of :mod:`training.evaluate` counts). Two proper scores are minimised over a grid of T: the best
 mode's negative log-likelihood and the Brier score of the best-mode indicator (which weighs the probable modes more);
 of the two temperatures, the one whose validation reliability is closer in the bins the must-show checks (p ≥ 0.3,
-at least 30 modes: :func:`training.scorecard.worst_gap`) is kept. The engine applies it in decoding (contract 2).
+at least 30 modes: :func:`training.metrics.worst_gap`) is kept. The engine applies it in decoding (contract 2).
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ import numpy as np
 import torch
 
 import dgan
-from training.data import Windows
-from training.loss import mode_probabilities
+from training.data.windows import Windows
+from training.losses import mode_probabilities
+from training.metrics import worst_gap
 
 #: The temperatures tried, log-spaced.
 GRID = np.exp(np.linspace(np.log(0.05), np.log(20.0), 121))
@@ -29,7 +30,7 @@ def best_mode_logits(
     model: torch.nn.Module, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, batch: int = 64
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """For every target of ``w``: class logits, anchor logits and the index of its best mode (smallest ADE)."""
-    from training.train import forward_inputs, prepared_batch, windows_with_targets
+    from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
 
     model.eval()
     cls, anc, best = [], [], []
@@ -69,10 +70,8 @@ def best_mode_reliability(p: torch.Tensor, best: torch.Tensor) -> dict[str, Any]
 
 
 def reliability_gap(p: torch.Tensor, best: torch.Tensor) -> float:
-    """The worst |frequency − probability| of a checked reliability bin (``training.scorecard.worst_gap``); infinite
+    """The worst |frequency − probability| of a checked reliability bin (``training.metrics.worst_gap``); infinite
     when no bin qualifies, so that a temperature cannot pass by leaving no mode at p ≥ 0.3."""
-    from training.scorecard import worst_gap
-
     gap, at = worst_gap(best_mode_reliability(p, best))
     return gap if at == at else float("inf")
 
@@ -143,8 +142,8 @@ def validation_logits(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """:func:`best_mode_logits` of the checkpoint at ``path`` on its configuration's validation split (under
     ``data_root`` if given), and the class of each of its anchors."""
+    from training.data.batches import load_windows
     from training.export import load_checkpoint
-    from training.train import load_windows
 
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
     if data_root is not None:
@@ -163,7 +162,7 @@ def calibrate_checkpoint(
     ``folds``: checkpoints of the same configuration trained with other validation splits (cross-fitting,
     ``data.val_recordings``); their predictions on their own validation splits join the fit, which then sees every
     fold's validation data instead of one split's."""
-    from training.train import update_checkpoint
+    from training.checkpoint import update_checkpoint
 
     cl, al, best, class_of = validation_logits(path, data_root, progress)
     parts = [(cl, al, best)]

@@ -8,13 +8,13 @@ from typing import Any
 
 import tomllib
 
-from training.model import ModelConfig
+from training.modules.dgan import ModelConfig
 
 
 @dataclass(frozen=True)
 class DataConfig:
     root: str = "../shared/data"  # the folder holding eth_ucy/, sdd/, apolloscape_trajectory/ ...
-    dataset: str = "ethucy"  # ethucy, sdd or apolloscape (training.datasets.DATASETS)
+    dataset: str = "ethucy"  # ethucy, sdd or apolloscape (training.data.datasets.DATASETS)
     scene: str = "zara1"  # the held-out ETH/UCY scene (ethucy only)
     target_class: str = ""  # train on this class's targets only (a per-class baseline); "" = every class
     window_stride: int = 1  # train and validate on windows ending at every n-th step (the test always uses all)
@@ -35,19 +35,19 @@ class DataConfig:
     prior_standing_mps: float = 0.0
     # Where agents' headings come from (dgan.InputSpec.heading): "measured", "motion_when_moving" or "motion".
     heading: str = "measured"
-    # ETH/UCY only: pedestrians of other sources added to the training windows (training.datasets.PEDESTRIAN_SOURCES,
-    # comma-separated; their training splits only, resampled to 0.4 s, without maps), at windows ending at every
-    # extra_stride-th step.
+    # ETH/UCY only: pedestrians of other sources added to the training windows
+    # (training.data.datasets.PEDESTRIAN_SOURCES, comma-separated; their training splits only, resampled to 0.4 s,
+    # without maps), at windows ending at every extra_stride-th step.
     extra_pedestrians: str = ""
     extra_stride: int = 3
     # Whether those pedestrians' futures join the k-means of the anchors; false fits the anchors on the dataset's own
     # training windows alone (the network still trains on all of them).
     extra_in_anchors: bool = True
-    # ApolloScape only: the recordings that form the validation split instead of training.datasets.APOLLO_VAL
+    # ApolloScape only: the recordings that form the validation split instead of training.data.apolloscape.APOLLO_VAL
     # (comma-separated numbers; never a test recording), for the folds of a cross-fitted temperature
-    # (train.calibration_folds, training.bundle --calibration-fold).
+    # (train.calibration_folds, training.release.bundle --calibration-fold).
     val_recordings: str = ""
-    # Tracker-like augmentation (training.augment.tracker_noise): one noisy copy of the training windows per
+    # Tracker-like augmentation (training.data.augment.tracker_noise): one noisy copy of the training windows per
     # comma-separated sigma (metres of Gaussian noise on the observed positions), each with augment_drop of the
     # observed steps before the current one dropped; "" = none. Validation and test stay as recorded.
     augment_noise: str = ""
@@ -89,7 +89,7 @@ class TrainConfig:
     anchor_pool: str = "own_class"
     # Cross-fitted temperature (ApolloScape): the validation splits (data.val_recordings values, ";"-separated) of
     # further runs of this configuration whose out-of-fold predictions join the temperature's fit beside the
-    # validation split's own (training.bundle --calibration-fold; training.calibrate.calibrate_checkpoint).
+    # validation split's own (training.release.bundle --calibration-fold; training.calibrate.calibrate_checkpoint).
     calibration_folds: str = ""
     # One anchor of each class held at a zero residual, the kinematic prior itself, so that "nothing to add" is a mode
     # the classifier can pick (training.anchors.kmeans_anchors); the other anchors are k-means around it.

@@ -1,4 +1,4 @@
-"""Several runs of one configuration (seeds) as one exported model: :class:`training.model.ConsensusEnsemble`.
+"""Several runs of one configuration (seeds) as one exported model: :class:`training.modules.dgan.ConsensusEnsemble`.
 
     python -m training.ensemble RUN [RUN ...] --out model.onnx [--checkpoint ensemble.pt] [--name NAME]
 
@@ -28,7 +28,7 @@ import torch
 
 from training.calibrate import calibrate_checkpoint
 from training.export import SLIM_KEYS, export_checkpoint, load_checkpoint
-from training.model import ConsensusEnsemble
+from training.modules.dgan import ConsensusEnsemble
 
 #: The residual scales tried for a class's most probable mode (:func:`fit_top_scale`); 1 is the network as trained.
 TOP_SCALES = (0.0, 0.25, 0.5, 0.75, 1.0)
@@ -85,8 +85,8 @@ def top_mode_errors(
     of :data:`TOP_SCALES` ``(N, S)`` (:func:`scaled_errors`), its class index ``(N,)``, and the model's classes."""
     from dataclasses import replace
 
-    from training.loss import mode_probabilities
-    from training.train import forward_inputs, load_windows, prepared_batch, windows_with_targets
+    from training.data.batches import forward_inputs, load_windows, prepared_batch, windows_with_targets
+    from training.losses import mode_probabilities
 
     model, spec, anchors_np, class_of_np, cfg, temperature = load_checkpoint(path)
     if not isinstance(model, ConsensusEnsemble):
@@ -131,7 +131,7 @@ def fit_top_scale(path: Path, data_root: Path | None = None, progress: bool = Fa
     """Fits the top-mode residual scale of each class of the ensemble checkpoint at ``path`` on its validation split
     (:func:`top_mode_errors`, :func:`choose_scale`; a class without validation targets keeps 1) and stores it there
     as ``top_scale``."""
-    from training.train import update_checkpoint
+    from training.checkpoint import update_checkpoint
 
     errors, klass, names = top_mode_errors(path, data_root, progress)
     seen = [bool((klass == i).any()) for i in range(len(names))]

@@ -4,8 +4,8 @@ constant-velocity baseline on the very same windows and agents.
     python -m training.evaluate MODEL.onnx --dataset ethucy --scene zara1 [--data-root ../shared/data]
     python -m training.evaluate MODEL.onnx --dataset sdd
 
-Windows are built exactly as for training (``training.data.iter_windows``); the targets are the agents of a scored
-label present at all T_obs + T_f steps, standing ones too. Errors are in the dataset's unit (metres; pixels for
+Windows are built exactly as for training (``training.data.windows.iter_windows``); the targets are the agents of a
+scored label present at all T_obs + T_f steps, standing ones too. Errors are in the dataset's unit (metres; pixels for
 Stanford Drone), overall, per class and per label, and for moving and standing targets (moved less than 1 m from the
 first observed to the last true position) overall and per class. Also: the accuracy of the most probable class,
 and the calibration of the mode probabilities (how often a mode given probability p is the best of all K modes).
@@ -24,8 +24,8 @@ import numpy as np
 
 import dgan
 from training import metrics
-from training.data import iter_windows, noisy_window
-from training.datasets import DATASETS, recordings
+from training.data.datasets import DATASETS, recordings
+from training.data.windows import iter_windows, noisy_window
 
 #: Edges of the probability bins of the reliability diagram.
 CALIBRATION_BINS = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
@@ -57,7 +57,7 @@ def scored_windows(
 ) -> Iterator[Scored]:
     """Every window of a split, built as for training (``iter_windows``), with its targets' truth and constant
     velocity; ``with_map=False`` (or a spec without a map) gives frames without their map. ``noise = (sigma_m,
-    drop)`` corrupts the observed histories as a tracker would (:func:`training.augment.tracker_noise`, seeded per
+    drop)`` corrupts the observed histories as a tracker would (:func:`training.data.augment.tracker_noise`, seeded per
     split): the model and constant velocity both see the noisy history, the truth stays as recorded."""
     info = DATASETS[dataset]
     use_map = with_map and spec.map is not None
@@ -176,12 +176,7 @@ def evaluate(
     if fold:
         out["scene"] = fold
     moves = np.concatenate(moving) if moving else np.zeros(0, bool)
-    out["by_motion"] = {m: summarise(flat, sel) for m, sel in (("moving", moves), ("standing", ~moves))}
-    out["by_class"] = {c: summarise(flat, klass == i) for i, c in enumerate(model_classes) if (klass == i).any()}
-    for i, c in enumerate(model_classes):
-        if c in out["by_class"]:
-            for m, sel in (("moving", moves), ("standing", ~moves)):
-                out["by_class"][c][m] = summarise(flat, (klass == i) & sel)
+    out.update(splits(flat, moves, klass, model_classes))
     out["by_label"] = {n: summarise(flat, label == i) for i, n in enumerate(info.labels) if (label == i).any()}
     out["class_accuracy"] = float((np.concatenate(pred_class) == klass).mean())
     hits = np.concatenate(mode_hit)
@@ -189,6 +184,18 @@ def evaluate(
     out["temperature"] = temperature
     out["calibration_t1"] = calibration(np.concatenate(mode_p_raw), hits)
     return out
+
+
+def splits(flat: dict[str, np.ndarray], moves: np.ndarray, klass: np.ndarray, classes: list[str]) -> dict[str, Any]:
+    """The summaries of the moving and standing agents (``by_motion``) and of each class with its own moving and
+    standing split (``by_class``)."""
+    motion = (("moving", moves), ("standing", ~moves))
+    by_class = {}
+    for i, c in enumerate(classes):
+        if (klass == i).any():
+            by_class[c] = summarise(flat, klass == i)
+            by_class[c].update({m: summarise(flat, (klass == i) & sel) for m, sel in motion})
+    return {"by_motion": {m: summarise(flat, sel) for m, sel in motion}, "by_class": by_class}
 
 
 def rows_of(pred: dgan.Prediction, rows: np.ndarray, unit: float = 1.0) -> dgan.Prediction:

@@ -14,23 +14,16 @@ import torch
 
 import dgan
 from dgan import _dgan
+from dgan.contract import OUTPUTS as CONTRACT_OUTPUTS
+from dgan.contract import PADDED_INPUTS, PREPROCESS_VERSION, RASTER_VERSION
 from training.config import Config
-from training.model import DGAN, ConsensusEnsemble
+from training.modules.dgan import DGAN, ConsensusEnsemble
 
-OUTPUTS = ["class_logits", "anchor_logits", "offsets"]
+OUTPUTS = list(CONTRACT_OUTPUTS)
 #: What a bundled checkpoint keeps of a run's ``best.pt`` (export and the parity test need no optimizer state).
 SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature")
 #: The inputs of an exported model (contract 3, the padded neighbour layout), in ``DGAN.forward_padded``'s order.
-INPUTS = (
-    "trajectory",
-    "trajectory_mask",
-    "state",
-    "neighbor_index",
-    "neighbor_mask",
-    "neighbor_features",
-    "map",
-    "map_present",
-)
+INPUTS = PADDED_INPUTS
 
 
 def load_checkpoint(
@@ -58,7 +51,7 @@ def load_checkpoint(
 
 def _member(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
     """One trained network of a checkpoint: the model (eval mode), spec, anchors, class of each anchor, config."""
-    from training.train import build_model, input_spec
+    from training.build import build_model, input_spec
 
     cfg = Config.from_dict(
         {"name": ckpt["config"]["name"], **{k: ckpt["config"][k] for k in ("data", "model", "train")}}
@@ -85,6 +78,8 @@ def contract(
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
         contract_version=_dgan.CONTRACT_VERSION,
+        raster_version=RASTER_VERSION,
+        preprocess_version=PREPROCESS_VERSION,
         units="m",
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
         temperature=round(float(temperature), 6),
@@ -151,7 +146,7 @@ def export_model(
 ) -> Path:
     """Exports under the contract (version 3: the padded neighbour layout, whatever layout the model trained on);
     anchors must be grouped by class in the spec's class order."""
-    from training.model import PaddedDGAN
+    from training.modules.dgan import PaddedDGAN
 
     spec = replace(spec, graph="padded")
     if not np.all(np.diff(class_of) >= 0) or (len(class_of) and class_of[-1] >= len(spec.classes)):

@@ -7,11 +7,14 @@
 
 from __future__ import annotations
 
-from dgan import demo, exceptions, io, metrics, models, scenes
+from dgan import contract, demo, exceptions, metrics, models, scenes, tables
 from dgan._dgan import __version__
+from dgan.contract import CLASSES, MAP_ELEMENT_KINDS
 from dgan.exceptions import DganError
-from dgan.frame import CLASSES, MAP_ELEMENT_KINDS, Frame, RasterMap, VectorMap
-from dgan.predictor import Prediction, Predictor, available_execution_providers
+from dgan.frame import Frame
+from dgan.maps import RasterMap, VectorMap
+from dgan.prediction import Prediction
+from dgan.predictor import Predictor, available_execution_providers
 from dgan.scenes import scene_map
 from dgan.spec import (
     InputSpec,
@@ -42,9 +45,9 @@ __all__ = [
     "__version__",
     "attention_graph",
     "available_execution_providers",
+    "contract",
     "demo",
     "exceptions",
-    "io",
     "kinematic_prior",
     "metrics",
     "models",
@@ -52,6 +55,7 @@ __all__ = [
     "preprocess",
     "scene_map",
     "scenes",
+    "tables",
     "to_agent_frame",
     "to_world_frame",
 ]

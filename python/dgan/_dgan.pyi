@@ -7,11 +7,13 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
+    "CONTRACT",
     "CONTRACT_VERSION",
     "DUPLICATES",
     "SPARSE_SLACK",
     "UPSAMPLE_LIMIT",
     "Frame",
+    "Prediction",
     "Predictor",
     "RasterMap",
     "Tracker",
@@ -33,6 +35,13 @@ __all__ = [
 __version__: str
 #: The model contract version the exporter writes (``dgan_core::contract::CONTRACT_VERSION``).
 CONTRACT_VERSION: int
+#: What the engine owns about the model contract (``dgan-py/src/constants.rs``): ``version``,
+#: ``supported_versions``, ``raster_version``, ``preprocess_version``, ``metadata_key``, ``classes`` (by code),
+#: ``class_sizes_m`` (default length, width), ``map_kinds`` (in drawing order: ``name``, ``polygon``, ``colour``,
+#: ``width_m``), ``agent_colour``, ``state_features``, ``edge_features``, ``state_mirrored``, ``edge_mirrored`` (the
+#: columns that change sign when a scene is mirrored y → −y), ``inputs`` (by graph layout: ``edge_list``,
+#: ``padded``; in the contract's order), ``outputs``. Read it through :mod:`dgan.contract`.
+CONTRACT: dict[str, Any]
 #: The choices of ``frame_from_rows``' ``duplicates`` (``dgan_core::Duplicates::ALL``).
 DUPLICATES: list[str]
 #: Data at most this many times sparser than the grid are upsampled (``dgan_core::history::UPSAMPLE_LIMIT``).
@@ -96,6 +105,23 @@ class VectorMap:
     def elements(self) -> list[tuple[str, npt.NDArray[np.float64]]]: ...
 
 @final
+class Prediction:
+    @property
+    def agent_ids(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def trajectories(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def probabilities(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def class_probabilities(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def mode_classes(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def edges(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def headings(self) -> tuple[int, float, bool, bool] | None: ...
+
+@final
 class Predictor:
     def __new__(
         cls,
@@ -114,8 +140,8 @@ class Predictor:
     def sessions(self) -> int: ...
     @property
     def path(self) -> str: ...
-    def predict(self, frame: Frame, modes: int) -> dict[str, Any]: ...
-    def predict_batch(self, frames: list[Frame], modes: int) -> list[dict[str, Any]]: ...
+    def predict(self, frame: Frame, modes: int, check_headings: bool = False) -> Prediction: ...
+    def predict_batch(self, frames: list[Frame], modes: int, check_headings: bool = False) -> list[Prediction]: ...
 
 @final
 class Tracker:

@@ -18,8 +18,10 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan.exceptions import DatasetWarning, DganError
-from dgan.frame import Frame, RasterMap
-from dgan.predictor import Prediction, Predictor
+from dgan.frame import Frame
+from dgan.maps import RasterMap
+from dgan.prediction import Prediction
+from dgan.predictor import Predictor
 from dgan.scenes import APOLLO_TYPES, SDD_LABEL_CLASS, scene_image, scene_map, sdd_raster_map
 from dgan.spec import InputSpec
 

@@ -1,218 +1,19 @@
-"""The scene at the current time: :class:`Frame`, and its maps :class:`RasterMap` and :class:`VectorMap`."""
+"""The scene at the current time: :class:`Frame` (its maps are :mod:`dgan.maps`)."""
 
 from __future__ import annotations
 
-import os
-from collections.abc import Iterable, Sequence
-from typing import Any, Final
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan._values import ClassLike, as_given, checked_array, typename
+from dgan.contract import CLASSES
 from dgan.exceptions import InvalidFrameError, InvalidMapError, UnknownClassError
-from dgan.io import as_given
-
-#: The classes dgan knows, by canonical integer code.
-CLASSES: Final = ("vehicle", "cyclist", "pedestrian")
-#: The vector-map element kinds, each drawn in the paper's colour.
-MAP_ELEMENT_KINDS: Final = (
-    "lane_centerline",
-    "lane_line_dashed",
-    "lane_line_solid",
-    "road_edge",
-    "crosswalk",
-    "bike_lane",
-    "obstacle",
-)
-
-ClassLike = str | int
-
-
-def typename(value: Any) -> str:
-    """How an error message names what it was given: ``None``, or the type's name."""
-    return "None" if value is None else type(value).__name__
-
-
-#: The array kinds each target dtype accepts without losing information (numpy ``dtype.kind`` codes).
-_ACCEPTED_KINDS = {"f": "fiu", "i": "iu", "b": "b", "u": "u"}
-#: The largest number of values one input array may hold (2³¹: 16 GiB of float64).
-MAX_ARRAY_VALUES: Final = 2**31
-
-
-def _array(
-    name: str,
-    value: Any,
-    dtype: npt.DTypeLike,
-    error: type[Exception] = InvalidFrameError,
-    *,
-    required: bool = False,
-) -> Any:
-    """``value`` as a contiguous array of ``dtype``, refusing every conversion that would lose or invent information:
-    complex, bool-as-number, strings, objects, ints out of range, a float mask that is not 0/1, a float image."""
-    target = np.dtype(dtype)
-    if value is None:
-        if required:
-            raise error(f"{name} is required, got None")
-        return None
-    try:
-        arr = np.asarray(value)
-    except (TypeError, ValueError, OverflowError, MemoryError) as exc:
-        raise error(f"{name} must be an array of {target.name}: {exc}") from None
-    if arr.size > MAX_ARRAY_VALUES:
-        raise error(f"{name} has {arr.size} values; at most {MAX_ARRAY_VALUES} are accepted")
-    kind = arr.dtype.kind
-    if target == np.uint8 and kind != "u" and arr.size:
-        raise error(f"{name} must be uint8, got {arr.dtype}; convert it yourself (e.g. (img * 255).round())")
-    if target.kind == "b" and kind in "fiu":
-        # A mask given as numbers: only exact 0 and 1 (NaN or 0.5 are not "observed").
-        if arr.size and not np.all((arr == 0) | (arr == 1)):
-            raise error(f"{name} must be bool or 0/1, got values such as {arr[(arr != 0) & (arr != 1)].flat[0]!r}")
-    elif kind not in _ACCEPTED_KINDS.get(target.kind, target.kind) and arr.size:
-        what = {"c": "complex", "b": "bool", "U": "string", "S": "bytes", "O": "object", "M": "datetime"}.get(
-            kind, kind
-        )
-        raise error(f"{name} must be an array of {target.name}, got {what} values ({arr.dtype})")
-    if target.kind in "iu" and kind in "iu" and arr.size:
-        info = np.iinfo(target)
-        if arr.min() < info.min or arr.max() > info.max:
-            raise error(f"{name} holds values outside the range of {target.name} ({info.min}..{info.max})")
-    if arr.size == 0:  # nothing to convert (and no casting warning for an empty complex array)
-        return np.zeros(arr.shape, dtype=target)
-    try:
-        return np.ascontiguousarray(arr, dtype=target)
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise error(f"{name} must be an array of {target.name}: {exc}") from None
-
-
-class RasterMap:
-    """An RGB image of the scene and its 3×3 homography from world metres to pixels.
-
-    Pixels are ``(u, v)`` = (column, row) with integer values at pixel centres. ``image`` is ``(H, W, 3)`` uint8.
-    """
-
-    __slots__ = ("_map",)
-
-    def __init__(self, image: npt.ArrayLike, world_to_pixel: npt.ArrayLike) -> None:
-        img = _array("image", image, np.uint8, InvalidMapError, required=True)
-        h = _array("world_to_pixel", world_to_pixel, np.float64, InvalidMapError, required=True)
-        self._map = _dgan.RasterMap(img, h)
-
-    @classmethod
-    def from_file(cls, path: str | os.PathLike[str], world_to_pixel: npt.ArrayLike) -> RasterMap:
-        """Reads a PNG or JPEG image (converted to RGB)."""
-        h = _array("world_to_pixel", world_to_pixel, np.float64, InvalidMapError, required=True)
-        obj = cls.__new__(cls)
-        obj._map = _dgan.RasterMap.from_file(os.fspath(path), h)
-        return obj
-
-    @classmethod
-    def from_pixel_to_world(cls, image_path: str | os.PathLike[str], pixel_to_world: npt.ArrayLike) -> RasterMap:
-        """Reads an image whose homography is given pixel → world (as ETH/UCY's ``H.txt``)."""
-        h = _array("pixel_to_world", pixel_to_world, np.float64, InvalidMapError, required=True)
-        if h.shape != (3, 3):
-            raise InvalidMapError(f"pixel_to_world must be 3×3, got {h.shape}")
-        try:
-            inv = np.linalg.inv(h)
-        except np.linalg.LinAlgError:
-            raise InvalidMapError("pixel_to_world is singular") from None
-        return cls.from_file(image_path, inv)
-
-    @property
-    def image(self) -> npt.NDArray[np.uint8]:
-        """The image, ``(H, W, 3)``."""
-        img = self._map.image
-        assert img is not None
-        return img
-
-    @property
-    def world_to_pixel(self) -> npt.NDArray[np.float64]:
-        """The world → pixel homography."""
-        h = self._map.world_to_pixel
-        assert h is not None
-        return h
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        return (RasterMap, (self.image, self.world_to_pixel))
-
-    def __repr__(self) -> str:
-        return f"RasterMap(image={self.image.shape})"
-
-
-class VectorMap:
-    """Typed polylines and polygons of a semantic HD map, in world metres.
-
-    ``elements`` are ``(kind, points)`` pairs with ``points`` of shape ``(P, 2)``; kinds are
-    :data:`MAP_ELEMENT_KINDS`. Polylines need 2 points, polygons (crosswalk, bike lane, obstacle) 3.
-    """
-
-    __slots__ = ("_map",)
-
-    def __init__(self, elements: Iterable[tuple[str, npt.ArrayLike]] = ()) -> None:
-        if elements is None or isinstance(elements, (str, bytes)) or not hasattr(elements, "__iter__"):
-            raise InvalidMapError(f"elements must be an iterable of (kind, points) pairs, got {typename(elements)}")
-        items = []
-        for k, item in enumerate(elements):
-            try:
-                kind, points = item
-            except (TypeError, ValueError):
-                raise InvalidMapError(f"element {k} must be a (kind, points) pair") from None
-            if not isinstance(kind, str):
-                raise InvalidMapError(f"element {k}'s kind must be a string of {MAP_ELEMENT_KINDS}, got {kind!r}")
-            items.append((kind, _array(f"points of element {k}", points, np.float64, InvalidMapError, required=True)))
-        self._map = _dgan.VectorMap(items)
-
-    def elements(self) -> list[tuple[str, npt.NDArray[np.float64]]]:
-        """The elements, in drawing order."""
-        return self._map.elements()
-
-    def to_json(self, path: str | os.PathLike[str]) -> None:
-        """Writes the map as dgan's vector-map JSON (``{"format": "dgan.vector_map", "version": 1, "elements":
-        [{"kind": ..., "points": [[x, y], ...]}, ...]}``), what :meth:`from_json` and ``dgan predict --map`` read."""
-        import json
-
-        doc = {
-            "format": "dgan.vector_map",
-            "version": 1,
-            "elements": [{"kind": k, "points": p.tolist()} for k, p in self.elements()],
-        }
-        with open(path, "w") as f:
-            json.dump(doc, f)
-
-    @classmethod
-    def from_json(cls, path: str | os.PathLike[str]) -> VectorMap:
-        """Reads dgan's vector-map JSON (see :meth:`to_json`).
-
-        Raises:
-            InvalidMapError: not readable, not that format, or bad elements.
-        """
-        import json
-
-        try:
-            with open(path) as f:
-                doc = json.load(f)
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise InvalidMapError(f"cannot read vector map {path}: {e}") from None
-        if not isinstance(doc, dict) or doc.get("format") != "dgan.vector_map":
-            raise InvalidMapError(f"{path} is not a dgan vector map (format 'dgan.vector_map')")
-        if doc.get("version") != 1:
-            raise InvalidMapError(f"{path}: unsupported dgan vector map version {doc.get('version')!r} (this dgan: 1)")
-        elements = doc.get("elements")
-        if not isinstance(elements, list):
-            raise InvalidMapError(f"{path}: 'elements' must be a list")
-        try:
-            return cls((e["kind"], e["points"]) for e in elements)
-        except (KeyError, TypeError):
-            raise InvalidMapError(f"{path}: each element needs 'kind' and 'points'") from None
-
-    def __len__(self) -> int:
-        return len(self._map)
-
-    def __reduce__(self) -> tuple[Any, ...]:
-        return (VectorMap, (self.elements(),))
-
-    def __repr__(self) -> str:
-        return f"VectorMap({len(self)} elements)"
+from dgan.maps import RasterMap, VectorMap
+from dgan.records import Names, from_records
 
 
 def _classes(classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int) -> list[Any]:
@@ -234,11 +35,11 @@ def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[An
         return None, None
     arr = as_given(ids)
     if arr.dtype.kind == "i":
-        return _array("ids", arr, np.int64), None
+        return checked_array("ids", arr, np.int64), None
     if arr.dtype.kind == "f":
         if not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
             raise InvalidFrameError("float ids must be whole finite numbers (NaN or fractional ids are ambiguous)")
-        return _array("ids", arr, np.int64), None
+        return checked_array("ids", arr, np.int64), None
     if arr.dtype.kind not in "OUSu" or arr.ndim != 1:
         raise InvalidFrameError(f"ids must be a 1-D array of integers or strings, got {arr.dtype} {arr.shape}")
     labels = arr.copy() if arr.dtype.kind == "u" else np.asarray(arr, dtype=object)
@@ -287,7 +88,7 @@ class Frame:
         map: RasterMap | VectorMap | None = None,
         dt: float | None = None,
     ) -> None:
-        pos = _array("positions", positions, np.float64, required=True)
+        pos = checked_array("positions", positions, np.float64, required=True)
         if map is not None and not isinstance(map, (RasterMap, VectorMap)):
             raise InvalidMapError(f"map must be a dgan.RasterMap or dgan.VectorMap, got {type(map).__name__}")
         n = pos.shape[0] if pos.ndim >= 1 else 0
@@ -296,13 +97,13 @@ class Frame:
         self._source: tuple[float | None, bool] | None = None
         self._frame = _dgan.Frame(
             pos,
-            _array("mask", mask, np.bool_),
+            checked_array("mask", mask, np.bool_),
             _classes(classes, n),
             codes,
-            _array("headings", headings, np.float64),
-            _array("velocities", velocities, np.float64),
-            _array("lengths", lengths, np.float64),
-            _array("widths", widths, np.float64),
+            checked_array("headings", headings, np.float64),
+            checked_array("velocities", velocities, np.float64),
+            checked_array("lengths", lengths, np.float64),
+            checked_array("widths", widths, np.float64),
             None if map is None else map._map,
             None if dt is None else float(dt),
         )
@@ -371,7 +172,7 @@ class Frame:
         Args:
             records: any table: a dict of arrays, a sequence of records (dicts), a numpy structured array, a pandas
                 or polars DataFrame, a pyarrow Table, or anything with the Arrow stream or dataframe interchange
-                interface (:func:`dgan.io.columns`). Ids may be integers, strings or a mix; they come back as given.
+                interface (:func:`dgan.tables.columns`). Ids may be integers, strings or a mix; they come back as given.
             t_obs, dt: the frame's steps and the seconds between them; both from ``spec`` (an
                 :class:`~dgan.InputSpec` or a :class:`~dgan.Predictor`) if given. ``dt`` None: the data's own
                 spacing (the smallest gap between distinct times).
@@ -395,11 +196,8 @@ class Frame:
             TimeBaseError: data sparser than ``dt`` (naming the bundled models whose step fits), a non-positive
                 ``dt`` or ``time_unit``.
         """
-        from dgan.records import Names, from_records
-
         names = Names(agent_id, time, x, y, cls_column, heading, length, width, *velocity)
-        return from_records(
-            cls,
+        native, labels, source = from_records(
             records,
             t_obs=t_obs,
             dt=dt,
@@ -409,10 +207,11 @@ class Frame:
             max_gap=max_gap,
             names=names,
             default_class=default_class,
-            map=map,
             duplicates=duplicates,
             upsample=upsample,
         )
+        out = cls._wrap(native, labels, None, source)
+        return out if map is None else out.with_map(map)
 
     def __len__(self) -> int:
         return len(self._frame)

@@ -7,7 +7,6 @@ import numbers
 import os
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -16,95 +15,17 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._runtime import onnxruntime_library as onnxruntime_library_path
+from dgan._values import typename
 from dgan.exceptions import (
     HeadingWarning,
     InvalidFrameError,
     InvalidSpecError,
     ModelNotFoundError,
-    OutputError,
     UnknownClassError,
 )
-from dgan.frame import Frame, typename
+from dgan.frame import Frame
+from dgan.prediction import Prediction
 from dgan.spec import InputSpec
-
-
-@dataclass(frozen=True)
-class Prediction:
-    """Every agent's modes, most probable first. Positions are world metres.
-
-    Attributes:
-        agent_ids: ``(N,)`` the frame's ids as given (integers, or strings in an object array), in row order.
-        trajectories: ``(N, M, T_f, 2)`` future positions of each mode.
-        probabilities: ``(N, M)`` p(c) · p(k | c) of each mode.
-        class_probabilities: ``(N, C)`` p(c), columns in ``classes`` order.
-        mode_classes: ``(N, M)`` index into ``classes`` of each mode's anchor class.
-        edges: ``(E, 2)`` undirected attention-zone edges between frame rows ``i < j``.
-        classes: the model's class names.
-        dt_s: seconds between predicted steps (the model's time base); step ``s`` is ``(s + 1) · dt_s`` after now.
-    """
-
-    agent_ids: npt.NDArray[Any]
-    trajectories: npt.NDArray[np.float64]
-    probabilities: npt.NDArray[np.float64]
-    class_probabilities: npt.NDArray[np.float64]
-    mode_classes: npt.NDArray[np.int64]
-    edges: npt.NDArray[np.int64]
-    classes: tuple[str, ...]
-    dt_s: float = float("nan")
-
-    def __len__(self) -> int:
-        return int(self.agent_ids.shape[0])
-
-    @property
-    def times_s(self) -> npt.NDArray[np.float64]:
-        """``(T_f,)`` seconds after the current time of each predicted step."""
-        return np.round(np.arange(1, self.trajectories.shape[2] + 1) * self.dt_s, 9)
-
-    def to_records(self) -> dict[str, npt.NDArray[Any]]:
-        """The prediction as a long table of numpy columns, one row per agent, mode and step: ``agent_id``,
-        ``mode`` (0 = most probable), ``probability``, ``class`` (the mode's anchor class), ``class_probability``,
-        ``step`` (1..T_f), ``time_offset_s``, ``x``, ``y`` (world metres)."""
-        from dgan.io import prediction_columns
-
-        return prediction_columns(self)
-
-    def to_pandas(self) -> Any:
-        """:meth:`to_records` as a pandas DataFrame (needs pandas)."""
-        import pandas as pd
-
-        return pd.DataFrame(self.to_records())
-
-    def to_arrow(self) -> Any:
-        """:meth:`to_records` as a pyarrow Table (needs pyarrow); its schema metadata holds ``dt_s`` and the
-        classes.
-
-        Raises:
-            OutputError: ids an Arrow column cannot hold (integers mixed with strings, integers past 64 bits).
-        """
-        import pyarrow as pa
-
-        cols = self.to_records()
-        arrays = {k: pa.array(v.tolist() if v.dtype == object else v) for k, v in cols.items() if k != "agent_id"}
-        table = pa.table({"agent_id": _arrow_ids(cols["agent_id"]), **arrays})
-        meta = {b"dgan.dt_s": str(self.dt_s).encode(), b"dgan.classes": ",".join(self.classes).encode()}
-        return table.replace_schema_metadata(meta)
-
-    def to_parquet(self, path: str | os.PathLike[str]) -> None:
-        """Writes :meth:`to_arrow` to a parquet file (needs pyarrow). The file is written beside ``path`` and then
-        renamed onto it, so a failed write leaves ``path`` as it was (a path that is not a regular file, such as a
-        device or a pipe, is written in place and never removed).
-
-        Raises:
-            OutputError: as :meth:`to_arrow`. OSError: the file cannot be written.
-        """
-        import pyarrow.parquet as pq
-
-        write_atomically(path, lambda f: pq.write_table(self.to_arrow(), f))
-
-    @property
-    def most_likely(self) -> npt.NDArray[np.float64]:
-        """``(N, T_f, 2)`` the top-1 mode of each agent."""
-        return self.trajectories[:, 0]
 
 
 class Predictor:
@@ -143,20 +64,18 @@ class Predictor:
         if model is None or not isinstance(model, (str, os.PathLike)):
             raise ModelNotFoundError(f"model must be a path or a bundled model's name, got {typename(model)}")
         lib = Path(onnxruntime_library) if onnxruntime_library is not None else onnxruntime_library_path()
-        cores = os.cpu_count() or 1
-        if isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads <= cores:
-            raise InvalidSpecError(f"threads must be an integer in 1..={cores} (this machine's cores), got {threads!r}")
         if sessions is None:
-            sessions = min(2, cores)
-        if isinstance(sessions, bool) or not isinstance(sessions, int) or not 1 <= sessions <= 64:
-            raise InvalidSpecError(f"sessions must be an integer in 1..=64, got {sessions!r}")
+            sessions = min(2, os.cpu_count() or 1)
+        # What the engine can be handed; it checks the ranges (threads within the cores, up to 64 sessions) and the
+        # execution provider's name itself, once.
+        for key, value in (("threads", threads), ("sessions", sessions)):
+            _positive_int(key, value, 2**31)
+        for key, value in (("max_edges", max_edges), ("max_input_bytes", max_input_bytes)):
+            _positive_int(key, value, 2**62)
         if not isinstance(execution_provider, str):
             raise InvalidSpecError(
                 f"execution_provider must be a string such as 'cpu' or 'cuda', got {execution_provider!r}"
             )
-        for key, value in (("max_edges", max_edges), ("max_input_bytes", max_input_bytes)):
-            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= 2**62:
-                raise InvalidSpecError(f"{key} must be a positive integer, got {value!r}")
         # What pickling rebuilds the predictor from: a bundled model by name (found in the receiver's own dgan),
         # a file by its absolute path.
         bundled = isinstance(model, str) and _resolve(model) != Path(model)
@@ -247,12 +166,13 @@ class Predictor:
         """
         m = self._modes if modes is None else self._check_modes(modes)
         frame = self._known(frame, unknown_classes)
+        check = not self._heading_warned and self._spec.heading == "measured"
         try:
-            out = self._predictor.predict(_native(frame), m)
+            native = self._predictor.predict(_native(frame), m, check)
         except UnknownClassError as e:
             raise UnknownClassError(f"{e}; unknown_classes='ignore' predicts only the agents of its classes") from None
-        self._check_headings(frame)
-        return self._prediction(out, frame)
+        self._warn_headings(native.headings)
+        return Prediction.from_native(native, frame.agent_ids, self.classes, self._spec.dt_s)
 
     def _known(self, frame: Frame, unknown_classes: str) -> Frame:
         """``frame``, or with ``unknown_classes="ignore"`` its agents of the model's classes."""
@@ -263,13 +183,10 @@ class Predictor:
         keep = np.fromiter((c in self.classes for c in frame.classes), dtype=bool, count=len(frame))
         return frame if keep.all() else frame.select(keep)
 
-    def _check_headings(self, frame: Frame) -> None:
-        """Warns once (:class:`~dgan.exceptions.HeadingWarning`) if ``frame``'s measured headings, which this model
-        takes as they are, disagree with its agents' motion."""
-        if self._heading_warned or self._spec.heading != "measured":
-            return
-        check = _dgan.check_headings(frame._frame, self._spec.dt_s)
-        if check is None:
+    def _warn_headings(self, check: tuple[int, float, bool, bool] | None) -> None:
+        """Warns once (:class:`~dgan.exceptions.HeadingWarning`) if the frame's measured headings, which this model
+        takes as they are, disagree with its agents' motion (the engine checks them within ``predict``)."""
+        if check is None or self._heading_warned:
             return
         moving, median_deg, beyond_two_pi, disagrees = check
         if disagrees:
@@ -283,10 +200,6 @@ class Predictor:
                 HeadingWarning,
                 stacklevel=3,
             )
-
-    def _prediction(self, out: dict[str, Any], frame: Frame) -> Prediction:
-        out["agent_ids"] = frame.agent_ids
-        return Prediction(classes=self.classes, dt_s=self._spec.dt_s, **out)
 
     def predict_batch(
         self, frames: Sequence[Frame], *, modes: int | None = None, unknown_classes: str = "error"
@@ -307,10 +220,13 @@ class Predictor:
         if isinstance(frames, Frame) or not isinstance(frames, Sequence):
             raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {typename(frames)}")
         frames = [self._known(f, unknown_classes) for f in frames]
-        outs = self._predictor.predict_batch([_native(f, f"frame {i} of the batch") for i, f in enumerate(frames)], m)
-        for f in frames:
-            self._check_headings(f)
-        return [self._prediction(o, f) for o, f in zip(outs, frames, strict=True)]
+        check = not self._heading_warned and self._spec.heading == "measured"
+        natives = [_native(f, f"frame {i} of the batch") for i, f in enumerate(frames)]
+        outs = self._predictor.predict_batch(natives, m, check)
+        for o in outs:
+            self._warn_headings(o.headings)
+        dt_s = self._spec.dt_s
+        return [Prediction.from_native(o, f.agent_ids, self.classes, dt_s) for o, f in zip(outs, frames, strict=True)]
 
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickles as its model and options (for multiprocessing, Ray, Dask, Spark): the receiver loads the model
@@ -321,54 +237,15 @@ class Predictor:
         return f"Predictor({str(self.path)!r}, classes={self.classes}, modes={self._modes})"
 
 
+def _positive_int(name: str, value: Any, most: int) -> None:
+    """Refuses what cannot cross to the engine as a count: not an integer, a bool, below 1 or beyond ``most``."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= most:
+        raise InvalidSpecError(f"{name} must be a positive integer, got {value!r}")
+
+
 def _unpickle_predictor(options: dict[str, Any]) -> Predictor:
     opts = dict(options)
     return Predictor(opts.pop("model"), **opts)
-
-
-def _arrow_ids(ids: npt.NDArray[Any]) -> Any:
-    """The agent-id column of an Arrow table: one type, or :class:`OutputError`."""
-    import pyarrow as pa
-
-    if ids.dtype != object:
-        return pa.array(ids)
-    values = ids.tolist()
-    if all(isinstance(v, str) for v in values):
-        return pa.array(values, type=pa.string())
-    if all(isinstance(v, numbers.Integral) and not isinstance(v, bool) for v in values):
-        ints = [int(v) for v in values]
-        if all(-(2**63) <= v < 2**63 for v in ints):
-            return pa.array(ints, type=pa.int64())
-        if all(0 <= v < 2**64 for v in ints):
-            return pa.array(ints, type=pa.uint64())
-        raise OutputError("agent ids past 64 bits cannot be an Arrow column; give them as strings")
-    kinds = sorted({type(v).__name__ for v in values})
-    raise OutputError(
-        f"agent ids mix {' and '.join(kinds)}; an Arrow or parquet column holds one type: give the frame ids of one "
-        "type (e.g. strings), or use to_records() / to_pandas(), which keep them as given"
-    )
-
-
-def write_atomically(path: str | os.PathLike[str], write: Any) -> None:
-    """Calls ``write(file)`` on a temporary file beside ``path``, then renames it onto ``path``: a failure leaves
-    ``path`` as it was. A path that exists and is not a regular file (a device, a pipe) is opened and written in
-    place, and never removed."""
-    target = Path(path)
-    if target.exists() and not target.is_file():
-        with open(target, "wb") as f:
-            write(f)
-        return
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            write(f)
-        os.replace(tmp, target)
-    except OSError as e:
-        tmp.unlink(missing_ok=True)
-        raise OSError(e.errno, f"cannot write {target}: {e.strerror or e}", os.fspath(target)) from None
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def _native(frame: Any, what: str = "") -> _dgan.Frame:

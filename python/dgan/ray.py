@@ -26,8 +26,8 @@ import numpy.typing as npt
 
 from dgan.exceptions import InvalidFrameError
 from dgan.frame import Frame
-from dgan.io import columns
 from dgan.predictor import Predictor
+from dgan.tables import columns
 
 __all__ = ["Predict", "predict_scenes"]
 

@@ -11,17 +11,19 @@ import functools
 import re
 import warnings
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan._values import ClassLike
 from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
-from dgan.io import Columns, columns
+from dgan.tables import Columns, columns
 
-if TYPE_CHECKING:
-    from dgan.frame import ClassLike, Frame, RasterMap, VectorMap
+#: What a table becomes: the engine's frame, the ids as given of its rows (None when its codes are the ids), and
+#: the data's own spacing with whether it was upsampled.
+Parsed = tuple[_dgan.Frame, npt.NDArray[Any] | None, tuple[float | None, bool] | None]
 
 #: How repeated (agent, time) rows may be resolved (the engine's ``Duplicates``).
 DUPLICATES: Final = tuple(_dgan.DUPLICATES)
@@ -202,7 +204,7 @@ def _median_gap(codes: npt.NDArray[np.int64], times: npt.NDArray[np.float64]) ->
     return float(np.median(gaps)) if gaps.size else float("inf")
 
 
-def _warn_time_unit(frame: Frame, time_unit: float, gap_s: float) -> None:
+def _warn_time_unit(frame: _dgan.Frame, time_unit: float, gap_s: float) -> None:
     """Warns when agents have several rows in the table, so far apart that none has two observed steps in the frame:
     the time column is most likely in another unit (a recording's first tick, with one row per agent, is not)."""
     window_s = frame.mask.shape[1] * (frame.dt or 0.0)
@@ -218,7 +220,6 @@ def _warn_time_unit(frame: Frame, time_unit: float, gap_s: float) -> None:
 
 
 def from_records(
-    cls: type[Frame],
     records: Any,
     *,
     t_obs: int | None,
@@ -229,11 +230,10 @@ def from_records(
     max_gap: float | None,
     names: Names,
     default_class: ClassLike,
-    map: RasterMap | VectorMap | None,
     duplicates: str,
     upsample: bool,
-) -> Frame:
-    """:meth:`dgan.Frame.from_records` (documented there)."""
+) -> Parsed:
+    """The work of :meth:`dgan.Frame.from_records` (documented there), which wraps what this returns."""
     if spec is not None:
         spec = getattr(spec, "spec", spec)
         t_obs = spec.t_obs if t_obs is None else t_obs
@@ -252,7 +252,8 @@ def from_records(
     codes, labels = record_ids(cols[names.agent_id], names.agent_id)
     uniq_t = np.unique(times)
     if uniq_t.size == 0:
-        return cls(np.zeros((0, t_obs, 2)), map=map, dt=dt)
+        empty = _dgan.Frame(np.zeros((0, t_obs, 2)), None, [], None, None, None, None, None, None, dt)
+        return empty, None, None
     if dt is None:
         gaps = np.diff(uniq_t)
         dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
@@ -270,6 +271,5 @@ def from_records(
         raise TimeBaseError(f"{e}; {sparse_advice(spacing_s, bool(upsample))}") from None
     except InvalidFrameError as e:
         raise _named(e, labels) from None
-    out = cls._wrap(native, None if labels is None else labels[native.ids], None, (spacing, upsampled))
-    _warn_time_unit(out, time_unit, _median_gap(codes, seconds))
-    return out if map is None else out.with_map(map)
+    _warn_time_unit(native, time_unit, _median_gap(codes, seconds))
+    return native, None if labels is None else labels[native.ids], (spacing, upsampled)

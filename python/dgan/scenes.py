@@ -18,13 +18,14 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from dgan.contract import map_kind
 from dgan.exceptions import InvalidMapError
-from dgan.frame import RasterMap
+from dgan.maps import RasterMap
 
-#: Colour of each mask id: 0 unknown/outside black, 1 walkable grey, then pink, yellow, green, white.
-MASK_PALETTE: Final = np.array(
-    [[0, 0, 0], [128, 128, 128], [255, 105, 180], [255, 255, 0], [0, 255, 0], [255, 255, 255]], dtype=np.uint8
-)
+#: Colour of each mask id, from the engine's palette: 0 unknown/outside black, 1 walkable in the crosswalk grey, then
+#: the obstacle pink, road-edge yellow, centre-line green and bike-lane white.
+_MASK_KINDS: Final = ("crosswalk", "obstacle", "road_edge", "lane_centerline", "bike_lane")  # not a contract copy
+MASK_PALETTE: Final = np.array([(0, 0, 0), *(map_kind(k).colour for k in _MASK_KINDS)], dtype=np.uint8)
 #: Scenes whose homography takes (row, column) rather than (column, row).
 ROW_MAJOR_SCENES: Final = frozenset({"eth", "hotel"})
 #: The ETH/UCY scenes.

@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan.contract import CLASSES, state_width
 from dgan.exceptions import InvalidFrameError, InvalidSpecError
 from dgan.frame import Frame
 
@@ -60,7 +61,7 @@ class InputSpec:
     dt_s: float
     t_obs: int
     t_f: int
-    classes: Sequence[str] = ("vehicle", "cyclist", "pedestrian")
+    classes: Sequence[str] = CLASSES
     attention_lambda: float = 0.5
     map: MapSpec | None = field(default=None)
     prior: PriorSpec = field(default_factory=PriorSpec)
@@ -110,7 +111,7 @@ class InputSpec:
     @property
     def state_dim(self) -> int:
         """Width of the traffic-state vector: 7 features and a one-hot class."""
-        return 7 + len(self.classes)
+        return state_width(self.classes)
 
 
 def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:

@@ -9,10 +9,12 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan._values import ClassLike, as_given, typename
 from dgan.exceptions import InvalidFrameError
-from dgan.frame import ClassLike, Frame, RasterMap, VectorMap, typename
-from dgan.io import as_given
-from dgan.predictor import Prediction, Predictor
+from dgan.frame import Frame
+from dgan.maps import RasterMap, VectorMap
+from dgan.prediction import Prediction
+from dgan.predictor import Predictor
 
 
 def _column(name: str, values: npt.ArrayLike | None, n: int) -> npt.NDArray[np.float64] | None:

@@ -15,8 +15,9 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan.exceptions import DganError, InvalidFrameError, InvalidMapError, InvalidSpecError
-from dgan.frame import Frame, RasterMap, VectorMap
-from dgan.predictor import Prediction
+from dgan.frame import Frame
+from dgan.maps import RasterMap, VectorMap
+from dgan.prediction import Prediction
 
 #: Colour of each class in the pictures.
 CLASS_COLOURS = {"vehicle": "deepskyblue", "cyclist": "limegreen", "pedestrian": "orange"}
@@ -210,14 +211,7 @@ def plot(
             kind = type(scene_map).__name__
             raise InvalidMapError(f"in_pixels draws a RasterMap in its own pixels; the map is {kind}")
         picture, h = scene_map.image, scene_map.world_to_pixel
-    n = len(frame)
-    if len(prediction) != n or not np.array_equal(np.asarray(prediction.agent_ids), np.asarray(frame.agent_ids)):
-        raise InvalidFrameError(f"the prediction ({len(prediction)} agents) is not of this frame ({n} agents)")
-    t_f = prediction.trajectories.shape[2]
-    m_all = prediction.trajectories.shape[1]
-    if modes is not None and (isinstance(modes, bool) or not isinstance(modes, numbers.Integral) or modes < 1):
-        raise InvalidSpecError(f"modes must be a whole number of at least 1 (or None for all), got {modes!r}")
-    m = m_all if modes is None else min(int(modes), m_all)
+    n, m, t_f = len(frame), _drawn_modes(frame, prediction, modes), prediction.trajectories.shape[2]
     truth = _truths(frame, ground_truth, t_f)
     pts = [frame.positions[i][frame.mask[i]] for i in range(n)]
     drawn = [*pts, *prediction.trajectories[:, :m].reshape(-1, t_f, 2)]
@@ -240,27 +234,48 @@ def plot(
         box = None if yaw is None or not len(pts[i]) else (float(yaw), float(frame.lengths[i]), float(frame.widths[i]))
         paths = [np.vstack([pts[i][-1:], prediction.trajectories[i, k]]) for k in range(m)]
         _draw_agent(ax, cmap, h, frame.classes[i], pts[i], paths, prediction.probabilities[i, :m], truth[i], box)
+    _frame_axes(ax, picture, lo, hi)
+    sm = plt.cm.ScalarMappable(cmap=cmap, norm=Normalize(0, SATURATION))
+    fig.colorbar(sm, ax=ax, fraction=0.035, pad=0.01, label=f"mode probability (≥ {SATURATION:g} saturates)")
+    _legend(ax, cmap, sorted(set(frame.classes)), any(t is not None for t in truth), t_f * prediction.dt_s)
+    if title is not None:
+        ax.set_title(title)
+    return fig
+
+
+def _drawn_modes(frame: Frame, prediction: Prediction, modes: int | None) -> int:
+    """How many modes of each agent are drawn, once the prediction is checked to be of the frame."""
+    n = len(frame)
+    if len(prediction) != n or not np.array_equal(np.asarray(prediction.agent_ids), np.asarray(frame.agent_ids)):
+        raise InvalidFrameError(f"the prediction ({len(prediction)} agents) is not of this frame ({n} agents)")
+    m_all = int(prediction.trajectories.shape[1])
+    if modes is not None and (isinstance(modes, bool) or not isinstance(modes, numbers.Integral) or modes < 1):
+        raise InvalidSpecError(f"modes must be a whole number of at least 1 (or None for all), got {modes!r}")
+    return m_all if modes is None else min(int(modes), m_all)
+
+
+def _frame_axes(ax: Any, picture: npt.NDArray[np.uint8] | None, lo: Any, hi: Any) -> None:
+    """The axes' limits: a picture's own pixels (no axes drawn), or the world metres between ``lo`` and ``hi``."""
     if picture is not None:
         ax.set_xlim(-0.5, picture.shape[1] - 0.5)
         ax.set_ylim(picture.shape[0] - 0.5, -0.5)
         ax.set_axis_off()
-    else:
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_aspect("equal")
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-    sm = plt.cm.ScalarMappable(cmap=cmap, norm=Normalize(0, SATURATION))
-    fig.colorbar(sm, ax=ax, fraction=0.035, pad=0.01, label=f"mode probability (≥ {SATURATION:g} saturates)")
-    for cls in sorted(set(frame.classes)):
+        return
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def _legend(ax: Any, cmap: Any, classes: list[str], truth: bool, horizon_s: float) -> None:
+    """One legend entry per observed class, the ground truth (if drawn) and the predicted modes."""
+    for cls in classes:
         ax.plot([], [], "--", color=CLASS_COLOURS.get(cls, "white"), label=f"observed {cls}")
-    if any(t is not None for t in truth):
+    if truth:
         ax.plot([], [], "-", color="red", label="ground truth")
-    ax.plot([], [], "-", color=cmap(0.9), label=f"predicted modes ({t_f * prediction.dt_s:g} s)")
+    ax.plot([], [], "-", color=cmap(0.9), label=f"predicted modes ({horizon_s:g} s)")
     ax.legend(loc="best", fontsize=8)
-    if title is not None:
-        ax.set_title(title)
-    return fig
 
 
 _RGB = {"vehicle": (0, 191, 255), "cyclist": (50, 205, 50), "pedestrian": (255, 165, 0)}

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import inspect
 import os
 import sys
 from pathlib import Path
@@ -25,6 +27,41 @@ def shared_data(needs: str) -> Path:
     if not (root / needs).is_dir():
         pytest.fail(f"shared data not found under {root}; set DGAN_DATA_ROOT to the folder holding {needs}/")
     return root
+
+
+def _source(f: object) -> str:
+    try:
+        return inspect.getsource(f)  # type: ignore[arg-type]
+    except (TypeError, OSError):
+        return ""
+
+
+@functools.cache
+def _data_calls(module: object) -> frozenset[str]:
+    """``shared_data(`` and the calls of the module's functions that reach it (directly or through each other)."""
+    own = {n: _source(f) for n, f in vars(module or object()).items() if inspect.isfunction(f)}
+    calls = {"shared_data("}
+    while more := {f"{n}(" for n, text in own.items() if any(c in text for c in calls)} - calls:
+        calls |= more
+    return frozenset(calls)
+
+
+def _reads_shared_data(item: pytest.Item) -> bool:
+    """Whether a test, a fixture it uses or a function of its module that it calls (directly or through another)
+    calls :func:`shared_data`."""
+    calls = _data_calls(getattr(item, "module", None))
+    funcs: list[object] = [getattr(item, "function", None)]
+    info = getattr(item, "_fixtureinfo", None)
+    if info is not None:
+        funcs += [d.func for defs in info.name2fixturedefs.values() for d in defs]
+    return any(call in _source(f) for f in funcs for call in calls)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Marks every test that reads the shared data ``needs_data`` (``./dev test --quick`` deselects them)."""
+    for item in items:
+        if _reads_shared_data(item):
+            item.add_marker(pytest.mark.needs_data)
 
 
 @pytest.fixture(scope="session")

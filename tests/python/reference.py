@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from dgan import contract
+
 MIN_MOVING_SPEED = 0.2
 CLASS_CODES = {"vehicle": 0, "cyclist": 1, "pedestrian": 2}
 DEFAULT_LENGTH = {"vehicle": 4.5, "cyclist": 1.8, "pedestrian": 0.5}
@@ -60,7 +62,7 @@ def preprocess(positions: Arr, mask: Arr, classes: list[str], spec: dict[str, An
     lengths = np.array([DEFAULT_LENGTH[c] for c in classes])
     widths = np.array([DEFAULT_WIDTH[c] for c in classes])
     traj = np.zeros((n, t_obs, 2))
-    state = np.zeros((n, 7 + len(model_classes)))
+    state = np.zeros((n, contract.state_width(model_classes)))
     for i in range(n):
         r_inv = rot(-heading[i])
         traj[i] = ((positions[i] - origin[i]) @ r_inv.T) * mask[i][:, None]

@@ -7,11 +7,15 @@ from __future__ import annotations
 import ast
 import dataclasses
 import importlib
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import shared_data
 
 import dgan
 from dgan.datasets import hdmaps
@@ -28,9 +32,13 @@ TYPES: dict[str, type] = {
 }
 
 
-def snippets() -> list[str]:
-    """The bodies of the README's fenced ``python`` blocks."""
-    return re.findall(r"^```python\n(.*?)^```", README.read_text(), flags=re.S | re.M)
+DOCS = sorted((README.parent / "docs").glob("*.md"))
+EXAMPLES = sorted((README.parent / "docs" / "examples").glob("*.py"))
+
+
+def snippets(page: Path = README) -> list[str]:
+    """The bodies of a page's fenced ``python`` blocks (the README's by default)."""
+    return re.findall(r"^```python\n(.*?)^```", page.read_text(), flags=re.S | re.M)
 
 
 def chain(node: ast.expr) -> list[str] | None:
@@ -100,3 +108,58 @@ def test_a_missing_name_is_caught() -> None:
         resolve(["dgan", "no_such_thing"])
     assert has(TYPES["prediction"], "trajectories")
     assert not has(TYPES["prediction"], "trajectory")
+
+
+@pytest.mark.slow
+def test_the_snippets_run_on_bundled_data(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every Python block of the README, in order and in one namespace (a later block may use an earlier one's
+    names), run as a user would paste them, in an empty folder."""
+    monkeypatch.chdir(tmp_path)
+    namespace: dict[str, Any] = {"__name__": "readme"}
+    for i, code in enumerate(snippets()):
+        exec(compile(code, f"README.md, Python block {i + 1}", "exec"), namespace)
+    assert (tmp_path / "prediction.parquet").is_file()
+    assert (tmp_path / "prediction.png").is_file()
+    assert isinstance(namespace["prediction"], dgan.Prediction)
+
+
+@pytest.mark.parametrize("page", [p for p in DOCS if snippets(p)], ids=lambda p: p.name)
+def test_the_docs_snippets_run(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each page of ``docs/`` runs its Python blocks in order, in a namespace of its own."""
+    monkeypatch.chdir(tmp_path)
+    namespace: dict[str, Any] = {"__name__": page.stem}
+    for i, code in enumerate(snippets(page)):
+        exec(compile(code, f"{page.name}, Python block {i + 1}", "exec"), namespace)
+
+
+def test_the_docs_have_snippets() -> None:
+    assert any(snippets(p) for p in DOCS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("example", EXAMPLES, ids=lambda p: p.name)
+def test_the_examples_run(example: Path, tmp_path: Path) -> None:
+    """``docs/examples/*.py`` as a user runs them (on the shared data's Argoverse 2 scenes), writing into a folder."""
+    shared_data("argoverse2")
+    env = dict(os.environ, MPLBACKEND="Agg")
+    out = subprocess.run(
+        [sys.executable, str(example), "--out", str(tmp_path)], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr[-4000:]
+    assert any(tmp_path.iterdir()), "the example wrote nothing"
+
+
+def test_the_readme_is_short_and_the_changelog_entries_too() -> None:
+    """A README of at most 220 lines for users, and a Keep-a-Changelog file whose entries are at most 4 lines."""
+    assert len(README.read_text().splitlines()) <= 220
+    changelog = (README.parent / "CHANGELOG.md").read_text().splitlines()
+    assert "## [Unreleased]" in changelog
+    entries: list[list[str]] = []
+    for line in changelog:
+        if line.startswith("- "):
+            entries.append([line])
+        elif line.startswith("  ") and entries:
+            entries[-1].append(line)
+    long = [e[0] for e in entries if len(e) > 4]
+    assert not long, f"CHANGELOG entries over 4 lines: {long}"
+    assert len(entries) > 10

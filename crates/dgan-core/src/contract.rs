@@ -110,6 +110,12 @@ pub struct ModelContract {
     /// SHA-256 of the model file (contract 4, required there): see [`crate::integrity`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub weights_sha256: Option<String>,
+    /// The rasteriser the model was trained with ([`crate::raster::RASTER_VERSION`]); absent in older exports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raster_version: Option<u32>,
+    /// The features the model was trained with ([`crate::preprocess::PREPROCESS_VERSION`]); absent in older exports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preprocess_version: Option<u32>,
 }
 
 /// Parses JSON into `T` with an error that names the key and says what was wrong and what is allowed, in words
@@ -180,6 +186,19 @@ impl ModelContract {
                 "contract_version {} is not supported; this engine reads versions {SUPPORTED_CONTRACT_VERSIONS:?}",
                 self.contract_version
             )));
+        }
+        let engine = [
+            ("raster_version", self.raster_version, crate::raster::RASTER_VERSION),
+            ("preprocess_version", self.preprocess_version, crate::preprocess::PREPROCESS_VERSION),
+        ];
+        for (key, declared, ours) in engine {
+            if declared.is_some_and(|v| v != ours) {
+                return Err(DganError::Contract(format!(
+                    "the model was exported with {key} {}, this engine's is {ours}: its inputs would differ from \
+                     those it was trained on; use the dgan release it was exported with, or re-export it",
+                    declared.unwrap_or_default()
+                )));
+            }
         }
         if self.contract_version < 2 {
             let optional_map = self.input.map.as_ref().is_some_and(|m| m.optional);
@@ -445,6 +464,17 @@ mod tests {
         assert_eq!((prior.fit, prior.standing_mps), (VelocityFit::LeastSquares, 0.3));
         let v5_robust = v5.replace("\"window_s\": 0.8", robust);
         assert!(matches!(ModelContract::from_json(&v5_robust), Err(DganError::Contract(_))));
+    }
+
+    #[test]
+    fn a_model_from_another_rasteriser_or_preprocessing_is_refused() {
+        let ours = crate::raster::RASTER_VERSION;
+        let same = json().replace("\"units\"", &format!("\"raster_version\": {ours}, \"units\""));
+        assert_eq!(ModelContract::from_json(&same).unwrap().raster_version, Some(ours));
+        let other = json().replace("\"units\"", &format!("\"preprocess_version\": {}, \"units\"", ours + 7));
+        let err = ModelContract::from_json(&other).unwrap_err().to_string();
+        assert!(err.contains("preprocess_version 8, this engine's is 1"), "{err}");
+        assert_eq!(ModelContract::from_json(&json()).unwrap().raster_version, None);
     }
 
     #[test]

@@ -7,9 +7,7 @@ use ndarray::{Array2, Array3, ArrayView2};
 use std::collections::HashSet;
 use std::sync::Arc;
 
-/// The largest coordinate magnitude, metres, of a position or map vertex: far beyond any real scene (UTM northings
-/// are below 10⁷ m), so that a value of 10³⁰ m is caught as the unit or data error it is.
-pub const MAX_COORDINATE_M: f64 = 1e9;
+pub use crate::limits::MAX_COORDINATE_M;
 
 /// The largest agent length or width, metres (an articulated bus is 25 m).
 pub const MAX_SIZE_M: f64 = 100.0;
@@ -265,7 +263,7 @@ impl Frame {
     /// Checks the frame's time base against a model's `dt_s` (relative tolerance 1e-6).
     pub fn check_dt(&self, model_dt_s: f64) -> Result<()> {
         match self.dt_s {
-            Some(dt) if (dt - model_dt_s).abs() > model_dt_s * crate::history::TIME_TOLERANCE => {
+            Some(dt) if (dt - model_dt_s).abs() > model_dt_s * crate::limits::TIME_TOLERANCE => {
                 let dt = (dt * 1e9).round() / 1e9;
                 Err(crate::DganError::TimeBase(format!(
                     "the frame's steps are {dt} s apart but the model's are {model_dt_s} s; resample the data to the \

@@ -17,8 +17,7 @@ use crate::frame::Frame;
 use ndarray::{Array2, Array3};
 use std::collections::{BTreeMap, HashSet};
 
-/// Relative tolerance for "the same time": a detection within `dt_s · TIME_TOLERANCE` of a grid time is on it.
-pub const TIME_TOLERANCE: f64 = 1e-6;
+pub use crate::limits::TIME_TOLERANCE;
 
 /// How much sparser than the grid the data may be (median spacing ≤ `dt_s · (1 + SPARSE_SLACK)`).
 pub const SPARSE_SLACK: f64 = 0.05;

@@ -11,6 +11,7 @@
 //! - [`preprocess`]: frame → network inputs; [`decode`]: p(c) · p(k | c), anchors + offsets → world modes.
 //! - [`history`]: detections at any times → frames on the model's time grid; the streaming [`history::Tracker`].
 //! - [`batch`]: several frames as one graph, for [`Predictor::predict_batch`].
+//! - [`limits`]: bounds and tolerances shared by several modules.
 //! - [`contract`]: the model contract; [`runtime`]: the ONNX Runtime session and [`Predictor`].
 //!
 //! ```no_run
@@ -37,6 +38,7 @@ pub mod frame;
 pub mod graph;
 pub mod history;
 pub mod integrity;
+pub mod limits;
 pub mod map;
 pub mod preprocess;
 pub mod prior;

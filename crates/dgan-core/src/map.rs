@@ -150,34 +150,66 @@ pub enum MapElementKind {
     Obstacle,
 }
 
+/// An RGB colour.
+pub type Rgb = [u8; 3];
+
+/// How one element kind is named and drawn: a row of [`PALETTE`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct KindStyle {
+    /// The kind.
+    pub kind: MapElementKind,
+    /// Its name in the Python API, vector-map JSON and `dgan._dgan.CONTRACT`.
+    pub name: &'static str,
+    /// A filled polygon (else a polyline).
+    pub polygon: bool,
+    /// The paper's colour.
+    pub colour: Rgb,
+    /// Drawn line width in metres (at least one pixel is drawn); 0 for polygons.
+    pub width_m: f64,
+}
+
+const fn style(kind: MapElementKind, name: &'static str, polygon: bool, colour: Rgb, width_m: f64) -> KindStyle {
+    KindStyle { kind, name, polygon, colour, width_m }
+}
+
+/// Every element kind, in drawing order (regions first, then lines): the one table a new kind is added to (with its
+/// variant above). Python, training and the tests read it through `dgan._dgan.CONTRACT`; drawing changes bump
+/// [`crate::raster::RASTER_VERSION`].
+pub const PALETTE: [KindStyle; 7] = [
+    style(MapElementKind::BikeLane, "bike_lane", true, [255, 255, 255], 0.0),
+    style(MapElementKind::Crosswalk, "crosswalk", true, [128, 128, 128], 0.0),
+    style(MapElementKind::Obstacle, "obstacle", true, [255, 105, 180], 0.0),
+    style(MapElementKind::RoadEdge, "road_edge", false, [255, 255, 0], 0.3),
+    style(MapElementKind::LaneLineSolid, "lane_line_solid", false, [255, 255, 255], 0.15),
+    style(MapElementKind::LaneLineDashed, "lane_line_dashed", false, [255, 255, 255], 0.15),
+    style(MapElementKind::LaneCenterline, "lane_centerline", false, [0, 255, 0], 0.3),
+];
+
 impl MapElementKind {
-    /// Every kind, in drawing order (regions first, then lines).
-    pub const ALL: [MapElementKind; 7] = [
-        MapElementKind::BikeLane,
-        MapElementKind::Crosswalk,
-        MapElementKind::Obstacle,
-        MapElementKind::RoadEdge,
-        MapElementKind::LaneLineSolid,
-        MapElementKind::LaneLineDashed,
-        MapElementKind::LaneCenterline,
-    ];
+    /// Every kind, in drawing order (regions first, then lines): the kinds of [`PALETTE`].
+    pub const ALL: [MapElementKind; PALETTE.len()] = {
+        let mut out = [MapElementKind::BikeLane; PALETTE.len()];
+        let mut i = 0;
+        while i < PALETTE.len() {
+            out[i] = PALETTE[i].kind;
+            i += 1;
+        }
+        out
+    };
+
+    /// The kind's row of [`PALETTE`].
+    pub fn style(self) -> &'static KindStyle {
+        PALETTE.iter().find(|s| s.kind == self).expect("every kind has a row in PALETTE")
+    }
 
     /// The name used in the Python API.
     pub fn name(self) -> &'static str {
-        match self {
-            MapElementKind::LaneCenterline => "lane_centerline",
-            MapElementKind::LaneLineDashed => "lane_line_dashed",
-            MapElementKind::LaneLineSolid => "lane_line_solid",
-            MapElementKind::RoadEdge => "road_edge",
-            MapElementKind::Crosswalk => "crosswalk",
-            MapElementKind::BikeLane => "bike_lane",
-            MapElementKind::Obstacle => "obstacle",
-        }
+        self.style().name
     }
 
     /// Whether the element is a filled polygon (else a polyline).
     pub fn is_polygon(self) -> bool {
-        matches!(self, MapElementKind::Crosswalk | MapElementKind::BikeLane | MapElementKind::Obstacle)
+        self.style().polygon
     }
 }
 
@@ -282,12 +314,12 @@ impl MapElement {
         if points.iter().flatten().any(|v| !v.is_finite()) {
             return Err(DganError::InvalidMap(format!("a {kind} has NaN or infinite coordinates")));
         }
-        if let Some(p) = points.iter().find(|p| p[0].abs().max(p[1].abs()) > crate::frame::MAX_COORDINATE_M) {
+        if let Some(p) = points.iter().find(|p| p[0].abs().max(p[1].abs()) > crate::limits::MAX_COORDINATE_M) {
             return Err(DganError::InvalidMap(format!(
                 "a {kind} has a vertex at ({}, {}) m, beyond ±{:e} m of the origin; maps are in metres",
                 p[0],
                 p[1],
-                crate::frame::MAX_COORDINATE_M
+                crate::limits::MAX_COORDINATE_M
             )));
         }
         let mut bbox = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
@@ -340,6 +372,19 @@ impl VectorMap {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_palette_holds_every_kind_once_in_drawing_order() {
+        use MapElementKind::*;
+        let every = [LaneCenterline, LaneLineDashed, LaneLineSolid, RoadEdge, Crosswalk, BikeLane, Obstacle];
+        for kind in every {
+            assert_eq!(PALETTE.iter().filter(|s| s.kind == kind).count(), 1, "{kind:?}");
+            assert_eq!(kind.name().parse::<MapElementKind>().unwrap(), kind);
+            assert_eq!(kind.is_polygon(), kind.style().width_m == 0.0, "{kind:?}");
+        }
+        let regions = PALETTE.iter().take_while(|s| s.polygon).count();
+        assert!(PALETTE[regions..].iter().all(|s| !s.polygon), "regions are drawn before lines");
+    }
+
     use super::*;
     use ndarray::Array3;
 

@@ -10,6 +10,11 @@ use crate::state::{traffic_states_with, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
 use ndarray::{Array1, Array2, Array3, Array4};
 
+/// The version of the features (state and edge columns, agent-centric transforms, graph, prior). Bump it with any
+/// change to what the network receives: exporters write it into each model's contract (`preprocess_version`), a
+/// model exported with another is refused, and the training window cache is keyed by it.
+pub const PREPROCESS_VERSION: u32 = 1;
+
 /// The network's input tensors (see `docs/model-contract.md`).
 #[derive(Debug, Clone)]
 pub struct NetworkInputs {

@@ -16,42 +16,24 @@ use rstar::{RTree, AABB};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use tiny_skia::{FillRule, LineCap, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
-/// An RGB colour.
-pub type Rgb = [u8; 3];
+pub use crate::map::Rgb;
 
-/// Median strips, barriers and other static obstacles.
-pub const OBSTACLE: Rgb = [255, 105, 180];
-/// Road boundaries.
-pub const ROAD_EDGE: Rgb = [255, 255, 0];
-/// Pedestrian crossings.
-pub const CROSSWALK: Rgb = [128, 128, 128];
-/// Bicycle lanes.
-pub const BIKE_LANE: Rgb = [255, 255, 255];
-/// Lane centre lines.
-pub const CENTERLINE: Rgb = [0, 255, 0];
-/// Dashed and solid lane lines.
-pub const LANE_LINE: Rgb = [255, 255, 255];
+/// The version of the rasteriser (colours, widths, drawing order, anti-aliasing, agent boxes). Bump it with any
+/// change to what a crop holds: exporters write it into each model's contract (`raster_version`), a model exported
+/// with another is refused, and the training window cache is keyed by it.
+pub const RASTER_VERSION: u32 = 1;
+
 /// Movable agents.
 pub const AGENT: Rgb = [0, 0, 255];
 
-/// Colour of each element kind.
+/// Colour of each element kind (its row of [`crate::map::PALETTE`]).
 pub fn colour(kind: MapElementKind) -> Rgb {
-    match kind {
-        MapElementKind::LaneCenterline => CENTERLINE,
-        MapElementKind::LaneLineDashed | MapElementKind::LaneLineSolid => LANE_LINE,
-        MapElementKind::RoadEdge => ROAD_EDGE,
-        MapElementKind::Crosswalk => CROSSWALK,
-        MapElementKind::BikeLane => BIKE_LANE,
-        MapElementKind::Obstacle => OBSTACLE,
-    }
+    kind.style().colour
 }
 
-/// Drawn width in metres of each polyline kind (at least one pixel is drawn).
-fn line_width_m(kind: MapElementKind) -> f64 {
-    match kind {
-        MapElementKind::RoadEdge | MapElementKind::LaneCenterline => 0.3,
-        _ => 0.15,
-    }
+/// Drawn width in metres of each polyline kind (at least one pixel is drawn; [`crate::map::PALETTE`]).
+pub fn line_width_m(kind: MapElementKind) -> f64 {
+    kind.style().width_m
 }
 
 /// Dash pattern of dashed lane lines, metres: 3 m painted, 6 m gap.

@@ -179,6 +179,13 @@ pub const STATE_FEATURES: [&str; 7] =
 /// Names of the per-edge features: the sender's position, velocity and heading in the receiver's frame.
 pub const EDGE_FEATURES: [&str; 6] = ["dx_m", "dy_m", "dvx_mps", "dvy_mps", "heading_cos", "heading_sin"];
 
+/// The state features that change sign when a scene is mirrored across the agents' x axes (y → −y): every input is
+/// agent-centric, so training's mirror augmentation negates these, the y of every position, and nothing else.
+pub const STATE_MIRRORED: [&str; 2] = ["yaw_rate_radps", "motion_sin"];
+
+/// The edge features that change sign under the same mirroring.
+pub const EDGE_MIRRORED: [&str; 3] = ["dy_m", "dvy_mps", "heading_sin"];
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,6 +1,7 @@
 //! The native module `dgan._dgan`: a thin shell over `dgan-core`. Each file wraps one area of the core; this file
 //! only assembles them. The Python package `dgan` adds the Pythonic surface.
 
+mod constants;
 mod error;
 mod frame;
 mod geometry;
@@ -21,6 +22,7 @@ fn init_onnxruntime(path: Option<std::path::PathBuf>) -> PyResult<std::path::Pat
 fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("CONTRACT_VERSION", dgan_core::contract::CONTRACT_VERSION)?;
+    m.add("CONTRACT", constants::contract(m.py())?)?;
     m.add("DUPLICATES", dgan_core::Duplicates::ALL.map(|(name, _)| name).to_vec())?;
     m.add("UPSAMPLE_LIMIT", dgan_core::history::UPSAMPLE_LIMIT)?;
     m.add("SPARSE_SLACK", dgan_core::history::SPARSE_SLACK)?;
@@ -28,6 +30,7 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<frame::PyRasterMap>()?;
     m.add_class::<frame::PyVectorMap>()?;
     m.add_class::<predictor::PyPredictor>()?;
+    m.add_class::<predictor::PyPrediction>()?;
     m.add_class::<history::PyTracker>()?;
     m.add_function(wrap_pyfunction!(history::frame_from_rows, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::preprocess, m)?)?;

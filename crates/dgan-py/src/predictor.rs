@@ -3,9 +3,8 @@
 use crate::error::IntoPyResult;
 use crate::frame::PyFrame;
 use dgan_core::{ExecutionProvider, Limits, Prediction, Predictor, PredictorOptions};
-use numpy::IntoPyArray;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray4};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 use std::path::PathBuf;
 
 /// A DGAN model around an ONNX Runtime session (see `dgan.Predictor`).
@@ -15,15 +14,53 @@ pub struct PyPredictor {
     inner: Predictor,
 }
 
-fn prediction_dict<'py>(py: Python<'py>, p: Prediction) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("agent_ids", p.agent_ids.into_pyarray(py))?;
-    d.set_item("trajectories", p.trajectories.into_pyarray(py))?;
-    d.set_item("probabilities", p.probabilities.into_pyarray(py))?;
-    d.set_item("class_probabilities", p.class_probabilities.into_pyarray(py))?;
-    d.set_item("mode_classes", p.mode_classes.into_pyarray(py))?;
-    d.set_item("edges", p.edges.into_pyarray(py))?;
-    Ok(d)
+/// What the engine predicted for one frame, its arrays handed to numpy without a copy (`dgan.Prediction` adds the
+/// ids as given, the classes and the time base). A new output is a field here, of `dgan_core::Prediction` and of
+/// `dgan.Prediction`.
+#[pyclass(name = "Prediction", module = "dgan._dgan", frozen)]
+pub struct PyPrediction {
+    /// `(N,)` the engine's agent codes.
+    #[pyo3(get)]
+    agent_ids: Py<PyArray1<i64>>,
+    /// `(N, M, T_f, 2)` world-frame modes, most probable first.
+    #[pyo3(get)]
+    trajectories: Py<PyArray4<f64>>,
+    /// `(N, M)` p(c) · p(k | c).
+    #[pyo3(get)]
+    probabilities: Py<PyArray2<f64>>,
+    /// `(N, C)` p(c).
+    #[pyo3(get)]
+    class_probabilities: Py<PyArray2<f64>>,
+    /// `(N, M)` class index of each mode's anchor.
+    #[pyo3(get)]
+    mode_classes: Py<PyArray2<i64>>,
+    /// `(E, 2)` undirected attention-zone edges.
+    #[pyo3(get)]
+    edges: Py<PyArray2<i64>>,
+    /// The frame's measured headings against its agents' motion, when `predict` was asked to check them
+    /// (`check_headings`' tuple; None when not asked or when the frame has no measured heading).
+    #[pyo3(get)]
+    headings: Option<(usize, f64, bool, bool)>,
+}
+
+type Headings = Option<(usize, f64, bool, bool)>;
+
+fn native_prediction(py: Python<'_>, p: Prediction, headings: Headings) -> PyPrediction {
+    PyPrediction {
+        agent_ids: ndarray::Array1::from(p.agent_ids).into_pyarray(py).unbind(),
+        trajectories: p.trajectories.into_pyarray(py).unbind(),
+        probabilities: p.probabilities.into_pyarray(py).unbind(),
+        class_probabilities: p.class_probabilities.into_pyarray(py).unbind(),
+        mode_classes: p.mode_classes.into_pyarray(py).unbind(),
+        edges: p.edges.into_pyarray(py).unbind(),
+        headings,
+    }
+}
+
+/// The heading check of `frame` at the model's time base (`dgan_core::state::check_headings`).
+fn heading_check(frame: &dgan_core::Frame, dt_s: f64) -> Headings {
+    dgan_core::state::check_headings(frame, dt_s)
+        .map(|c| (c.moving, c.median_error_deg, c.beyond_two_pi, c.disagrees()))
 }
 
 #[pymethods]
@@ -70,23 +107,38 @@ impl PyPredictor {
         self.inner.path().to_path_buf()
     }
 
-    /// Predicts several frames in one network call; returns one dict of numpy arrays per frame.
+    /// Predicts several frames in as few network calls as fit; one prediction per frame (each with its frame's
+    /// heading check when `check_headings`).
+    #[pyo3(signature = (frames, modes, check_headings = false))]
     fn predict_batch<'py>(
         &self,
         py: Python<'py>,
         frames: Vec<PyRef<'py, PyFrame>>,
         modes: usize,
-    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        check_headings: bool,
+    ) -> PyResult<Vec<PyPrediction>> {
         let frames: Vec<dgan_core::Frame> = frames.iter().map(|f| f.inner.clone()).collect();
-        let out = py.detach(|| self.inner.predict_batch(&frames, modes)).py()?;
-        out.into_iter().map(|p| prediction_dict(py, p)).collect()
+        let dt_s = self.inner.contract().input.dt_s;
+        let (out, headings) = py.detach(|| {
+            let checks: Vec<Headings> =
+                frames.iter().map(|f| if check_headings { heading_check(f, dt_s) } else { None }).collect();
+            (self.inner.predict_batch(&frames, modes), checks)
+        });
+        let out = out.py()?;
+        Ok(out.into_iter().zip(headings).map(|(p, h)| native_prediction(py, p, h)).collect())
     }
 
-    /// Predicts the top `modes` modes of every agent; returns a dict of numpy arrays.
-    fn predict<'py>(&self, py: Python<'py>, frame: &PyFrame, modes: usize) -> PyResult<Bound<'py, PyDict>> {
+    /// Predicts the top `modes` modes of every agent; with `check_headings`, also checks the frame's measured
+    /// headings against its agents' motion (in the same call, on the same frame).
+    #[pyo3(signature = (frame, modes, check_headings = false))]
+    fn predict(&self, py: Python<'_>, frame: &PyFrame, modes: usize, check_headings: bool) -> PyResult<PyPrediction> {
         let frame = &frame.inner;
-        let p = py.detach(|| self.inner.predict_modes(frame, modes)).py()?;
-        prediction_dict(py, p)
+        let dt_s = self.inner.contract().input.dt_s;
+        let (p, headings) = py.detach(|| {
+            let p = self.inner.predict_modes(frame, modes);
+            (p, if check_headings { heading_check(frame, dt_s) } else { None })
+        });
+        Ok(native_prediction(py, p.py()?, headings))
     }
 }
 

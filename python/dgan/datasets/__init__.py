@@ -2,15 +2,15 @@
 predictor, and none of these; a reader module is imported when it is first used.
 
 The registry maps a format name to its reader (``module:function``). Each reader turns a source's file or folder into
-a :class:`dgan.datasets.hdmaps.Scenario` (every agent's states on the source's grid and the scene's vector map),
-whose :meth:`~dgan.datasets.hdmaps.Scenario.frame` cuts a :class:`dgan.Frame` at any step:
+a :class:`dgan.datasets.scenario.Scenario` (every agent's states on the source's grid and the scene's vector map),
+whose :meth:`~dgan.datasets.scenario.Scenario.frame` cuts a :class:`dgan.Frame` at any step:
 
 >>> from dgan import datasets
 >>> datasets.formats()
 ('argoverse2_scenario', 'argoverse2_sensor_log', 'interaction', 'scenarionet', 'waymo_json')
 >>> scenario = datasets.read("waymo_motion_samples/gpudrive_json/<id>.json.gz")  # doctest: +SKIP
 
-The ETH/UCY, Stanford Drone and ApolloScape readers that training uses live in ``training.datasets``.
+The ETH/UCY, Stanford Drone and ApolloScape readers that training uses live in ``training.data.datasets``.
 """
 
 from __future__ import annotations
@@ -23,16 +23,16 @@ from typing import TYPE_CHECKING, Any
 from dgan.exceptions import InvalidFrameError
 
 if TYPE_CHECKING:
-    from dgan.datasets.hdmaps import Scenario
+    from dgan.datasets.scenario import Scenario
 
 __all__ = ["formats", "read", "reader", "register"]
 
 #: Format name → ``"module:function"`` of its reader.
 _REGISTRY: dict[str, str] = {
-    "scenarionet": "dgan.datasets.hdmaps:read_scenarionet",
-    "waymo_json": "dgan.datasets.hdmaps:read_waymo_json",
-    "argoverse2_scenario": "dgan.datasets.hdmaps:read_av2_scenario",
-    "argoverse2_sensor_log": "dgan.datasets.hdmaps:read_av2_sensor_log",
+    "scenarionet": "dgan.datasets.scenarionet:read_scenarionet",
+    "waymo_json": "dgan.datasets.waymo_json:read_waymo_json",
+    "argoverse2_scenario": "dgan.datasets.argoverse2:read_av2_scenario",
+    "argoverse2_sensor_log": "dgan.datasets.argoverse2:read_av2_sensor_log",
     "interaction": "dgan.datasets.lanelet2:read_interaction",
 }
 

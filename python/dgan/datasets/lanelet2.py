@@ -36,9 +36,10 @@ from typing import Any, Final
 import numpy as np
 import numpy.typing as npt
 
-from dgan.datasets.hdmaps import Element, Scenario, _long_rows, _Tracks, midline, resample, warn_unmapped
+from dgan.datasets.argoverse2 import _long_rows
+from dgan.datasets.scenario import Element, Scenario, _Tracks, midline, resample, warn_unmapped
 from dgan.exceptions import InvalidFrameError, InvalidMapError
-from dgan.frame import VectorMap
+from dgan.maps import VectorMap
 
 Arr = npt.NDArray[Any]
 

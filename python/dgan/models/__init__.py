@@ -7,10 +7,14 @@ on the other four scenes, never on the one they are named after, which is their 
 
 from __future__ import annotations
 
+import json
+import os
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
+from dgan import _dgan
+from dgan._runtime import onnxruntime_library
 from dgan.exceptions import ModelNotFoundError
 
 __all__ = ["ModelInfo", "card", "info", "list", "map_kind", "path"]
@@ -72,9 +76,7 @@ def map_kind(name: str, contract: dict[str, object]) -> str:
 
 def info(name: str) -> ModelInfo:
     """A bundled model's time base, classes, map kind and licence, from its contract and card."""
-    from dgan.predictor import Predictor
-
-    spec = Predictor(name, sessions=1).contract
+    spec = json.loads(_dgan.Predictor(os.fspath(path(name)), os.fspath(onnxruntime_library())).contract_json)
     licence = "see the model card"
     for line in card(name).splitlines():
         if "Licence" in line:

@@ -1,0 +1,1 @@
+"""Benchmarks: ``python benches/bench.py`` (latency, FLOPs), ``benches/soak.py`` (memory over many predicts)."""

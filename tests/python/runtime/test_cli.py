@@ -1,0 +1,309 @@
+"""The ``dgan`` command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import DATA, ROOT, shared_data, zara1_records
+
+import dgan
+from dgan.cli import main
+
+SCENE = DATA / "frames_5430_5620.txt"
+
+
+def test_info(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", str(nomap_model)]) == 0
+    out = capsys.readouterr().out
+    assert "observes 8 steps, predicts 12 (4.8 s)" in out
+    assert "pedestrian (2 anchors)" in out
+    assert "no map branch" in out
+
+
+def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["predict", str(nomap_model), str(SCENE), "--time", "5500", "--modes", "2"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("18 agents at time 5500")
+    assert "(steps of 0.4 s, horizon 4.8 s)" in out
+    assert len(out.strip().splitlines()) == 19
+
+
+def test_predict_json_and_csv(nomap_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    csv = tmp_path / "scene.csv"
+    rows = ["agent_id,time,x,y,class"] + [
+        f"car-{a},{t * 0.4:.1f},{t * 0.5 + a},{a},pedestrian" for a in range(3) for t in range(8)
+    ]
+    csv.write_text("\n".join(rows) + "\n")
+    assert main(["predict", str(nomap_model), str(csv), "--json", "--modes", "1"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [a["id"] for a in out["agents"]] == ["car-0", "car-1", "car-2"]
+    assert out["dt_s"] == 0.4
+    assert out["times_s"] == pytest.approx([0.4 * (s + 1) for s in range(12)])
+    assert out["current_time"] == pytest.approx(2.8)
+    agent = out["agents"][0]
+    assert agent["class"] == "pedestrian"
+    assert set(agent["class_probabilities"]) == set(dgan.CLASSES)  # the fixture's classes
+    assert sum(agent["class_probabilities"].values()) == pytest.approx(1.0)
+    assert len(agent["modes"]) == 1
+    assert len(agent["modes"][0]["trajectory"]) == 12
+    assert agent["modes"][0]["class"] in agent["class_probabilities"]
+
+
+def test_predict_with_a_map_and_a_table_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "modes.csv"
+    assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--map", "zara1", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "no --map given" not in err
+    lines = out.read_text().splitlines()
+    assert lines[0] == "agent_id,mode,probability,class,class_probability,step,time_offset_s,x,y"
+    assert len(lines) == 1 + 18 * 3 * 12
+    assert lines[1].startswith("76,0,")
+    # The same scene without --map: a note that the model runs without its map, and other predictions.
+    assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--out", str(tmp_path / "nomap.parquet")]) == 0
+    assert "no --map given; zara1 runs without a map" in capsys.readouterr().err
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(tmp_path / "nomap.parquet")
+    assert table.num_rows == 18 * 3 * 12
+    assert table.column("x").to_pylist()[0] != float(lines[1].split(",")[7])
+    # An image map with its homography, and a vector map file.
+    scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
+    args = ["predict", "zara1", str(SCENE), "--time", "5500", "--json", "--modes", "1"]
+    assert main([*args, "--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(scene / "H.txt")]) == 0
+    assert len(json.loads(capsys.readouterr().out)["agents"]) == 18
+
+
+def test_predict_an_argoverse_scenario_with_its_vector_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 10 Hz Argoverse 2 scenario (never trained on) as a parquet table, its map archive as --map, the 5 Hz hdmap
+    model: resampled, predicted with the map, and the same map through dgan's own vector-map JSON."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    from dgan.datasets.hdmaps import AV2_SCENARIO_CLASSES, av2_map
+
+    folder = next((shared_data("argoverse2") / "argoverse2" / "motion_forecasting").iterdir())
+    src = pq.read_table(next(folder.glob("scenario_*.parquet")))
+    keep = pc.is_in(src.column("object_type"), value_set=pa.array(list(AV2_SCENARIO_CLASSES)))
+    src = src.filter(keep)
+    table = pa.table(
+        {
+            "agent_id": src.column("track_id"),
+            "time": pc.multiply(src.column("timestep").cast(pa.float64()), 0.1),
+            "x": src.column("position_x"),
+            "y": src.column("position_y"),
+            "class": pa.array([AV2_SCENARIO_CLASSES[t] for t in src.column("object_type").to_pylist()]),
+        }
+    )
+    scene = tmp_path / "scenario.parquet"
+    pq.write_table(table, scene)
+    archive = next(folder.glob("log_map_archive_*.json"))
+    outs = []
+    own = tmp_path / "map.json"
+    dgan.VectorMap(av2_map(archive)).to_json(own)
+    for m in (archive, own):
+        assert main(["predict", "hdmap", str(scene), "--time", "4.9", "--map", str(m), "--json", "--modes", "2"]) == 0
+        outs.append(json.loads(capsys.readouterr().out))
+    assert outs[0]["dt_s"] == 0.2
+    assert len(outs[0]["agents"]) >= 10
+    assert isinstance(outs[0]["agents"][0]["id"], str)
+    assert outs[0] == outs[1]
+    # Without --map the optional-map model still predicts, and says so; with another map it predicts differently.
+    assert main(["predict", "hdmap", str(scene), "--time", "4.9", "--json", "--modes", "2"]) == 0
+    captured = capsys.readouterr()
+    assert "no --map given" in captured.err
+    assert json.loads(captured.out)["agents"] != outs[0]["agents"]
+
+
+@pytest.mark.slow
+def test_models_lists_every_bundled_model(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["models"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:4] == ["model", "dt", "T_obs", "T_f"]
+    by_name = {line.split()[0]: line for line in lines[1:]}
+    assert set(by_name) == set(dgan.models.list())
+    assert "0.5s" in by_name["apolloscape"]
+    assert "none" in by_name["apolloscape"]
+    assert "vector: HD map" in by_name["hdmap"]
+    assert "raster: ETH/UCY scene mask" in by_name["zara1"]
+    assert all("non-commercial" in line for line in lines[1:])
+    assert main(["models", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert {r["name"]: r["t_f"] for r in rows}["hdmap"] == 15
+    assert main(["info", "hdmap"]) == 0
+    assert "map kind   vector: HD map" in capsys.readouterr().out
+
+
+def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["predict", str(tmp_path / "none.onnx"), str(SCENE)]) == 2
+    assert "model file not found" in capsys.readouterr().err
+    bad = tmp_path / "bad.txt"
+    bad.write_text("1 2\n3 4\n")
+    assert main(["predict", str(nomap_model), str(bad)]) == 2
+    assert "expected rows of 4 columns" in capsys.readouterr().err
+    # A time that is not in the file: an error naming the span, never "0 agents" and exit 0.
+    assert main(["predict", str(nomap_model), str(SCENE), "--time", "5505"]) == 2
+    assert "no row at current_time 5505; the table spans 5430..5620" in capsys.readouterr().err
+    # A map file that is not a map, an image without its homography.
+    junk = tmp_path / "junk.json"
+    junk.write_text("{}")
+    assert main(["predict", "zara1", str(SCENE), "--map", str(junk)]) == 2
+    assert "not a dgan vector map" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(SCENE), "--map", "nowhere"]) == 2
+    assert "neither a bundled scene" in capsys.readouterr().err
+    scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
+    assert main(["predict", "zara1", str(SCENE), "--map", str(scene / "rgb.jpg")]) == 2
+    assert "--pixel-to-world" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(SCENE), "--out", str(tmp_path / "x.xlsx")]) == 2
+    assert "--out must end in" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_demo_faults_fixed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # A --time between the excerpt's annotations: a typed error, not an IndexError.
+    assert main(["demo", "--time", "5505", "--out", str(tmp_path / "d.png")]) == 2
+    assert "no row at current_time 5505" in capsys.readouterr().err
+    # At 5510 the excerpt ends 4.4 s later: the true position is the last seen one, said so, not "left the scene".
+    assert main(["demo", "--time", "5510", "--out", str(tmp_path / "d.png")]) == 0
+    text = capsys.readouterr().out
+    assert "left the scene" not in text
+    assert "last seen 4.4 s ahead" in text
+    # The truth is drawn up to the predicted horizon only.
+    from dgan.demo import zara1_scene
+
+    scene = zara1_scene(8, 12, 5430.0 + 70)
+    assert max(len(f) for f in scene.futures.values()) == 12
+
+
+@pytest.mark.parametrize(
+    ("model", "expected"),
+    [
+        ("zara1", "18 agents of zara1 at step 5500"),
+        ("sdd", "22 agents of Stanford Drone hyang video0 at step 841"),
+        ("apolloscape", "agents of ApolloScape recording 9048 at step 17"),
+        ("hdmap", "45 agents of Waymo Open Motion 2bd577a009790706 at step 40"),
+    ],
+)
+@pytest.mark.slow
+def test_demo_prints_and_draws(model: str, expected: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo.png"
+    assert main(["demo", "--model", model, "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert expected in text
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out.stat().st_size > 50_000
+    crop = out.with_name("demo_crop.png")
+    has_map = dgan.Predictor(model).spec.map is not None
+    assert crop.is_file() == has_map  # one agent's map crop, for the models with a map branch
+    if has_map:
+        assert "one agent's map crop" in text
+
+
+def test_demo_needs_only_the_runtime_and_leaves_nothing_tracked(tmp_path: Path) -> None:
+    """`./dev demo` installs the runtime's requirements only (no torch), and the demo's pictures are ignored by git."""
+    import subprocess
+
+    dev = (ROOT / "dev").read_text()
+    assert 'demo) setup runtime; exec "$PY" -m dgan demo' in dev
+    runtime = (ROOT / "requirements-runtime.txt").read_text()
+    assert "onnxruntime" in runtime
+    assert "torch" not in runtime
+    for name in ("dgan_demo.png", "dgan_demo_crop.png"):
+        ignored = subprocess.run(["git", "check-ignore", "-q", name], cwd=ROOT, check=False)
+        assert ignored.returncode == 0, f"{name} is not ignored by git"
+
+
+@pytest.mark.slow
+def test_unreadable_inputs_and_outputs_exit_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
+    notnumbers = tmp_path / "H.txt"
+    notnumbers.write_text("a b c\n")
+    kept = tmp_path / "kept.csv"
+    kept.write_text("kept")
+    (tmp_path / "folder.csv").mkdir()
+    cases = [
+        (["predict", "zara1", "/dev/zero"], "cannot read scene /dev/zero: it is not a regular file"),
+        (["predict", "zara1", str(tmp_path / "none.txt")], "it does not exist"),
+        (
+            ["predict", "zara1", str(SCENE), "--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(notnumbers)],
+            "cannot read --pixel-to-world",
+        ),
+        (
+            ["predict", "zara1", str(SCENE), "--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(tmp_path / "no")],
+            "cannot read --pixel-to-world",
+        ),
+        (["predict", "zara1", str(SCENE), "--out", str(tmp_path / "no" / "x.csv")], "cannot write"),
+        (["predict", "zara1", str(SCENE), "--out", str(tmp_path / "folder.csv")], "Is a directory"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1].startswith("dgan: error: "), err
+        assert message in err[-1], err
+        assert "Traceback" not in "\n".join(err)
+    assert kept.read_text() == "kept"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "H.txt",
+        "folder.csv",
+        "kept.csv",
+    ]
+
+
+@pytest.mark.slow
+def test_predict_a_directory_or_glob_of_scenes_into_one_table(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import pyarrow.parquet as pq
+
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    for name in ("a.txt", "b.txt"):
+        (scenes / name).write_text(SCENE.read_text())
+    out = tmp_path / "all.parquet"
+    assert main(["predict", "zara1", str(scenes), "--out", str(out), "--modes", "2"]) == 0
+    table = pq.read_table(out)
+    one = dgan.Predictor("zara1", modes=2).predict(
+        dgan.Frame.from_records(zara1_records(), spec=dgan.Predictor("zara1"), time_unit=0.04)
+    )
+    assert table.num_rows == 2 * len(one.to_records()["x"])
+    assert table.column_names[0] == "scene"
+    assert set(table.column("scene").to_pylist()) == {"a.txt", "b.txt"}
+    assert main(["predict", "zara1", str(scenes / "*.txt"), "--out", str(tmp_path / "all.csv")]) == 0
+    assert "wrote 28 agents of 2 scenes" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(scenes)]) == 2
+    assert "need --out" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_predict_options_for_repeated_rows_sparse_data_and_other_classes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rows = ["agent_id,time,x,y,class"]
+    for t in np.arange(0.0, 4.01, 0.5):
+        rows += [f"1,{t:g},{1.2 * t:g},0,pedestrian", f"2,{t:g},{8 * t:g},5,vehicle"]
+    rows.append("1,4,4.8,0.1,pedestrian")  # a repeated row
+    path = tmp_path / "street.csv"
+    path.write_text("\n".join(rows) + "\n")
+    assert main(["predict", "zara1", str(path)]) == 2
+    assert "duplicates=" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(path), "--duplicates", "last"]) == 2
+    assert "upsample=True" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(path), "--duplicates", "last", "--upsample"]) == 2
+    assert "unknown_classes='ignore'" in capsys.readouterr().err
+    argv = [
+        "predict",
+        "zara1",
+        str(path),
+        "--duplicates",
+        "last",
+        "--upsample",
+        "--unknown-classes",
+        "ignore",
+        "--json",
+    ]
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert [a["id"] for a in doc["agents"]] == [1]

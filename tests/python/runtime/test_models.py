@@ -1,0 +1,124 @@
+"""The bundled models, their cards and scene maps."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+import dgan
+from dgan import exceptions as exc
+
+SCENES = ("eth", "hotel", "univ", "zara1", "zara2")
+
+
+@pytest.mark.slow
+def test_five_leave_one_out_models_are_bundled() -> None:
+    assert set(SCENES) <= set(dgan.models.list())
+    for name in SCENES:
+        p = dgan.Predictor(name)
+        assert p.spec.t_obs == 8
+        assert p.spec.t_f == 12
+        assert p.classes == ("pedestrian",)
+        assert p.anchors["pedestrian"].shape == (20, 12, 2)
+        assert p.spec.map is not None
+        card = dgan.models.card(name)
+        assert f"test scene {name}" in card
+        assert "non-commercial" in card
+        assert dgan.models.path(name).stat().st_size < size_limit(card)
+
+
+@pytest.mark.parametrize(
+    ("name", "dt", "t_obs", "t_f", "has_map", "k_c"),
+    [("sdd", 1 / 3, 8, 12, True, 20), ("apolloscape", 0.5, 6, 6, False, 20), ("hdmap", 0.2, 10, 15, True, 10)],
+)
+def test_multiclass_models_are_bundled(name: str, dt: float, t_obs: int, t_f: int, has_map: bool, k_c: int) -> None:
+    p = dgan.Predictor(name)
+    assert p.classes == dgan.CLASSES
+    assert p.spec.dt_s == pytest.approx(dt)
+    assert (p.spec.t_obs, p.spec.t_f) == (t_obs, t_f)
+    assert (p.spec.map is not None) == has_map
+    for cls in p.classes:
+        assert p.anchors[cls].shape == (k_c, t_f, 2)
+    assert p.num_modes == 3 * k_c
+    card = dgan.models.card(name)
+    assert "one model for vehicles, cyclists and pedestrians" in card
+    assert "non-commercial" in card
+    assert dgan.models.path(name).stat().st_size < size_limit(card)
+
+
+def size_limit(card: str) -> int:
+    """A bundled network stays under 5 MB; an ensemble (its card says of how many runs, float16 weights) under 2 MB
+    a member."""
+    found = re.search(r"\*\*Ensemble\*\*: the consensus of (\d+) runs", card)
+    return 5_000_000 if found is None else 2_000_000 * int(found.group(1))
+
+
+def test_unknown_names_list_the_bundled_ones() -> None:
+    with pytest.raises(exc.ModelNotFoundError, match="zara1"):
+        dgan.Predictor("zara9")
+    with pytest.raises(exc.ModelNotFoundError):
+        dgan.models.card("nope")
+
+
+@pytest.mark.slow
+def test_scene_maps_match_their_models(zara1_frame: dgan.Frame) -> None:
+    m = dgan.scene_map("zara1")
+    assert m.image.shape == (576, 720, 3)
+    # Colourised mask: only palette colours.
+    colours = np.unique(m.image.reshape(-1, 3), axis=0)
+    assert all(any((c == p).all() for p in dgan.scenes.MASK_PALETTE) for c in colours)
+    with pytest.raises(exc.InvalidMapError, match="bundled scenes"):
+        dgan.scene_map("times_square")
+    frame = dgan.Frame(zara1_frame.positions, mask=zara1_frame.mask, ids=zara1_frame.ids, map=m)
+    pred = dgan.Predictor("zara1", modes=5).predict(frame)
+    assert pred.trajectories.shape == (len(frame), 5, 12, 2)
+    # Pedestrians walk: the most likely mode ends within 15 m of where each one is now.
+    dist = np.linalg.norm(pred.most_likely[:, -1] - frame.positions[:, -1], axis=1)
+    assert np.all(dist < 15.0)
+
+
+@pytest.mark.parametrize("name", ["zara1", "sdd", "apolloscape", "hdmap"])
+def test_a_bundled_model_beats_standing_still(name: str) -> None:
+    """On its bundled real excerpt, a bundled model's top mode is far closer to what happened than standing still."""
+    predictor = dgan.Predictor(name)
+    scene = dgan.demo.scene_for(predictor.spec)
+    pred = predictor.predict(scene.frame)
+    errs, still = [], []
+    for i, pid in enumerate(scene.frame.ids):
+        fut = scene.futures[int(pid)]
+        if len(fut) == predictor.spec.t_f:
+            errs.append(np.linalg.norm(pred.most_likely[i] - fut, axis=1).mean())
+            still.append(np.linalg.norm(scene.frame.positions[i, -1] - fut, axis=1).mean())
+    assert len(errs) >= 2  # ApolloScape tracks are short: 2 of its excerpt's agents stay for all 3 s
+    assert np.mean(errs) < 0.5 * np.mean(still)
+
+
+#: Bundled models that still move a perfectly still lone agent of some class by more than 0.05 m (issue 25: not yet
+#: retrained with the standing prior; `hdmap` moved a still vehicle 1.12 m before it was); strict, so the mark must go
+#: when they are.
+STILL_AGENT_FAILS = {("apolloscape", "vehicle"): 0.08, ("apolloscape", "pedestrian"): 0.14}
+
+
+@pytest.mark.parametrize(
+    ("name", "klass"),
+    [
+        pytest.param(
+            name,
+            klass,
+            marks=[pytest.mark.xfail(strict=True, reason=f"moves it {STILL_AGENT_FAILS[name, klass]} m")]
+            if (name, klass) in STILL_AGENT_FAILS
+            else [],
+        )
+        for name in dgan.models.list()
+        for klass in dgan.Predictor(name).classes
+    ],
+)
+def test_a_perfectly_still_lone_agent_stays_put(name: str, klass: str) -> None:
+    predictor = dgan.Predictor(name)
+    if predictor.spec.map is not None and not predictor.spec.map.optional:
+        pytest.skip("the model needs its map")
+    here = np.broadcast_to(np.array([10.0, 5.0]), (1, predictor.spec.t_obs, 2)).copy()
+    top = predictor.predict(dgan.Frame(here, classes=[klass])).trajectories[0, 0]
+    assert np.linalg.norm(top - [10.0, 5.0], axis=-1).max() <= 0.05

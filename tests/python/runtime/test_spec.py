@@ -1,0 +1,111 @@
+"""dgan.InputSpec, dgan.preprocess and the geometry helpers training uses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import dgan
+from dgan import exceptions as exc
+
+SPEC = dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("pedestrian",))
+
+
+def test_spec_validation() -> None:
+    assert SPEC.state_dim == 8
+    assert dgan.InputSpec.from_dict(json_round_trip(SPEC)) == SPEC
+    with pytest.raises(exc.InvalidSpecError, match="dt_s"):
+        dgan.InputSpec(dt_s=-1.0, t_obs=8, t_f=12)
+    for dt in (1e-300, 1e9):  # a step that would overflow speeds, or a prior of light-years
+        with pytest.raises(exc.InvalidSpecError, match=r"dt_s must be a number of seconds in 0\.001\.\.=3600"):
+            dgan.InputSpec(dt_s=dt, t_obs=8, t_f=12)
+    with pytest.raises(exc.InvalidSpecError, match=r"t_obs must be in 1..=1000 steps, got 0"):
+        dgan.InputSpec(dt_s=0.4, t_obs=0, t_f=12)
+    # Bounds before any allocation: a spec (or a model's metadata) claiming 10^9 future steps is refused.
+    with pytest.raises(exc.InvalidSpecError, match=r"t_f must be in 1..=1000 steps, got 1000000000"):
+        dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=10**9)
+    with pytest.raises(exc.InvalidSpecError, match="repeat"):
+        dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("vehicle", "vehicle"))
+    with pytest.raises(exc.InvalidSpecError, match="outside"):
+        dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, map=dgan.MapSpec(agent_row=64))
+    with pytest.raises(exc.InvalidSpecError, match="not an input specification"):
+        dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("truck",))
+
+
+def json_round_trip(spec: dgan.InputSpec) -> dict[str, object]:
+    import json
+
+    out: dict[str, object] = json.loads(spec.to_json())
+    return out
+
+
+def test_preprocess_shapes_on_a_real_frame(zara1_frame: dgan.Frame) -> None:
+    x = dgan.preprocess(zara1_frame, SPEC)
+    n = len(zara1_frame)
+    assert x["trajectory"].shape == (n, 8, 2)
+    assert x["trajectory"].dtype == np.float32
+    assert x["state"].shape == (n, 8)
+    assert x["edge_index"].dtype == np.int64
+    assert x["edge_index"].shape[1] == 2
+    assert x["edge_features"].shape == (x["edge_index"].shape[0], 6)
+    assert "map" not in x
+    # Every agent's last observed position is its origin: (0, 0) in its own frame.
+    np.testing.assert_allclose(x["trajectory"][:, -1], 0.0, atol=1e-6)
+    # Self-loops first-class: one per agent, and the directed edges are the undirected ones both ways.
+    assert x["edge_index"].shape[0] == n + 2 * x["edges"].shape[0]
+    # Pedestrians walk 0.5..2 m/s in zara1.
+    assert 0.3 < np.median(x["speed"]) < 2.5
+
+
+def test_preprocess_rejects_unknown_classes_for_the_spec() -> None:
+    frame = dgan.Frame(np.zeros((1, 8, 2)), classes=["vehicle"])
+    with pytest.raises(exc.UnknownClassError, match="knows only"):
+        dgan.preprocess(frame, SPEC)
+
+
+def test_transforms_round_trip() -> None:
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-100, 100, (5, 12, 2))
+    origins, headings = rng.uniform(-50, 50, (5, 2)), rng.uniform(-4, 4, 5)
+    local = dgan.to_agent_frame(pts, origins, headings)
+    np.testing.assert_allclose(dgan.to_world_frame(local, origins, headings), pts, atol=1e-9)
+    # Heading +y: a point 1 m north of the origin is 1 m ahead.
+    np.testing.assert_allclose(
+        dgan.to_agent_frame([[[3.0, 5.0]]], [[3.0, 4.0]], [np.pi / 2]), [[[1.0, 0.0]]], atol=1e-12
+    )
+    with pytest.raises(exc.InvalidFrameError, match="origins"):
+        dgan.to_agent_frame(pts, origins[:2], headings)
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(0, 400), seed=st.integers(0, 2**32 - 1), side=st.floats(1.0, 500.0))
+def test_attention_graph_equals_brute_force(n: int, seed: int, side: float) -> None:
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(0, side, (n, 2))
+    radii = rng.exponential(3.0, n)
+    fast = dgan.attention_graph(centres, radii)
+    slow = dgan.attention_graph(centres, radii, brute_force=True)
+    np.testing.assert_array_equal(fast, slow)
+    if n:
+        d = np.linalg.norm(centres[:, None] - centres[None], axis=2)
+        want = np.argwhere(np.triu(d <= radii[:, None] + radii[None], k=1))
+        np.testing.assert_array_equal(fast, want.reshape(-1, 2))
+
+
+def test_attention_graph_errors() -> None:
+    with pytest.raises(exc.InvalidFrameError, match="radius"):
+        dgan.attention_graph([[0.0, 0.0]], [np.nan])
+    with pytest.raises(exc.InvalidFrameError, match=r"\(N, 2\)"):
+        dgan.attention_graph([0.0, 0.0], [1.0])
+
+
+def test_rigid_motion_leaves_inputs_unchanged(zara1_frame: dgan.Frame) -> None:
+    angle, shift = 2.1, np.array([250.0, -75.0])
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    moved = dgan.Frame(zara1_frame.positions @ rot.T + shift, mask=zara1_frame.mask, ids=zara1_frame.ids)
+    a, b = dgan.preprocess(zara1_frame, SPEC), dgan.preprocess(moved, SPEC)
+    for key in ("trajectory", "state", "edge_features"):  # not a contract copy: the arrays checked here
+        np.testing.assert_allclose(a[key], b[key], atol=1e-4, err_msg=key)
+    np.testing.assert_array_equal(a["edge_index"], b["edge_index"])

@@ -1,0 +1,103 @@
+"""Tracker-like corruption (training.data.augment), the robust kinematic prior it motivates (dgan.PriorSpec's
+``fit`` and ``standing_mps``, through the engine), and the moving / standing split of the evaluation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import shared_data
+
+import dgan
+from training.data.augment import tracker_noise
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def test_tracker_noise_keeps_the_current_step_and_the_inputs() -> None:
+    rng = np.random.default_rng(0)
+    pos = np.cumsum(np.ones((200, 10, 2)), axis=1)
+    mask = np.ones((200, 10), bool)
+    mask[:5, 9] = False  # agents whose current step is already missing keep their last valid one
+    noisy, keep = tracker_noise(pos, mask, 0.3, 0.1, rng)
+    assert noisy is not pos
+    assert np.all(pos == np.cumsum(np.ones((200, 10, 2)), axis=1))
+    assert keep[5:, 9].all()
+    assert keep[:5, 8].all()
+    assert not keep[:5, 9].any()
+    dropped = 1 - keep[5:, :9].mean()
+    assert 0.07 < dropped < 0.13, dropped
+    err = (noisy - pos)[keep]
+    assert abs(err.std() - 0.3) < 0.02
+    assert abs(err.mean()) < 0.02
+    same, same_keep = tracker_noise(pos, mask, 0.0, 0.0, rng)
+    assert np.array_equal(same, pos)
+    assert np.array_equal(same_keep, mask)
+    for sigma, drop in ((-0.1, 0.1), (float("nan"), 0.1), (0.1, 1.0), (0.1, -0.5)):
+        with pytest.raises(ValueError, match=r"sigma_m|drop"):
+            tracker_noise(pos, mask, sigma, drop, rng)
+
+
+def _prior(fit: str, standing: float, traj: np.ndarray, mask: np.ndarray, dt: float = 0.5) -> np.ndarray:
+    spec = dgan.InputSpec(dt, traj.shape[1], 4, classes=("vehicle",))
+    spec_p = dgan.InputSpec(
+        dt, traj.shape[1], 4, classes=("vehicle",), prior=dgan.PriorSpec("constant_velocity", 2.0, fit, standing)
+    )
+    frame = dgan.Frame(traj, mask=mask, classes=["vehicle"] * len(traj))
+    x = dgan.preprocess(frame, spec)
+    return np.asarray(dgan.kinematic_prior(x["trajectory"], x["trajectory_mask"], x["state"], spec_p))
+
+
+def test_the_robust_prior_through_the_engine() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(5) * 0.5
+    still = np.zeros((300, 5, 2)) + rng.normal(0, 0.1, (300, 5, 2))  # parked, tracked with 0.1 m noise
+    mask = np.ones((300, 5), bool)
+    clamp = _prior("least_squares", 0.3, still, mask)
+    free = _prior("least_squares", 0.0, still, mask)
+    ends = _prior("endpoints", 0.0, still, mask)
+    # Standing: almost every noisy parked car stays put, and the line moves it less than the endpoints do.
+    assert np.mean(np.abs(clamp).max(axis=(1, 2)) == 0) > 0.9
+    assert np.linalg.norm(free[:, -1], axis=1).mean() < np.linalg.norm(ends[:, -1], axis=1).mean()
+    # Moving at 2 m/s with steady acceleration 1 m/s²: the parabola's slope is the current velocity (4 m/s at 2 s).
+    moving = np.stack([2 * t + t**2 / 2, 0 * t], axis=1)[None]
+    quad = _prior("quadratic", 0.3, moving, np.ones((1, 5), bool))
+    assert np.linalg.norm(quad[0, 0]) == pytest.approx(4.0 * 0.5, abs=1e-4)
+    with pytest.raises(dgan.exceptions.InvalidSpecError, match="standing_mps"):
+        dgan.InputSpec(0.5, 5, 4, prior=dgan.PriorSpec("constant_velocity", 1.0, "least_squares", -1.0))
+    with pytest.raises(dgan.exceptions.InvalidSpecError, match="fit"):
+        dgan.InputSpec(0.5, 5, 4, prior=dgan.PriorSpec("constant_velocity", 1.0, "spline", 0.0))
+    with pytest.raises(dgan.exceptions.InvalidSpecError, match="window"):
+        dgan.InputSpec(0.5, 5, 4, prior=dgan.PriorSpec("constant_velocity", 0.0, "quadratic", 0.0))
+
+
+def test_augment_levels_are_checked() -> None:
+    from training.data.batches import augment_sigmas
+
+    assert augment_sigmas("") == []
+    assert augment_sigmas("0.1, 0.3") == [0.1, 0.3]
+    for bad in ("0.1,x", "0", "-0.2", "9"):
+        with pytest.raises(ValueError, match="augment_noise"):
+            augment_sigmas(bad)
+
+
+@pytest.mark.slow
+def test_evaluation_scores_standing_agents_apart() -> None:
+    """ApolloScape's test recordings with the bundled model: every target is moving or standing, and the two splits
+    add up to the whole, overall and per class; a noisy evaluation is worse for constant velocity too."""
+    from training.evaluate import evaluate
+
+    root = shared_data("apolloscape_trajectory")
+    predictor = dgan.Predictor("apolloscape")
+    clean = evaluate(predictor, "apolloscape", root)
+    moving, standing = clean["by_motion"]["moving"], clean["by_motion"]["standing"]
+    assert moving["agents"] + standing["agents"] == clean["agents"]
+    assert standing["agents"] > 50
+    mean = (moving["ade"] * moving["agents"] + standing["ade"] * standing["agents"]) / clean["agents"]
+    assert mean == pytest.approx(clean["ade"], rel=1e-9)
+    for c, row in clean["by_class"].items():
+        assert row["moving"]["agents"] + row["standing"]["agents"] == row["agents"], c
+    noisy = evaluate(predictor, "apolloscape", root, noise=(0.3, 0.1))
+    assert noisy["agents"] == clean["agents"]
+    assert noisy["cv_last2_ade"] > clean["cv_last2_ade"] + 0.1

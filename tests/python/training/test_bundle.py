@@ -1,0 +1,58 @@
+"""training.release.bundle: the model card's words follow the training configuration."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("torch")
+
+from training.release.bundle import check_folds
+from training.release.cards import classification_words, extra_data_line, extra_licence_line, fitted_where
+
+
+def cfg(**data: Any) -> dict[str, Any]:
+    return {"data": data, "train": {}}
+
+
+def test_extra_pedestrians_are_named_with_their_licence() -> None:
+    assert extra_data_line(cfg()) == extra_licence_line(cfg()) == ""
+    line = extra_data_line(cfg(extra_pedestrians="sdd", extra_stride=2))
+    assert "Stanford Drone's 30 training videos" in line
+    assert "divisible by 2" in line
+    assert "anchors" not in line
+    assert "fitted on ETH/UCY's windows alone" in extra_data_line(cfg(extra_pedestrians="sdd", extra_in_anchors=False))
+    assert "CC BY-NC-SA 3.0" in extra_licence_line(cfg(extra_pedestrians="sdd"))
+
+
+def test_the_classification_target_is_named() -> None:
+    assert classification_words(cfg()) == "the paper's hierarchical classification"
+    best = {"data": {}, "train": {"cls_target": "best_mode"}}
+    assert "decoded mode closest to the future" in classification_words(best)
+
+
+def test_a_cross_fitted_temperature_is_named() -> None:
+    assert fitted_where(cfg()) == "fitted on validation"
+    assert fitted_where(cfg(), " for the consensus") == "fitted for the consensus on validation"
+    folds = {"data": {}, "train": {"calibration_folds": "9050,9055;9051,9054"}}
+    assert fitted_where(folds).startswith("cross-fitted on 3 validation folds (its validation split and 2 more")
+
+
+def test_the_fold_runs_must_hold_out_the_declared_splits(tmp_path: Path) -> None:
+    def run(name: str, val: str) -> Path:
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "config.json").write_text(json.dumps({"config": {"data": {"val_recordings": val}}}))
+        return folder
+
+    declared = {"data": {}, "train": {"calibration_folds": "9050,9055;9051,9054"}}
+    a, b = [run("a", "9050,9055")], [run("b", "9051,9054")]
+    check_folds(declared, [b, a])
+    check_folds(cfg(), [])
+    with pytest.raises(ValueError, match="pass --calibration-fold"):
+        check_folds(declared, [a])
+    with pytest.raises(ValueError, match="declares the validation splits none"):
+        check_folds(cfg(), [a])

@@ -1,0 +1,98 @@
+"""training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, the
+choice itself on best modes drawn at a known temperature, and a temperature cross-fitted over validation folds."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from conftest import shared_data
+
+from training.build import build_model, input_spec
+from training.calibrate import (
+    best_mode_brier,
+    calibrate_checkpoint,
+    choose_temperature,
+    reliability_gap,
+    validation_logits,
+)
+from training.config import Config
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def test_the_brier_score_of_the_best_mode_indicator() -> None:
+    p = torch.tensor([[1.0, 0.0], [0.5, 0.5], [0.2, 0.8]])
+    best = torch.tensor([0, 1, 0])
+    # 0; 0.25 + 0.25; 0.64 + 0.64
+    assert best_mode_brier(p, best) == pytest.approx((0.0 + 0.5 + 1.28) / 3)
+
+
+def test_the_reliability_gap_of_the_checked_bins() -> None:
+    # 40 modes at p = 0.75 that are the best 30 times: frequency 0.75, no gap; then 20 of 40: gap 0.25.
+    p = torch.tensor([[0.75, 0.25]] * 40)
+    assert reliability_gap(p, torch.tensor([0] * 30 + [1] * 10)) == pytest.approx(0.0, abs=1e-9)
+    assert reliability_gap(p, torch.tensor([0] * 20 + [1] * 20)) == pytest.approx(0.25)
+    # Fewer than 30 modes at p >= 0.3 in every bin: no bin is checked, and the gap counts as infinite, so that a
+    # temperature cannot pass by leaving no probable mode.
+    assert math.isinf(reliability_gap(torch.tensor([[0.75, 0.25]] * 10), torch.zeros(10, dtype=torch.long)))
+
+
+def test_best_modes_drawn_at_a_temperature_give_it_back() -> None:
+    g = torch.Generator().manual_seed(0)
+    n, k, true_t = 20000, 6, 2.0
+    cl = torch.zeros(n, 1)
+    al = 3.0 * torch.randn(n, k, generator=g)
+    best = torch.multinomial(torch.softmax(al / true_t, dim=1), 1, generator=g).squeeze(1)
+    fit = choose_temperature(cl, al, best, torch.zeros(k, dtype=torch.long))
+    assert fit.objective in ("nll", "brier")
+    assert fit.temperature == pytest.approx(true_t, rel=0.1)
+    assert fit.nll_after < fit.nll_before  # the logits at T = 1 are overconfident
+    assert fit.gap_after < 0.05 < fit.gap_before
+    assert "temperature" in str(fit)
+
+
+def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int) -> Path:
+    """An untrained ApolloScape network with random anchors, saved as a checkpoint whose validation split is
+    ``val_recordings`` (the default split if empty)."""
+    torch.manual_seed(seed)
+    overrides = {"data.val_recordings": val_recordings, "data.root": str(shared_data("apolloscape_trajectory"))}
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", overrides)
+    spec = input_spec(cfg)
+    k = kc * len(spec.classes)
+    anchors = np.cumsum(np.random.default_rng(seed).normal(0.5, 0.3, (k, spec.t_f, 2)), axis=1)
+    ckpt = {
+        "model": build_model(cfg, spec, k).eval().state_dict(),
+        "anchors": anchors.astype(np.float32),
+        "class_of": np.repeat(np.arange(len(spec.classes)), kc),
+        "config": asdict(cfg),
+        "epoch": 0,
+    }
+    torch.save(ckpt, path)
+    return path
+
+
+@pytest.mark.slow
+def test_a_cross_fitted_temperature_pools_every_folds_validation_split(tmp_path: Path) -> None:
+    main = _apollo_checkpoint(tmp_path / "main.pt", "", 4, 0)
+    fold = _apollo_checkpoint(tmp_path / "fold.pt", "9053,9059", 4, 1)
+    own = len(validation_logits(main)[2])
+    other = len(validation_logits(fold)[2])
+    assert own > 0
+    assert other > 0
+    alone = calibrate_checkpoint(main)
+    assert (alone.targets, alone.folds) == (own, 1)
+    pooled = calibrate_checkpoint(main, folds=[fold])
+    assert (pooled.targets, pooled.folds) == (own + other, 2)
+    assert "2 validation folds" in str(pooled)
+    ckpt = torch.load(main, weights_only=False)
+    assert ckpt["temperature"] == pooled.temperature
+    # A fold of another anchor layout is another configuration: refused, and the checkpoint keeps its temperature.
+    odd = _apollo_checkpoint(tmp_path / "odd.pt", "9053,9059", 3, 2)
+    with pytest.raises(ValueError, match="folds must share a configuration"):
+        calibrate_checkpoint(main, folds=[odd])
+    assert torch.load(main, weights_only=False)["temperature"] == pooled.temperature

@@ -1,0 +1,291 @@
+"""The dataset readers and the window rule (``training.data.datasets``, ``training.data.windows``) on small hand-made
+recordings and on the real shared data."""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import shared_data
+
+import dgan
+from training.data.apolloscape import APOLLO_TEST, APOLLO_VAL, apollo_files, apollo_recording_id
+from training.data.datasets import DATASETS, recordings, source_files
+from training.data.driving import HDMAP_TEST, HDMAP_VAL, hdmap_recordings
+from training.data.recording import Recording
+from training.data.sdd import sdd_scales, sdd_video
+from training.data.windows import iter_windows
+from training.evaluate import calibration
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+def data_root() -> Path:
+    return shared_data("sdd")
+
+
+def toy(rows: list[tuple[int, int, int]]) -> Recording:
+    """(step, agent, label) rows; agent a walks along x at 1 m per step."""
+    r = np.array(rows)
+    return Recording.sorted(
+        name="toy", step=r[:, 0], agent=r[:, 1], xy=np.c_[r[:, 0] * 1.0 + r[:, 1] * 10.0, r[:, 1] * 1.0], label=r[:, 2]
+    )
+
+
+def test_windows_need_two_agents_present_at_every_step() -> None:
+    info = DATASETS["sdd"]
+    # Agents 1 and 2 cover steps 0..19; agent 3 misses step 15; agent 4 appears at step 5 only (a neighbour).
+    rows = [(s, a, 0) for s in range(20) for a in (1, 2)] + [(s, 3, 1) for s in range(20) if s != 15] + [(5, 4, 2)]
+    windows = list(iter_windows(toy(rows), info, 8, 12))
+    assert [w.now for w in windows] == [7]
+    w = windows[0]
+    assert w.ids.tolist() == [1, 2, 3]
+    assert w.target.tolist() == [True, True, False]
+    assert not w.mask[2, 15]
+    assert w.mask[2, :15].all()
+    np.testing.assert_allclose(w.positions[0, :, 0], np.arange(20) + 10.0)
+    # One target is not enough.
+    assert not list(iter_windows(toy([r for r in rows if r[1] != 2]), info, 8, 12))
+
+
+def test_unscored_labels_are_neighbours_only() -> None:
+    info = DATASETS["apolloscape"]
+    others = info.labels.index("others")
+    rows = [(s, 1, 0) for s in range(12)] + [(s, 2, others) for s in range(12)]
+    (w,) = iter_windows(toy(rows), info, 6, 6)
+    assert w.target.tolist() == [True, False]
+    frame = w.frame(info, 6)
+    assert frame.classes == ["vehicle", "cyclist"]
+
+
+def test_labels_map_to_the_papers_classes() -> None:
+    assert DATASETS["sdd"].classes == dgan.CLASSES
+    sdd = dict(zip(DATASETS["sdd"].labels, DATASETS["sdd"].label_class, strict=True))
+    assert sdd == {
+        "Pedestrian": "pedestrian",
+        "Biker": "cyclist",
+        "Skater": "cyclist",
+        "Cart": "vehicle",
+        "Car": "vehicle",
+        "Bus": "vehicle",
+    }
+    assert DATASETS["ethucy"].classes == ("pedestrian",)
+    assert DATASETS["apolloscape"].classes == dgan.CLASSES
+
+
+def test_sdd_reads_metres_and_its_map_lines_up() -> None:
+    root = data_root()
+    scales = sdd_scales(root)
+    assert len(scales) == 60
+    assert scales[("hyang", 0)] == pytest.approx(0.034749693)
+    assert sdd_video(Path("stan_deathCircle_3.txt")) == ("deathCircle", 3)
+    (rec,) = [r for r in recordings("sdd", root, "test") if r.name == "stan_hyang_0"]
+    raw = np.loadtxt(root / "sdd/multiclass_step10/test/stan_hyang_0.txt", dtype=str)
+    assert len(rec.step) == len(raw)
+    assert rec.unit_m == pytest.approx(0.034749693)
+    first = raw[(raw[:, 0].astype(float) == rec.step[0]) & (raw[:, 1].astype(float) == rec.agent[0])][0]
+    np.testing.assert_allclose(rec.xy[0], first[2:4].astype(float) * rec.unit_m)
+    # The world → pixel map of the box-filtered image puts a world point on the same image content.
+    assert isinstance(rec.map, dgan.RasterMap)
+    small, h = rec.map.image, rec.map.world_to_pixel
+    full = dgan.RasterMap.from_file(root / "sdd/raw_annotations/hyang/video0/reference.jpg", np.eye(3)).image
+    f = full.shape[1] // small.shape[1]
+    u, v = (h @ np.r_[rec.xy[0], 1.0])[:2]
+    px = (rec.xy[0] / rec.unit_m).round().astype(int)
+    block = full[int(v) * f : int(v) * f + f, int(u) * f : int(u) * f + f].reshape(-1, 3).mean(axis=0)
+    np.testing.assert_allclose(small[int(v), int(u)], block, atol=1.0)
+    assert abs(px[0] // f - int(u)) <= 1
+    assert abs(px[1] // f - int(v)) <= 1
+
+
+def test_apolloscape_splits_by_recording() -> None:
+    root = data_root()
+    splits = {s: {apollo_recording_id(p) for p in apollo_files(root, s)} for s in ("train", "val", "test")}
+    assert splits["test"] == set(APOLLO_TEST)
+    assert splits["val"] == set(APOLLO_VAL)
+    assert not splits["train"] & (splits["val"] | splits["test"])
+    rec = recordings("apolloscape", root, "test")[0]
+    assert rec.heading is not None
+    assert rec.length is not None
+    assert rec.width is not None
+    assert rec.label.min() >= 0
+    assert rec.label.max() <= 4
+
+
+def test_apolloscape_validation_recordings_can_be_chosen() -> None:
+    root = data_root()
+    val = {apollo_recording_id(p) for p in apollo_files(root, "val", "9050,9055")}
+    train = {apollo_recording_id(p) for p in apollo_files(root, "train", "9050,9055")}
+    assert val == {9050, 9055}
+    assert set(APOLLO_VAL) <= train  # the default validation recordings train in this fold
+    assert not train & (val | set(APOLLO_TEST))
+    with pytest.raises(ValueError, match="test recordings"):
+        apollo_files(root, "val", f"9050,{APOLLO_TEST[0]}")
+    with pytest.raises(ValueError, match="no ApolloScape recording"):
+        apollo_files(root, "val", "1234")
+    with pytest.raises(ValueError, match="comma-separated"):
+        apollo_files(root, "val", "9050;9055")
+
+
+def test_calibration_bins_probabilities_and_hits() -> None:
+    prob = np.array([0.01, 0.01, 0.95, 0.95, 0.5])
+    hit = np.array([False, False, True, False, True])
+    cal = calibration(prob, hit)
+    count = np.array(cal["count"])
+    assert count.sum() == 5
+    first, last = 0, len(count) - 1
+    assert count[first] == 2
+    assert cal["frequency"][first] == 0.0
+    assert count[last] == 2
+    assert cal["frequency"][last] == 0.5
+    expected = (2 * 0.01 + 2 * abs(0.95 - 0.5) + 1 * 0.5) / 5
+    assert cal["ece"] == pytest.approx(expected)
+
+
+def test_bad_dataset_files_are_clear_errors(tmp_path: Path) -> None:
+    from dgan.exceptions import InvalidMapError
+    from dgan.scenes import sdd_raster_map
+    from training.data.apolloscape import apollo_recording
+    from training.data.sdd import sdd_recording
+
+    (tmp_path / "sdd" / "raw_annotations").mkdir(parents=True)
+    (tmp_path / "sdd" / "raw_annotations" / "estimated_scales.yaml").write_text(
+        "hyang:\n   video0:\n      scale: 0.03\n      certainty: 1.0\n"
+    )
+    bad_label = tmp_path / "stan_hyang_0.txt"
+    bad_label.write_text("1 0.0 10.0 20.0 Pedestrian\n2 0.0 11.0 20.0 Horse\n")
+    with pytest.raises(ValueError, match="unknown SDD labels"):
+        sdd_recording(bad_label, tmp_path, with_map=False)
+    no_scale = tmp_path / "stan_quad_7.txt"
+    no_scale.write_text("1 0.0 10.0 20.0 Pedestrian\n")
+    with pytest.raises(ValueError, match="no scale for SDD quad video 7"):
+        sdd_recording(no_scale, tmp_path, with_map=False)
+    bad_type = tmp_path / "result_9048_1_frame.txt"
+    bad_type.write_text("0 1 7 1.0 2.0 0.0 4.0 2.0 1.5 0.0\n")
+    with pytest.raises(ValueError, match=r"object types must be 1\.\.5"):
+        apollo_recording(bad_type)
+    with pytest.raises(InvalidMapError, match="metres_per_px must be positive"):
+        sdd_raster_map(ROOT / "python/dgan/data/sdd/hyang_0/reference.jpg", 0.0)
+
+
+def test_a_per_class_run_needs_a_known_class() -> None:
+    import torch  # noqa: F401  (training.train needs torch)
+
+    from training.build import input_spec
+    from training.config import Config
+    from training.data.batches import restrict_targets
+
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml")
+    spec = input_spec(cfg)
+    w = type("W", (), {"target": np.ones(3, bool), "class_index": np.array([0, 1, 2])})()
+    restrict_targets(w, spec, "cyclist")
+    assert w.target.tolist() == [False, True, False]
+    with pytest.raises(ValueError, match="'bus' is not among the classes"):
+        restrict_targets(w, spec, "bus")
+
+
+def test_hdmap_splits_by_scene_and_samples_5_hz() -> None:
+    root = data_root()
+    files = {s: {p.name for p in source_files("hdmap", root, s)} for s in ("train", "val", "test")}
+    assert not files["train"] & files["val"]
+    assert not files["train"] & files["test"]
+    assert not files["val"] & files["test"]
+    assert sum(len(f) for f in files.values()) == 45  # 10 nuScenes scenes and 35 Waymo scenarios
+    assert len(files["test"]) == len(HDMAP_TEST)
+    assert len(files["val"]) == len(HDMAP_VAL)
+    assert source_files("argoverse2", root, "train") == []
+    assert len(source_files("argoverse2", root, "test")) == 3
+    nu = next(p for p in source_files("hdmap", root, "test") if "scene-0103" in p.name)
+    info = DATASETS["hdmap"]
+    both = hdmap_recordings(nu, keyframes_only=True)
+    assert [r.name for r in both] == ["sd_nuscenes_v1.0-mini_scene-0103@0", "sd_nuscenes_v1.0-mini_scene-0103@1"]
+    for phase, rec in enumerate(both):
+        windows = list(iter_windows(rec, info, info.t_obs, info.t_f))
+        assert windows
+        for w in windows:
+            # t_obs is a real 2 Hz annotation (10 Hz step divisible by 5), and so is the 3 s endpoint.
+            assert (2 * w.now + phase) % 5 == 0
+            assert (2 * (w.now + info.t_f) + phase) % 5 == 0
+            # Every agent seen at all 25 steps is a target, standing ones too.
+            assert np.array_equal(w.target, w.mask.all(axis=1))
+    # Training windows may end at any step.
+    assert len(list(iter_windows(hdmap_recordings(nu)[0], info, 10, 15))) > len(
+        list(iter_windows(both[0], info, 10, 15))
+    )
+
+
+def test_a_run_needs_a_known_weight_selection(tmp_path: Path) -> None:
+    import torch  # noqa: F401  (training.train needs torch)
+
+    from training.train import main
+
+    config = str(ROOT / "training" / "configs" / "hdmap.toml")
+    with pytest.raises(ValueError, match=r"train\.select must be 'val_loss', 'val_ade' or 'last', got 'best'"):
+        main(["--config", config, "--out", str(tmp_path), "--set", "train.select=best"])
+
+
+def test_hdmap_needs_10_hz_sources(tmp_path: Path) -> None:
+    # A ScenarioNet scenario at 2 Hz: readable, but not a source of the 5 Hz protocol (every second 10 Hz step).
+    t = 5
+    track = {
+        "type": "VEHICLE",
+        "state": {
+            "position": np.zeros((t, 3)),
+            "heading": np.zeros(t),
+            "velocity": np.zeros((t, 2)),
+            "valid": np.ones(t),
+            "length": np.full((t, 1), 4.5),
+            "width": np.full((t, 1), 2.0),
+        },
+    }
+    meta = {"dataset": "nuscenes", "sample_rate": 0.5}
+    path = tmp_path / "slow.pkl"
+    path.write_bytes(pickle.dumps({"tracks": {"a": track}, "map_features": {}, "metadata": meta}))
+    with pytest.raises(ValueError, match=r"slow\.pkl: expected 10 Hz states, got a step of 0\.5 s"):
+        hdmap_recordings(path)
+
+
+def test_resampling_interpolates_and_never_bridges_a_gap() -> None:
+    from training.data.datasets import resampled
+
+    # Agent 0 walks 1 m per old step (1/3 s) over steps 0..12; agent 1 is missing at old step 4.
+    steps = np.r_[np.arange(13), [0, 1, 2, 3, 5, 6]]
+    agents = np.r_[np.zeros(13, np.int64), np.ones(6, np.int64)]
+    xy = np.c_[steps.astype(float), agents * 10.0]
+    rec = Recording.sorted(name="r", step=steps, agent=agents, xy=xy, label=np.zeros(len(steps), np.int64))
+    out = resampled(rec, 1 / 3, 0.4)
+    walker = out.agent == 0
+    np.testing.assert_array_equal(out.step[walker], np.arange(11))  # 0.4 s steps up to 4.0 s (old step 12)
+    np.testing.assert_allclose(out.xy[walker, 0], 1.2 * np.arange(11))  # positions on the line, interpolated
+    # Agent 1: new steps at old 0, 1.2, 2.4, 3.6, 4.8, 6.0; 3.6 and 4.8 need old step 4, which is missing.
+    other = out.agent == 1
+    np.testing.assert_array_equal(out.step[other], [0, 1, 2, 5])
+    np.testing.assert_allclose(out.xy[other, 0], [0.0, 1.2, 2.4, 6.0])
+
+
+def test_other_sources_pedestrians_join_the_ethucy_time_base() -> None:
+    from training.data.datasets import pedestrian_recordings
+
+    root = shared_data("sdd")
+    recs = pedestrian_recordings("sdd", root, 0.4)
+    assert len(recs) == len(source_files("sdd", root, "train"))  # the training split only
+    rec = recs[0]
+    assert rec.map is None
+    assert (rec.label == 0).all()  # ETH/UCY's one label
+    # Consecutive 0.4 s steps of one agent are at most a few metres apart (metres, not pixels).
+    a = rec.agent == rec.agent[0]
+    gaps = np.diff(rec.step[a]) == 1
+    assert (np.linalg.norm(np.diff(rec.xy[a], axis=0), axis=1)[gaps] < 5.0).all()
+    with pytest.raises(ValueError, match="unknown pedestrian source"):
+        pedestrian_recordings("apolloscape", root, 0.4)
+
+
+def test_extra_pedestrian_sources_are_parsed_and_checked() -> None:
+    from training.data.datasets import pedestrian_sources
+
+    assert pedestrian_sources("") == []
+    assert pedestrian_sources(" sdd , ") == ["sdd"]
+    with pytest.raises(ValueError, match=r"unknown pedestrian source\(s\) \['kitti'\]"):
+        pedestrian_sources("sdd,kitti")

@@ -1,0 +1,425 @@
+"""The training side: typed config, loss, the engine–PyTorch parity of exported models, and DDP on two CPU
+processes (gloo). Needs torch (``pip install -e ".[train]"``; ``./dev test`` installs it) and the shared data."""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from conftest import shared_data
+
+import dgan
+from training.build import build_model, input_spec
+from training.config import Config
+from training.data.batches import INPUTS
+from training.export import export_model, load_checkpoint
+from training.losses import anchor_pool, class_weights, closest_anchor, decode_torch, dgan_loss
+from training.modules.dgan import DGAN
+
+ROOT = Path(__file__).resolve().parents[3]
+CHECKPOINTS = ROOT / "training" / "checkpoints"
+CONFIG = ROOT / "training" / "configs" / "ethucy_zara1.toml"
+
+
+def data_root() -> Path:
+    return shared_data("eth_ucy")
+
+
+def test_config_is_typed() -> None:
+    cfg = Config.load(CONFIG, {"train.epochs": 3, "model.use_gat": False})
+    assert cfg.train.epochs == 3
+    assert not cfg.model.use_gat
+    assert cfg.data.scene == "zara1"
+    with pytest.raises(ValueError, match="unknown keys"):
+        Config.load(CONFIG, {"train.epoch": 3})
+    with pytest.raises(ValueError, match="must be int"):
+        Config.load(CONFIG, {"train.epochs": "three"})
+    with pytest.raises(ValueError, match="unknown config section"):
+        Config.from_dict({"optimizer": {}})
+
+
+def test_loss_picks_the_closest_anchor_of_the_class() -> None:
+    anchors = torch.tensor([[[1.0, 0.0]], [[2.0, 0.0]], [[0.0, 5.0]]])
+    class_of = torch.tensor([0, 0, 1])
+    future = torch.tensor([[[0.0, 4.0]], [[0.0, 4.0]]])
+    # Agent 0 is class 0: anchors 0 and 1 only (anchor 2 is closer but belongs to class 1).
+    k = closest_anchor(future, anchors, anchor_pool("own_class", class_of, torch.tensor([0, 1])))
+    assert k.tolist() == [0, 2]
+    zeros = torch.zeros(2, 3, 1, 2)
+    loss, parts = dgan_loss(
+        torch.zeros(2, 2), torch.zeros(2, 3), zeros, future, torch.tensor([0, 1]), anchors, class_of, 1.0
+    )
+    # −log(½ · ½) for agent 0, −log(½ · 1) for agent 1; errors √17 and 1.
+    assert parts["cls"] == pytest.approx((np.log(4) + np.log(2)) / 2, rel=1e-6)
+    assert parts["reg"] == pytest.approx((np.sqrt(17) + 1) / 2, rel=1e-6)
+    assert float(loss) == pytest.approx(parts["cls"] + parts["reg"], rel=1e-6)
+    _, prob = decode_torch(torch.zeros(2, 2), torch.zeros(2, 3), zeros, anchors, class_of)
+    assert prob.sum(dim=1).tolist() == pytest.approx([1.0, 1.0])
+    # Class balance: weights 1 and 3 make agent 1's loss count three times.
+    weighted, _ = dgan_loss(
+        torch.zeros(2, 2),
+        torch.zeros(2, 3),
+        zeros,
+        future,
+        torch.tensor([0, 1]),
+        anchors,
+        class_of,
+        1.0,
+        weights=torch.tensor([1.0, 3.0]),
+    )
+    each = [np.log(4) + np.sqrt(17), np.log(2) + 1.0]
+    assert float(weighted) == pytest.approx((each[0] + 3 * each[1]) / 4, rel=1e-6)
+
+
+def test_the_classifier_can_be_taught_the_best_decoded_mode() -> None:
+    anchors = torch.tensor([[[1.0, 0.0]], [[2.0, 0.0]], [[0.0, 5.0]]])
+    class_of = torch.tensor([0, 0, 1])
+    future = torch.tensor([[[0.0, 4.0]]])
+    # Anchor 0 is the closest of class 0, but anchor 1's offset brings its mode onto the future.
+    offsets = torch.tensor([[[[0.0, 0.0]], [[-2.0, 4.0]], [[0.0, 0.0]]]])
+    anchor_logits = torch.tensor([[0.0, float(np.log(3.0)), 0.0]])  # p(k | class 0) = 1/4, 3/4
+    args = (torch.zeros(1, 2), anchor_logits, offsets, future, torch.tensor([0]), anchors, class_of, 1.0)
+    _, paper = dgan_loss(*args)
+    _, best = dgan_loss(*args, cls_target="best_mode")
+    assert paper["cls"] == pytest.approx(np.log(2) + np.log(4), rel=1e-6)  # −log(½ · ¼): anchor 0
+    assert best["cls"] == pytest.approx(np.log(2) + np.log(4 / 3), rel=1e-6)  # −log(½ · ¾): mode 1
+    assert best["reg"] == paper["reg"] == pytest.approx(np.sqrt(17), rel=1e-6)  # the regression follows anchor 0
+    with pytest.raises(ValueError, match="cls_target"):
+        dgan_loss(*args, cls_target="nearest")
+
+
+def test_the_anchors_can_be_drawn_from_every_class() -> None:
+    anchors = torch.tensor([[[1.0, 0.0]], [[2.0, 0.0]], [[0.0, 5.0]]])
+    class_of = torch.tensor([0, 0, 1])
+    future = torch.tensor([[[0.0, 4.0]]])  # a class-0 agent whose future is nearest class 1's anchor
+    pool = anchor_pool("all_classes", class_of, torch.tensor([0]))
+    assert closest_anchor(future, anchors, pool).tolist() == [2]
+    class_logits = torch.tensor([[float(np.log(3.0)), 0.0]])  # p(c) = 3/4, 1/4
+    args = (class_logits, torch.zeros(1, 3), torch.zeros(1, 3, 1, 2), future, torch.tensor([0]), anchors, class_of)
+    _, own = dgan_loss(*args, 1.0)
+    _, every = dgan_loss(*args, 1.0, pool="all_classes")
+    assert own["cls"] == pytest.approx(np.log(4 / 3) + np.log(2), rel=1e-6)  # −log(¾ · ½): anchor 0 of class 0
+    assert every["cls"] == pytest.approx(np.log(4), rel=1e-6)  # −log(¼ · 1): anchor 2, the only one of class 1
+    assert every["reg"] == pytest.approx(1.0, rel=1e-6)  # the regression follows anchor 2
+    with pytest.raises(ValueError, match="anchor_pool"):
+        dgan_loss(*args, 1.0, pool="mine")
+
+
+def test_class_weights_balance_the_classes() -> None:
+    classes = torch.tensor([0] * 70 + [1] * 20 + [2] * 10)
+    assert class_weights(classes, 3, 0.0).tolist() == [1.0, 1.0, 1.0]
+    w = class_weights(classes, 3, 1.0)
+    # Every class carries the same total weight, and the mean weight of a target is 1.
+    totals = [float(w[c]) * int((classes == c).sum()) for c in range(3)]
+    assert totals == pytest.approx([totals[0]] * 3, rel=1e-5)
+    assert float(w[classes].mean()) == pytest.approx(1.0, rel=1e-6)
+    # A class without targets weighs nothing.
+    assert class_weights(torch.tensor([0, 0, 2]), 3, 1.0)[1] == 0.0
+
+
+def real_frames(spec: dgan.InputSpec) -> list[dgan.Frame]:
+    """Two real frames of the bundled demo scene that matches the spec's time base (ETH/UCY, SDD, ApolloScape,
+    Waymo)."""
+    from dgan.demo import scene_for
+
+    first = scene_for(spec)
+    return [first.frame, scene_for(spec, first.default_now + first.time_step).frame]
+
+
+def assert_parity(
+    model: torch.nn.Module,
+    spec: dgan.InputSpec,
+    anchors: np.ndarray,
+    class_of: np.ndarray,
+    onnx_path: Path,
+    temperature: float = 1.0,
+) -> None:
+    """The engine's predictions equal PyTorch's (model, kinematic prior, decoding at ``temperature``) on real
+    frames, and, for a model whose map is optional, on the same frames without their map."""
+    predictor = dgan.Predictor(onnx_path)
+    frames = real_frames(spec)
+    if spec.map is not None and spec.map.optional:
+        frames += [frame.without_map() for frame in frames]
+    for frame in frames:
+        x = dgan.preprocess(frame, spec)
+        with torch.no_grad():
+            cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
+            prior = torch.from_numpy(x["prior"])
+            a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
+            traj, prob = decode_torch(cl, al, off, a, c, prior, temperature)
+        n, k = traj.shape[:2]
+        flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
+        world = dgan.to_world_frame(flat, x["origin"], x["heading"]).reshape(n, k, -1, 2)
+        got = predictor.predict(frame)
+        np.testing.assert_allclose(got.probabilities, prob.numpy(), atol=1e-4)
+        np.testing.assert_allclose(got.trajectories, tied_order(world, prob.numpy(), got.trajectories), atol=1e-4)
+
+
+def tied_order(expected: np.ndarray, prob: np.ndarray, got: np.ndarray, tie: float = 1e-6) -> np.ndarray:
+    """``expected (N, K, T, 2)`` with modes of equal probability (within ``tie``) reordered as close to ``got`` as
+    they can be: two sorts of the same probabilities may order a tie either way."""
+    out = expected.copy()
+    for i in range(len(prob)):
+        for k in range(prob.shape[1]):
+            tied = np.flatnonzero(np.abs(prob[i] - prob[i, k]) <= tie)
+            if len(tied) > 1:
+                errors = np.abs(expected[i, tied] - got[i, k]).max(axis=(1, 2))
+                out[i, k] = expected[i, tied[int(np.argmin(errors))]]
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(p.stem for p in CHECKPOINTS.glob("*.pt")))
+def test_bundled_models_match_pytorch(name: str) -> None:
+    model, spec, anchors, class_of, _, temperature = load_checkpoint(CHECKPOINTS / f"{name}.pt")
+    assert_parity(model, spec, anchors, class_of, dgan.models.path(name), temperature)
+
+
+def test_every_bundled_model_has_a_checkpoint() -> None:
+    assert set(dgan.models.list()) <= {p.stem for p in CHECKPOINTS.glob("*.pt")}
+
+
+def randomised_batch_norm(model: DGAN) -> DGAN:
+    """``model`` with random BatchNorm running statistics (fresh ones are 0 and 1, which would hide their export)."""
+    for m in model.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            assert m.running_mean is not None
+            assert m.running_var is not None
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+    return model
+
+
+@pytest.mark.parametrize(
+    ("config", "variant"),
+    [
+        ("ethucy_zara1", {}),
+        ("ethucy_zara1", {"model.use_map": False}),
+        ("ethucy_zara1", {"model.use_gat": False}),
+        ("sdd", {}),
+        ("apolloscape", {}),
+        ("hdmap", {}),
+        ("hdmap", {"train.map_dropout": 0.0}),
+        ("ethucy_zara1", {"data.prior": "none", "train.map_dropout": 0.0}),
+    ],
+)
+@pytest.mark.slow
+def test_fresh_exports_match_pytorch(config: str, variant: dict[str, object], tmp_path: Path) -> None:
+    torch.manual_seed(1)
+    cfg = Config.load(ROOT / "training" / "configs" / f"{config}.toml", variant)
+    spec = input_spec(cfg)
+    k_c = 4
+    k = k_c * len(spec.classes)
+    class_of = np.repeat(np.arange(len(spec.classes)), k_c)
+    anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (k, spec.t_f, 2)), axis=1).astype(np.float32)
+    model = randomised_batch_norm(build_model(cfg, spec, k).eval())
+    path = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "fresh", temperature=1.7)
+    predictor = dgan.Predictor(path)
+    assert predictor.classes == spec.classes
+    assert predictor.contract["contract_version"] == dgan._dgan.CONTRACT_VERSION
+    # the rasteriser and features it was exported with: an engine with others refuses it
+    assert predictor.contract["raster_version"] == dgan.contract.RASTER_VERSION
+    assert predictor.contract["preprocess_version"] == dgan.contract.PREPROCESS_VERSION
+    assert predictor.spec.graph == "padded"
+    assert predictor.contract["temperature"] == pytest.approx(1.7)
+    assert_parity(model, spec, anchors, class_of, path, temperature=1.7)
+
+
+@pytest.mark.slow
+def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
+    from training.data.windows import cached_windows
+
+    root = data_root()
+    cfg = Config.load(CONFIG)
+    cache = Path(cfg.data.cache_dir).expanduser()
+    for split in ("train", "val"):  # build the cache once, before two processes read it
+        cached_windows("ethucy", root, split, input_spec(cfg), cache, fold="zara1", progress=False)
+    out = tmp_path / "run"
+    common = [
+        "-m",
+        "training.train",
+        "--config",
+        str(CONFIG),
+        "--out",
+        str(out),
+        "--no-export",
+        "--set",
+        f"data.root={root}",
+        "--set",
+        "train.max_train_windows=24",
+        "--set",
+        "train.batch_windows=4",
+        "--set",
+        "train.select=val_ade",
+    ]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    torchrun = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2"]
+
+    def run(*extra: str) -> str:
+        done = subprocess.run(
+            [*torchrun, *common, "--set", "train.epochs=2", *extra],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        return done.stdout
+
+    assert "2 process(es)" in run("--stop-after", "1")  # interrupted after epoch 1
+    run("--resume")
+    rows = list(csv.DictReader((out / "log.csv").open()))
+    assert [r["epoch"] for r in rows] == ["1", "2"]
+    assert np.isfinite(float(rows[-1]["val_min_ade20"]))
+    # best.pt holds the epoch of the lowest validation top-1 ADE (train.select = "val_ade").
+    kept = torch.load(out / "best.pt", weights_only=False)
+    assert kept["epoch"] + 1 == int(min(rows, key=lambda r: float(r["val_ade"]))["epoch"])
+
+
+def test_a_checkpoint_save_stopped_midway_keeps_the_previous_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from training import checkpoint
+
+    path = tmp_path / "last.pt"
+    checkpoint.save_atomic({"epoch": 3}, path)
+    assert torch.load(path)["epoch"] == 3
+    assert [p.name for p in tmp_path.iterdir()] == ["last.pt"]
+
+    def killed(state: object, f: Path) -> None:  # the job's time limit strikes inside torch.save
+        Path(f).write_bytes(b"\x80\x02half a pick")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(torch, "save", killed)
+    with pytest.raises(KeyboardInterrupt):
+        checkpoint.save_atomic({"epoch": 4}, path)
+    assert torch.load(path)["epoch"] == 3  # --resume still loads epoch 3
+
+
+def test_concatenated_windows_batch_as_their_parts() -> None:
+    from training.data.windows import cached_windows, concat_windows
+
+    root = data_root()
+    cfg = Config.load(CONFIG)
+    spec = input_spec(cfg)
+    cache = Path(cfg.data.cache_dir).expanduser()
+    val = cached_windows("ethucy", root, "val", spec, cache, fold="zara1", progress=False)
+    both = concat_windows([val, val])
+    assert both.num_windows == 2 * val.num_windows
+    assert both.files == val.files * 2
+    n = val.num_windows
+    for w in (0, n - 1):
+        a, b = val.batch([w]), both.batch([n + w])
+        assert a.keys() == b.keys()
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    np.testing.assert_array_equal(both.window_file[n:], val.window_file + len(val.files))
+    with pytest.raises(ValueError, match="with and without map"):
+        concat_windows([val, replace(val, map=None)])
+
+
+@pytest.mark.slow
+def test_anchors_can_leave_the_extra_windows_out() -> None:
+    from training.anchors import anchor_windows, fit_anchors
+    from training.data.windows import cached_windows, concat_windows
+
+    root = data_root()
+    cfg = Config.load(CONFIG, {"train.anchors_per_class": 4})
+    spec = input_spec(cfg)
+    cache = Path(cfg.data.cache_dir).expanduser()
+    parts = [cached_windows("ethucy", root, "val", spec, cache, fold=f, progress=False) for f in ("zara1", "eth")]
+    both = concat_windows(parts)
+    own = replace(cfg, data=replace(cfg.data, extra_in_anchors=False))
+    assert anchor_windows(own, parts, both) is parts[0]
+    assert anchor_windows(cfg, parts, both) is both
+    alone, _ = fit_anchors(own, anchor_windows(own, parts, both), spec, 1)
+    mixed, _ = fit_anchors(cfg, anchor_windows(cfg, parts, both), spec, 1)
+    np.testing.assert_array_equal(alone, fit_anchors(cfg, parts[0], spec, 1)[0])
+    assert not np.allclose(alone, mixed)
+
+
+def test_an_anchor_can_be_held_at_the_prior() -> None:
+    from training.anchors import kmeans_anchors
+
+    rng = np.random.default_rng(0)
+    futures = np.concatenate([rng.normal(0.0, 0.05, (200, 5, 2)), rng.normal(1.0, 0.1, (200, 5, 2))])
+    futures = np.concatenate([futures, rng.normal(-2.0, 0.1, (100, 5, 2))])
+    held = kmeans_anchors(futures, 4, zero=True)
+    assert held.shape == (4, 5, 2)
+    assert np.count_nonzero(np.abs(held).sum(axis=(1, 2)) == 0.0) == 1  # exactly one anchor is the prior itself
+    ends = sorted(held[:, -1, 0].round(1).tolist())
+    assert ends[0] == pytest.approx(-2.0, abs=0.1)
+    assert ends[-1] == pytest.approx(1.0, abs=0.1)  # the others still find the clusters around it
+    assert not (np.abs(kmeans_anchors(futures, 4)).sum(axis=(1, 2)) == 0.0).any()
+
+
+def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
+    from training.anchors import kmeans_anchors
+    from training.data.datasets import recordings
+    from training.data.ethucy import split_files
+
+    with pytest.raises(FileNotFoundError, match=r"set data\.root"):
+        split_files(tmp_path, "zara1", "train")
+    for dataset in ("sdd", "apolloscape"):
+        with pytest.raises(FileNotFoundError, match=r"set data\.root"):
+            recordings(dataset, tmp_path, "test")
+    with pytest.raises(ValueError, match="unknown dataset"):
+        recordings("kitti", tmp_path, "test")
+    with pytest.raises(ValueError, match=r"unknown data\.dataset"):
+        input_spec(Config.load(CONFIG, {"data.dataset": "kitti"}))
+    with pytest.raises(ValueError, match="3 futures cannot make 20 anchors"):
+        kmeans_anchors(np.zeros((3, 12, 2)), 20)
+    from training.data.batches import load_windows
+
+    sdd = Config.load(ROOT / "training" / "configs" / "sdd.toml", {"data.extra_pedestrians": "sdd"})
+    with pytest.raises(ValueError, match="for the ETH/UCY models"):
+        load_windows(replace(sdd, data=replace(sdd.data, root=str(data_root()))), input_spec(sdd), "train", False)
+    sdd_val = Config.load(ROOT / "training" / "configs" / "sdd.toml", {"data.val_recordings": "9050,9055"})
+    with pytest.raises(ValueError, match="val_recordings is for ApolloScape"):
+        load_windows(
+            replace(sdd_val, data=replace(sdd_val.data, root=str(data_root()))), input_spec(sdd_val), "val", False
+        )
+
+
+def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None:
+    from dgan.demo import scene_for
+    from training.data.batches import INPUTS, to_tensors
+    from training.losses import dgan_loss
+    from training.step import Teacher, forward_loss
+
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", {"train.distill_weight": 2.5})
+    spec = input_spec(cfg)
+    with pytest.raises(ValueError, match="takes other inputs"):
+        Teacher.load(str(ROOT / "training" / "checkpoints" / "hdmap.pt"), spec)
+    teacher = Teacher.load(str(ROOT / "training" / "checkpoints" / "apolloscape.pt"), spec)
+    frame = scene_for(spec).frame
+    x = dgan.preprocess(frame, spec)
+    b = to_tensors({k: x[k] for k in (*INPUTS, "prior") if k in x})
+    n = len(frame)
+    b["target"] = torch.ones(n, dtype=torch.bool)
+    b["class_index"] = torch.tensor([spec.classes.index(c) for c in frame.classes])
+    b["future"] = b["prior"] + 0.3
+    torch.manual_seed(0)
+    k_c = 4
+    anchors = torch.randn(k_c * len(spec.classes), spec.t_f, 2)
+    class_of = torch.arange(len(spec.classes)).repeat_interleave(k_c)
+    student = build_model(cfg, spec, len(anchors)).eval()
+    top = teacher.top_residual(b)
+    assert top.shape == (n, spec.t_f, 2)
+    assert torch.isfinite(top).all()
+    alone, _, outs = forward_loss(student, b, anchors, class_of, cfg)
+    taught, _, _ = forward_loss(student, b, anchors, class_of, cfg, teacher=teacher)
+    tr = cfg.train
+    classes = b["class_index"]
+    second, _ = dgan_loss(
+        *outs, top, classes, anchors, class_of, tr.alpha, tr.beta, None, tr.cls_target, tr.anchor_pool
+    )
+    torch.testing.assert_close(taught, alone + 2.5 * second)

@@ -1,0 +1,50 @@
+"""What a configuration builds: the model's input specification (the engine's :class:`dgan.InputSpec`), its run
+name and the untrained network."""
+
+from __future__ import annotations
+
+import dgan
+from training.config import Config
+from training.data.datasets import DATASETS
+from training.modules.dgan import DGAN
+
+
+def input_spec(cfg: Config) -> dgan.InputSpec:
+    d = cfg.data
+    if d.dataset not in DATASETS:
+        raise ValueError(f"unknown data.dataset {d.dataset!r}; known: {', '.join(DATASETS)}")
+    info = DATASETS[d.dataset]
+    map_spec = None
+    if d.use_map and cfg.model.use_map and info.has_map:
+        map_spec = dgan.MapSpec(
+            d.map_height_px,
+            d.map_width_px,
+            d.map_resolution_m,
+            d.map_agent_row,
+            d.map_width_px // 2,
+            optional=cfg.train.map_dropout > 0,
+        )
+    return dgan.InputSpec(
+        dt_s=info.dt_s,
+        t_obs=info.t_obs,
+        t_f=info.t_f,
+        classes=info.classes,
+        attention_lambda=0.5,
+        map=map_spec,
+        prior=dgan.PriorSpec(d.prior, d.prior_window_s, d.prior_fit, d.prior_standing_mps),
+        heading=d.heading,
+    )
+
+
+def run_name(cfg: Config) -> str:
+    """``ethucy-zara1``, ``sdd``, ``sdd-pedestrian``, ``hdmap-nomap`` ..."""
+    parts = [cfg.data.dataset] + ([cfg.data.scene] if cfg.data.dataset == "ethucy" else [])
+    if input_spec(cfg).map is None and DATASETS[cfg.data.dataset].has_map:
+        parts.append("nomap")
+    return "-".join(parts + ([cfg.data.target_class] if cfg.data.target_class else []))
+
+
+def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
+    hw = (spec.map.height_px, spec.map.width_px) if spec.map else None
+    optional = spec.map is not None and spec.map.optional
+    return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw, optional)

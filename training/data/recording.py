@@ -1,0 +1,64 @@
+"""What every dataset reader gives: a :class:`Recording` (rows in world metres with per-row labels) of a dataset
+whose time base, protocol and labels are its :class:`DatasetInfo`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+import dgan
+
+Arr = npt.NDArray[Any]
+
+
+@dataclass(frozen=True)
+class DatasetInfo:
+    """A dataset's time base, protocol and labels."""
+
+    name: str
+    dt_s: float
+    t_obs: int
+    t_f: int
+    labels: tuple[str, ...]  # the dataset's own labels, in code order
+    label_class: tuple[str, ...]  # the engine class of each label
+    scored: tuple[bool, ...]  # whether agents with the label can be targets
+    unit: str  # the unit errors are reported in: "m" or "px"
+    min_targets: int  # a window needs at least this many targets
+    has_map: bool
+    min_move_m: float = 0.0  # a target must move more than this over the window (first to last point)
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """The model's classes, in the engine's canonical order, among those of the scored labels."""
+        used = {c for c, s in zip(self.label_class, self.scored, strict=True) if s}
+        return tuple(c for c in dgan.CLASSES if c in used)
+
+
+@dataclass
+class Recording:
+    """One recording's rows, sorted by (step, agent). Steps are integer time indices ``dt_s`` apart."""
+
+    name: str
+    step: Arr  # (R,) int64
+    agent: Arr  # (R,) int64
+    xy: Arr  # (R, 2) f64, world metres
+    label: Arr  # (R,) int64 into DatasetInfo.labels
+    heading: Arr | None = None  # (R,) radians
+    length: Arr | None = None  # (R,) metres
+    width: Arr | None = None  # (R,) metres
+    unit_m: float = 1.0  # metres per reporting unit
+    map: dgan.RasterMap | dgan.VectorMap | None = None
+    now_steps: Arr | None = None  # the steps a window may end at (all if None)
+
+    @classmethod
+    def sorted(cls, **kw: Any) -> Recording:
+        rec = cls(**kw)
+        order = np.lexsort((rec.agent, rec.step))
+        for k in ("step", "agent", "xy", "label", "heading", "length", "width"):
+            v = getattr(rec, k)
+            if v is not None:
+                setattr(rec, k, v[order])
+        return rec

@@ -1,0 +1,346 @@
+"""The DGAN network (Dong et al. 2020): a map CNN over the agent's raster crop, a shared LSTM over MLP-embedded
+observed positions, a traffic-state MLP, their concatenation as node features, L stacked multi-head graph attention
+layers masked by the attention-zone graph, and heads for class logits, anchor logits and per-anchor offsets.
+
+Node features are agent-centric, so neighbour geometry travels on the edges: each edge carries the sender's position,
+velocity and heading in the receiver's frame (``edge_features``), which enters both the attention score and the
+message. Scores are clamped to ±20. Training runs the graph attention over the edge list (scatter-add); the exported
+model (contract 3, :class:`PaddedDGAN`) runs the same attention, with the same weights, over each agent's padded
+list of senders, which needs only gathers and dense reductions and which ONNX Runtime runs several times faster.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Sizes of the network."""
+
+    embed_dim: int = 32
+    lstm_dim: int = 64
+    state_dim_out: int = 64
+    map_channels: int = 8  # width multiplier of the map CNN (sized to train on a CPU)
+    map_dim: int = 64
+    node_dim: int = 128
+    gat_layers: int = 2
+    gat_heads: int = 4
+    head_dim: int = 256
+    use_map: bool = True
+    use_gat: bool = True
+    use_edge_features: bool = True  # False: the attention sees no neighbour geometry (ablation)
+
+
+class ResBlock(nn.Module):
+    def __init__(self, c: int) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Conv2d(c, c, 3, padding=1),
+            nn.BatchNorm2d(c),
+            nn.ReLU(),
+            nn.Conv2d(c, c, 3, padding=1),
+            nn.BatchNorm2d(c),
+        )
+
+    def forward(self, x: Tensor) -> Tensor:
+        out: Tensor = torch.relu(x + self.body(x))
+        return out
+
+
+class MapEncoder(nn.Module):
+    """A small ResNet over the ``(3, H, W)`` crop; the flattened 4× downsampled map keeps where things are."""
+
+    def __init__(self, c: int, out: int, h: int, w: int) -> None:
+        super().__init__()
+        self.net = nn.Sequential(
+            nn.Conv2d(3, c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(c),
+            nn.ReLU(),
+            ResBlock(c),
+            nn.Conv2d(c, 2 * c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(2 * c),
+            nn.ReLU(),
+            ResBlock(2 * c),
+            nn.Conv2d(2 * c, 2 * c, 3, stride=2, padding=1),
+            nn.ReLU(),
+        )
+        hh, ww = h, w
+        for _ in range(3):
+            hh, ww = (hh + 1) // 2, (ww + 1) // 2
+        self.proj = nn.Sequential(nn.Flatten(), nn.Linear(2 * c * hh * ww, out), nn.ReLU())
+
+    def forward(self, x: Tensor) -> Tensor:
+        out: Tensor = self.proj(self.net(x))
+        return out
+
+
+class GATLayer(nn.Module):
+    """Multi-head graph attention over directed edges ``[receiver, sender]`` with edge features."""
+
+    def __init__(self, dim: int, heads: int, edge_dim: int) -> None:
+        super().__init__()
+        self.heads, self.dh = heads, dim // heads
+        self.w = nn.Linear(dim, dim, bias=False)
+        self.we = nn.Sequential(nn.Linear(edge_dim, dim), nn.ReLU(), nn.Linear(dim, dim))
+        self.a_recv = nn.Parameter(torch.randn(heads, self.dh) * 0.1)
+        self.a_send = nn.Parameter(torch.randn(heads, self.dh) * 0.1)
+        self.out = nn.Linear(dim, dim)
+        self.norm = nn.LayerNorm(dim)
+
+    def forward(self, h: Tensor, edge_index: Tensor, edge_features: Tensor) -> Tensor:
+        n = h.shape[0]
+        recv, send = edge_index[:, 0], edge_index[:, 1]
+        wh = self.w(h).view(n, self.heads, self.dh)
+        msg = wh[send] + self.we(edge_features).view(-1, self.heads, self.dh)
+        score = nn.functional.leaky_relu((wh[recv] * self.a_recv).sum(-1) + (msg * self.a_send).sum(-1), 0.2)
+        weight = torch.exp(torch.clamp(score, -20.0, 20.0))  # (E, H)
+        # scatter_add, not index_add: the ONNX export of index_add mishandles repeated receivers.
+        r2 = recv.unsqueeze(-1).expand(-1, self.heads)
+        denom = torch.zeros(n, self.heads, dtype=h.dtype).scatter_add(0, r2, weight)
+        alpha = weight / (torch.gather(denom, 0, r2) + 1e-9)
+        r3 = recv.view(-1, 1, 1).expand(-1, self.heads, self.dh)
+        agg = torch.zeros(n, self.heads, self.dh, dtype=h.dtype).scatter_add(0, r3, alpha.unsqueeze(-1) * msg)
+        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
+        return out
+
+    def forward_padded(self, h: Tensor, index: Tensor, bias: Tensor, features: Tensor) -> Tensor:
+        """The same attention over padded senders ``index (N, D)`` with ``features (N, D, 6)``; ``bias (N, 1, D)`` is
+        0 for a real sender and -10⁴ for padding (:func:`padding_bias`, computed once for every layer).
+
+        Arranged for ONNX Runtime, equal in arithmetic (every agent hears at least itself, so each softmax row has a
+        real sender; the edge-list form's 1e-9 in the denominator is the only difference):
+        - scores in ``(N, H, D)``, normalised by one Softmax over the senders;
+        - receiver and sender scores from one matrix product with W folded into a_recv and a_send;
+        - the edge MLP's second linear layer W2 applied after the sum over senders (Σ α (W2 e + b2) = W2 (Σ α e) +
+          b2, as Σ α = 1), as one product with the block-diagonal of the heads' W2, and its part of the score as the
+          hidden edge vector times W2ᵀ a_send;
+        - the messages of the senders' nodes as one batched product α (N, H, D) @ (N, D, dim), of which each head
+          keeps its own dh columns.
+        The weights-only products are constants that the exporter folds.
+        """
+        n = index.shape[0]
+        heads, dh = self.heads, self.dh
+        lin1, lin2 = self.we[0], self.we[2]
+        assert isinstance(lin1, nn.Linear)
+        assert isinstance(lin2, nn.Linear)
+        w_t = self.w.weight.t()  # (dim, dim)
+        w_heads = w_t.reshape(-1, heads, dh)
+        a_both = torch.cat([(w_heads * self.a_recv).sum(-1), (w_heads * self.a_send).sum(-1)], dim=1)  # (dim, 2H)
+        w2 = lin2.weight.view(heads, dh, -1)  # (H, dh, dim)
+        v = (w2 * self.a_send.unsqueeze(-1)).sum(1).t()  # (dim, H)
+        c = (lin2.bias.view(heads, dh) * self.a_send).sum(-1)  # (H,)
+        eye = torch.eye(heads, dtype=h.dtype)
+        # The block-diagonal (H·dim, H·dh) of the heads' W2ᵀ (torch.block_diag has no ONNX export).
+        w2_blocks = (w2.transpose(1, 2).unsqueeze(2) * eye.view(heads, 1, heads, 1)).reshape(-1, heads * dh)
+        own = eye.repeat_interleave(dh, dim=1)  # (H, dim): head k keeps its own dh columns
+        wh = h @ w_t  # (N, dim)
+        s = h @ a_both  # (N, 2H)
+        hidden = torch.relu(lin1(features))  # (N, D, dim)
+        score = (s[:, heads:][index] + hidden @ v).transpose(1, 2) + (s[:, :heads] + c).unsqueeze(-1)  # (N, H, D)
+        score = torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0) + bias
+        alpha = torch.softmax(score, dim=-1)  # (N, H, D)
+        from_nodes = ((alpha @ wh[index]) * own).sum(1)  # (N, dim)
+        from_edges = (alpha @ hidden).reshape(n, -1) @ w2_blocks  # (N, dim)
+        agg = from_nodes + from_edges + lin2.bias
+        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg)))
+        return out
+
+
+def padding_bias(mask: Tensor) -> Tensor:
+    """``(N, D)`` sender mask → the ``(N, 1, D)`` additive score bias of :meth:`GATLayer.forward_padded`."""
+    return ((mask - 1.0) * 1e4).unsqueeze(1)
+
+
+class DGAN(nn.Module):
+    """Inputs and outputs follow the dgan model contract (``docs/model-contract.md``)."""
+
+    def __init__(
+        self,
+        cfg: ModelConfig,
+        t_obs: int,
+        t_f: int,
+        state_dim: int,
+        num_classes: int,
+        num_anchors: int,
+        map_hw: tuple[int, int] | None,
+        map_optional: bool = False,
+    ) -> None:
+        super().__init__()
+        self.cfg, self.t_f, self.k = cfg, t_f, num_anchors
+        self.embed = nn.Sequential(nn.Linear(3, cfg.embed_dim), nn.ReLU())
+        self.lstm = nn.LSTM(cfg.embed_dim, cfg.lstm_dim, batch_first=True)
+        self.state_mlp = nn.Sequential(
+            nn.Linear(state_dim, cfg.state_dim_out),
+            nn.ReLU(),
+            nn.Linear(cfg.state_dim_out, cfg.state_dim_out),
+            nn.ReLU(),
+        )
+        self.map_enc = MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw) if (cfg.use_map and map_hw) else None
+        # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
+        # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
+        self.map_optional = map_optional and self.map_enc is not None
+        node_in = cfg.lstm_dim + cfg.state_dim_out + (cfg.map_dim if self.map_enc is not None else 0)
+        node_in += 1 if self.map_optional else 0
+        self.node = nn.Sequential(nn.Linear(node_in, cfg.node_dim), nn.ReLU())
+        self.gat = nn.ModuleList(
+            [GATLayer(cfg.node_dim, cfg.gat_heads, 6) for _ in range(cfg.gat_layers)] if cfg.use_gat else []
+        )
+        head_in = cfg.node_dim * (2 if cfg.use_gat else 1)
+        self.trunk = nn.Sequential(
+            nn.Linear(head_in, cfg.head_dim), nn.ReLU(), nn.Linear(cfg.head_dim, cfg.head_dim), nn.ReLU()
+        )
+        self.class_head = nn.Linear(cfg.head_dim, num_classes)
+        self.anchor_head = nn.Linear(cfg.head_dim, num_anchors)
+        self.offset_head = nn.Linear(cfg.head_dim, num_anchors * t_f * 2)
+
+    def encode(
+        self, trajectory: Tensor, trajectory_mask: Tensor, state: Tensor, map: Tensor | None, map_present: Tensor | None
+    ) -> Tensor:
+        """Node features: the trajectory LSTM, the traffic-state MLP and the map CNN, concatenated and projected."""
+        x = torch.cat([trajectory, trajectory_mask.unsqueeze(-1)], dim=-1)
+        _, (h_n, _) = self.lstm(self.embed(x))
+        parts = [h_n[-1], self.state_mlp(state)]
+        if self.map_enc is not None:
+            assert map is not None, "this model has a map branch"
+            features = self.map_enc(map)
+            if self.map_optional:
+                assert map_present is not None, "this model's map is optional: it takes map_present"
+                present = map_present.unsqueeze(-1)
+                parts += [features * present, present]
+            else:
+                parts.append(features)
+        out: Tensor = self.node(torch.cat(parts, dim=-1))
+        return out
+
+    def heads(self, p: Tensor, v: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        z = self.trunk(torch.cat([p, v], dim=-1)) if self.cfg.use_gat else self.trunk(v + p)
+        offsets = self.offset_head(z).view(-1, self.k, self.t_f, 2)
+        return self.class_head(z), self.anchor_head(z), offsets
+
+    def forward(
+        self,
+        trajectory: Tensor,
+        trajectory_mask: Tensor,
+        state: Tensor,
+        edge_index: Tensor,
+        edge_features: Tensor,
+        map: Tensor | None = None,
+        map_present: Tensor | None = None,
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        v = self.encode(trajectory, trajectory_mask, state, map, map_present)
+        if not self.cfg.use_edge_features:
+            edge_features = edge_features * 0.0
+        p = v
+        for layer in self.gat:
+            p = layer(p, edge_index, edge_features)
+        if not self.cfg.use_gat:
+            # The contract's edge inputs stay in the exported graph (an exporter drops unused inputs).
+            p = (edge_features.sum() + edge_index.sum().to(v.dtype)) * 0.0
+        return self.heads(p, v)
+
+    def forward_padded(
+        self,
+        trajectory: Tensor,
+        trajectory_mask: Tensor,
+        state: Tensor,
+        neighbor_index: Tensor,
+        neighbor_mask: Tensor,
+        neighbor_features: Tensor,
+        map: Tensor | None = None,
+        map_present: Tensor | None = None,
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        """:meth:`forward` on the padded neighbour layout (contract 3): the same outputs for the same graph."""
+        v = self.encode(trajectory, trajectory_mask, state, map, map_present)
+        if not self.cfg.use_edge_features:
+            neighbor_features = neighbor_features * 0.0
+        p = v
+        bias = padding_bias(neighbor_mask)
+        for layer in self.gat:
+            assert isinstance(layer, GATLayer)
+            p = layer.forward_padded(p, neighbor_index, bias, neighbor_features)
+        if not self.cfg.use_gat:
+            unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
+            p = unused * 0.0
+        return self.heads(p, v)
+
+
+class PaddedDGAN(nn.Module):
+    """A trained :class:`DGAN` whose ``forward`` takes the padded neighbour layout: what the exporter traces."""
+
+    def __init__(self, model: DGAN | ConsensusEnsemble) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, *inputs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        return self.model.forward_padded(*inputs)
+
+
+class ConsensusEnsemble(nn.Module):
+    """Several :class:`DGAN` runs of one configuration (seeds) as one network under the same contract: the first
+    member's outputs, except that in the block of anchors of the agent's most probable class (by the first member's
+    class logits) its most probable mode is replaced by the mean of every member's most probable mode of that class
+    (each member's anchor + offset, in the agent frame relative to the kinematic prior, which the members share). The
+    engine ranks modes within a class by the anchor logits, which stay the first member's, so its top mode of that
+    class is the consensus; the other modes are the first member's.
+
+    Averaging the members' most probable futures cancels much of the run-to-run spread (``training.studies.seed``).
+
+    ``top_scale (C,)``: per class, how much of the consensus mode's residual over the prior is kept
+    (``prior + s_c · residual``; 1 by default, 0 is the prior itself), fitted on validation by
+    ``training.ensemble.fit_top_scale`` for classes whose top mode the network refines for the worse.
+    """
+
+    anchors: Tensor
+    top_scale: Tensor
+
+    def __init__(
+        self, members: list[nn.Module], anchors: list[Tensor], classes: int, top_scale: list[float] | None = None
+    ) -> None:
+        super().__init__()
+        if not members or len(members) != len(anchors):
+            raise ValueError("an ensemble needs one anchor set per member, and at least one member")
+        shape = anchors[0].shape
+        if any(a.shape != shape for a in anchors) or shape[0] % classes:
+            raise ValueError(f"every member needs the same anchors per class; got shapes {[a.shape for a in anchors]}")
+        self.members = nn.ModuleList(members)
+        self.classes, self.per_class = classes, shape[0] // classes
+        # (M, C, Kc, T, 2): anchors grouped by class, as the contract stores them.
+        self.register_buffer("anchors", torch.stack([a.reshape(classes, self.per_class, *shape[1:]) for a in anchors]))
+        scale = [1.0] * classes if top_scale is None else [float(x) for x in top_scale]
+        if len(scale) != classes or not all(0.0 <= x <= 1.0 for x in scale):
+            raise ValueError(f"top_scale needs one value in [0, 1] per class ({classes}); got {top_scale}")
+        self.register_buffer("top_scale", torch.tensor(scale, dtype=torch.float32))
+
+    def combine(self, outs: list[tuple[Tensor, Tensor, Tensor]]) -> tuple[Tensor, Tensor, Tensor]:
+        cl0, al0, off0 = outs[0]
+        n, c, kc = al0.shape[0], self.classes, self.per_class
+        tail = off0.shape[2:]
+        tops, bests = [], []
+        for m, (_, al, off) in enumerate(outs):
+            best = al.reshape(n, c, kc).argmax(-1)  # (N, C)
+            modes = self.anchors[m].unsqueeze(0) + off.reshape(n, c, kc, *tail)
+            tops.append(modes.gather(2, best[:, :, None, None, None].expand(n, c, 1, *tail)).squeeze(2))
+            bests.append(best)
+        # (N, C, T, 2), relative to the prior; scaled per class towards it.
+        consensus = torch.stack(tops).mean(0) * self.top_scale.to(off0.dtype)[None, :, None, None]
+        best0 = bests[0]
+        # Only in the block of the most probable class (the class is an input, so p(c) is all but one-hot there):
+        # the other blocks keep the first member's modes, which vary continuously with the inputs, while a block's
+        # top anchor can switch between near-equal logits.
+        top_class = cl0.argmax(-1, keepdim=True)  # (N, 1)
+        in_block = torch.arange(c, device=al0.device) == top_class  # (N, C)
+        at_top = torch.arange(kc, device=al0.device) == best0.unsqueeze(-1)  # (N, C, Kc)
+        chosen = (at_top & in_block.unsqueeze(-1)).to(off0.dtype)[..., None, None]
+        off = off0.reshape(n, c, kc, *tail)
+        replaced = off * (1 - chosen) + (consensus.unsqueeze(2) - self.anchors[0].unsqueeze(0)) * chosen
+        return cl0, al0, replaced.reshape(off0.shape)
+
+    def forward(self, *inputs: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
+        return self.combine([m(*inputs) for m in self.members])
+
+    def forward_padded(self, *inputs: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
+        return self.combine([m.forward_padded(*inputs) for m in self.members])  # type: ignore[operator]

@@ -1,0 +1,1 @@
+"""Bundling trained models into the package: slim checkpoints, ONNX exports, model cards."""

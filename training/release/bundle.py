@@ -1,0 +1,167 @@
+"""Ship a trained run: export its best checkpoint into ``python/dgan/models/<name>.onnx``, keep a slim checkpoint
+for the parity test in ``training/checkpoints/<name>.pt``, evaluate it with the engine and write its model card.
+
+    python -m training.release.bundle runs/ethucy_zara1 --name zara1 --data-root ../shared/data
+    python -m training.release.bundle runs/sdd --name sdd
+    python -m training.release.bundle runs/apollo_s0 runs/apollo_s1 --name apolloscape \
+        --calibration-fold runs/fold1_s0 runs/fold1_s1 --calibration-fold ...   # a cross-fitted temperature
+    python -m training.release.bundle --reexport zara1 sdd      # the kept checkpoints, exported again (a new contract)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+import dgan
+from training.calibrate import calibrate_checkpoint
+from training.evaluate import evaluate
+from training.export import SLIM_KEYS, export_checkpoint
+from training.release.cards import (
+    MULTICLASS,
+    card,
+    declared_folds,
+    ensemble_line,
+    multiclass_card,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+MODELS = ROOT / "python" / "dgan" / "models"
+CHECKPOINTS = ROOT / "training" / "checkpoints"
+
+
+def slim_checkpoint(run: Path, out: Path) -> Path:
+    """Keeps what export and the parity test need of a run's best checkpoint (no optimizer state)."""
+    ckpt = torch.load(run / "best.pt", weights_only=False)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({k: ckpt[k] for k in SLIM_KEYS if k in ckpt}, out)
+    return out
+
+
+def model_checkpoint(runs: list[Path], out: Path) -> Path:
+    """The checkpoint of one run (slimmed) or of several runs' consensus (``training.ensemble``, float16) at ``out``."""
+    if len(runs) > 1:
+        from training.ensemble import ensemble_checkpoint
+
+        return ensemble_checkpoint(runs, out, half=True)
+    return slim_checkpoint(runs[0], out)
+
+
+def with_scale(path: Path, scale: list[float] | None) -> None:
+    """Stores the top-mode scales ``scale`` (``training.ensemble.fit_top_scale``) in the ensemble checkpoint at
+    ``path``; nothing for ``None``."""
+    from training.checkpoint import save_atomic
+
+    if scale is None:
+        return
+    ckpt = torch.load(path, weights_only=False)
+    if "members" not in ckpt:
+        raise ValueError(f"{path}: a top-mode scale needs an ensemble checkpoint (training.ensemble)")
+    ckpt["top_scale"] = scale
+    save_atomic(ckpt, path)
+
+
+def check_folds(cfg: dict[str, Any], folds: list[list[Path]]) -> None:
+    """The fold runs must hold out exactly the validation splits the configuration declares, each once."""
+    held = sorted(
+        json.loads((f[0] / "config.json").read_text())["config"]["data"].get("val_recordings", "") for f in folds
+    )
+    want = sorted(declared_folds(cfg))
+    if held != want:
+        raise ValueError(
+            f"train.calibration_folds declares the validation splits {want or 'none'}; the fold runs given hold out "
+            f"{held or 'none'} (pass --calibration-fold RUN [RUN ...] once per declared split)"
+        )
+
+
+def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]] | None = None) -> dict[str, Any]:
+    """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
+    weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card.
+
+    ``folds``: for a configuration with ``train.calibration_folds``, the runs of each of its folds (seeds, built into
+    a model as ``runs`` are); their predictions on their validation splits join the temperature's fit."""
+    run = runs[0]
+    cfg = json.loads((run / "config.json").read_text())["config"]
+    dataset = cfg["data"].get("dataset", "ethucy")
+    check_folds(cfg, folds or [])
+    MODELS.mkdir(parents=True, exist_ok=True)
+    model_checkpoint(runs, CHECKPOINTS / f"{name}.pt")
+    scale = None
+    if len(runs) > 1:
+        from training.ensemble import fit_top_scale
+
+        fit = fit_top_scale(CHECKPOINTS / f"{name}.pt", data_root)
+        print(f"{name}: {fit}", flush=True)
+        scale = list(fit.scale)
+    with tempfile.TemporaryDirectory() as tmp:
+        fold_ckpts = [model_checkpoint(f, Path(tmp) / f"fold{i}.pt") for i, f in enumerate(folds or [])]
+        for fold_ckpt in fold_ckpts:  # the folds stand in for the model: the same top-mode scales
+            with_scale(fold_ckpt, scale)
+        print(f"{name}: {calibrate_checkpoint(CHECKPOINTS / f'{name}.pt', data_root, folds=fold_ckpts)}", flush=True)
+    if dataset == "ethucy":
+        description = (
+            f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "
+            "non-commercial research use only (ETH/UCY licence)."
+        )
+    else:
+        description = (
+            f"DGAN for vehicles, cyclists and pedestrians trained on {MULTICLASS[dataset]['title']}; "
+            "non-commercial research use only (dataset licence)."
+        )
+    model_name = f"dgan-ethucy-{name}" if dataset == "ethucy" else f"dgan-{name}"
+    onnx_path = export_checkpoint(CHECKPOINTS / f"{name}.pt", MODELS / f"{name}.onnx", model_name, description)
+    predictor = dgan.Predictor(onnx_path)
+    fold = cfg["data"]["scene"] if dataset == "ethucy" else ""
+    metrics = evaluate(predictor, dataset, data_root, fold)
+    if dataset == "ethucy" and predictor.spec.map is not None and predictor.spec.map.optional:
+        metrics["without_map"] = evaluate(predictor, dataset, data_root, fold, with_map=False)
+    text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
+    if len(runs) > 1:
+        text = text.replace("- **Test metrics**", ensemble_line(runs, predictor, cfg, scale) + "- **Test metrics**", 1)
+    (MODELS / f"{name}.md").write_text(text)
+    (run / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    return metrics
+
+
+def reexport(name: str) -> Path:
+    """Exports a bundled model again from its kept checkpoint under the current contract, keeping its name and
+    description (its card's metrics hold: the engine–PyTorch parity test checks the new file against the
+    checkpoint)."""
+    old = dgan.Predictor(name).contract
+    ckpt = CHECKPOINTS / f"{name}.pt"
+    return export_checkpoint(ckpt, MODELS / f"{name}.onnx", old.get("name", name), old.get("description", ""))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument(
+        "run", type=Path, nargs="*", help="a run folder, or several runs of one configuration (an ensemble)"
+    )
+    ap.add_argument("--name")
+    ap.add_argument("--data-root", type=Path, default=Path("../shared/data"))
+    ap.add_argument(
+        "--calibration-fold",
+        nargs="+",
+        type=Path,
+        action="append",
+        metavar="RUN",
+        help="the runs of one fold of a cross-fitted temperature (train.calibration_folds); once per fold",
+    )
+    ap.add_argument("--reexport", nargs="+", metavar="MODEL", help="export bundled models again from their checkpoints")
+    a = ap.parse_args()
+    if a.reexport:
+        for name in a.reexport:
+            print(reexport(name))
+        return
+    if not a.run or a.name is None:
+        ap.error("give a run folder (or several) and --name (or --reexport MODEL ...)")
+    print(json.dumps(bundle(a.run, a.name, a.data_root.expanduser(), a.calibration_fold), indent=2))
+
+
+if __name__ == "__main__":
+    main()

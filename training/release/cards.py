@@ -1,0 +1,300 @@
+"""The model cards of bundled models (``python/dgan/models/<name>.md``): provenance, protocol, the measured figures
+beside constant velocity, the licence of the data."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import dgan
+from training.data.datasets import pedestrian_sources
+
+
+def training_log(run: Path) -> tuple[list[dict[str, str]], float, dict[str, str]]:
+    """A run's epoch rows, its total training seconds and the row of the kept weights (``train.select``)."""
+    rows = list(csv.DictReader((run / "log.csv").open()))
+    cfg = json.loads((run / "config.json").read_text())["config"]
+    select = cfg["train"].get("select", "val_loss")
+    kept = rows[-1] if select == "last" else min(rows, key=lambda r: float(r[select]))
+    return rows, sum(float(r["seconds"]) for r in rows), kept
+
+
+#: How a run's kept epoch was chosen (``train.select``), for the cards.
+KEPT = {"last": "the last", "val_loss": "lowest validation loss", "val_ade": "lowest validation top-1 ADE"}
+
+
+def _threads(cfg: dict[str, Any]) -> str:
+    """The CPU threads a run trained on (its ``train.threads``)."""
+    n = int(cfg["train"].get("threads", 2))
+    return f"{n} CPU thread{'s' if n != 1 else ''}"
+
+
+def cv_row(metrics: dict[str, Any]) -> str:
+    """The card's constant-velocity row: the better of the two variants on the same targets."""
+    return (
+        f"| constant velocity ({metrics['cv_variant']}) | {metrics['cv_ade']:.3f} | {metrics['cv_fde']:.3f} | | | | | |"
+    )
+
+
+def nomap_row(metrics: dict[str, Any]) -> str:
+    """The card's row of the same model on the same frames without their map, if it was measured."""
+    n = metrics.get("without_map")
+    if not n:
+        return ""
+    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
+    return "| DGAN without the map | " + " | ".join(f"{n[k]:.3f}" for k in keys) + " |\n"
+
+
+def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
+    """What the model declares under contract 2: its prior, its optional map and its temperature."""
+    d, t = cfg["data"], cfg["train"]
+    prior = d.get("prior", "none")
+    parts = []
+    if prior != "none":
+        window = d.get("prior_window_s", 0.0)
+        fit = d.get("prior_fit", "endpoints")
+        how = "the velocity of the last two steps"
+        if window:
+            how = {
+                "least_squares": f"the slope of a least-squares line through the last {window:g} s",
+                "quadratic": f"the slope at t_obs of a least-squares parabola through the last {window:g} s",
+            }.get(fit, f"the mean velocity over the last {window:g} s")
+        standing = d.get("prior_standing_mps", 0.0)
+        if standing:
+            how += f", standing below {standing:g} m/s"
+        parts.append(f"The network refines a constant-velocity rollout ({how}) computed by the engine.")
+    if d.get("augment_noise"):
+        parts.append(
+            f"Trained also on tracker-like copies of its windows (position noise of "
+            f"{' and '.join(x.strip() for x in d['augment_noise'].split(','))} m, "
+            f"{100 * d.get('augment_drop', 0.1):g}% of the observed steps dropped)."
+        )
+    if t.get("map_dropout", 0.0) > 0 and d.get("use_map", True) and cfg["model"].get("use_map", True):
+        parts.append(
+            f"Trained with map dropout ({t['map_dropout']:g} of the crops blanked), so it also runs without a map "
+            "(`map.optional`)."
+        )
+    heading = d.get("heading", "measured")
+    if heading != "measured":
+        parts.append(
+            "Agents' headings come from their direction of motion"
+            + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
+        )
+    parts.append(f"Mode probabilities at the temperature {metrics.get('temperature', 1.0):.2f} {fitted_where(cfg)}.")
+    return " ".join(parts)
+
+
+def calibration_folds(declared: str) -> list[str]:
+    """The validation splits of the further runs a cross-fitted temperature is fitted with, from their
+    ``train.calibration_folds`` declaration, each as ``data.val_recordings`` names it."""
+    return [f for f in declared.split(";") if f]
+
+
+def declared_folds(cfg: dict[str, Any]) -> list[str]:
+    """:func:`calibration_folds` of a run's configuration (its ``config.json``)."""
+    return calibration_folds(str(cfg["train"].get("calibration_folds", "")))
+
+
+def fitted_where(cfg: dict[str, Any], whom: str = "") -> str:
+    """Where the model's temperature was fitted, in the card's words (``whom``: " for the consensus", say)."""
+    folds = declared_folds(cfg)
+    if not folds:
+        return f"fitted{whom} on validation"
+    return (
+        f"cross-fitted{whom} on {len(folds) + 1} validation folds (its validation split and {len(folds)} more, each "
+        "held out in turn by runs of this configuration: `train.calibration_folds`)"
+    )
+
+
+def _with_sdd(cfg: dict[str, Any]) -> bool:
+    """Whether the run also trained on Stanford Drone's pedestrians (``data.extra_pedestrians``)."""
+    return "sdd" in pedestrian_sources(str(cfg["data"].get("extra_pedestrians", "")))
+
+
+def extra_data_line(cfg: dict[str, Any]) -> str:
+    """The card's words on other sources' pedestrians in training (``data.extra_pedestrians``), if any."""
+    if not _with_sdd(cfg):
+        return ""
+    stride = cfg["data"].get("extra_stride", 3)
+    anchors = "" if cfg["data"].get("extra_in_anchors", True) else " The anchors are fitted on ETH/UCY's windows alone."
+    return (
+        "\n  Also trained on the pedestrians of Stanford Drone's 30 training videos (none of its test videos), "
+        f"resampled to 0.4 s, in metres, without a map, in windows ending at steps divisible by {stride} "
+        f"(`data.extra_pedestrians`).{anchors}"
+    )
+
+
+def classification_words(cfg: dict[str, Any]) -> str:
+    """The card's words on what the classifier is taught (``train.cls_target``)."""
+    if cfg["train"].get("cls_target", "closest_anchor") == "best_mode":
+        return "hierarchical classification of the decoded mode closest to the future (`train.cls_target`)"
+    return "the paper's hierarchical classification"
+
+
+def extra_licence_line(cfg: dict[str, Any]) -> str:
+    """The card's licence words for other sources' pedestrians in training, if any."""
+    if not _with_sdd(cfg):
+        return ""
+    return "\n  Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016."
+
+
+def card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
+    rows, seconds, best = training_log(run)
+    scene = cfg["data"]["scene"]
+    others = ", ".join(s for s in ("eth", "hotel", "univ", "zara1", "zara2") if s != scene)
+    m = cfg["model"]
+    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
+    row = " | ".join(f"{metrics[k]:.3f}" for k in keys)
+    return f"""# Model card: `{name}`
+
+DGAN (Dong et al. 2020) for pedestrians, trained leave-one-scene-out on ETH/UCY: **test scene {scene}**, never seen in
+training.
+
+- **Data**: ETH/UCY in the Social-GAN layout (metres, 0.4 s steps). Trained on the train split of {others}; the best
+  epoch chosen on their val split. Each scene's semantic mask, colourised (`dgan.scenes.MASK_PALETTE`), is the raster
+  map: {cfg["data"]["map_height_px"]}×{cfg["data"]["map_width_px"]} px crops at {cfg["data"]["map_resolution_m"]} m/px,
+  heading-aligned. Use it on new frames of a scene with `dgan.scene_map("{scene}")`.{extra_data_line(cfg)}
+- **Protocol**: 8 observed steps (3.2 s), 12 predicted (4.8 s); every start frame; all agents seen at t_obs are in the
+  graph; targets are the agents present at all 20 steps, in windows with at least two of them.
+- **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP, map CNN (ResNet-style, width
+  {m["map_channels"]}), {m["gat_layers"]} GAT layers × {m["gat_heads"]} heads over the attention-zone graph (λ = 0.5)
+  with neighbour geometry on the edges, {cfg["train"]["anchors_per_class"]} k-means anchors with offset regression.
+  Loss: {classification_words(cfg)} and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
+  β = {cfg["train"]["beta"]} times the error of the most probable mode (see `docs/results.md`).
+  One class (pedestrian). {contract_line(cfg, metrics)}
+- **Training**: {len(rows)} epochs, best at epoch {best["epoch"]}, {seconds / 60:.1f} min on {_threads(cfg)}; seed
+  {cfg["train"]["seed"]}; left-right mirroring.
+- **Test metrics** (engine, world metres, {metrics["windows"]} windows, {metrics["agents"]} agents):
+
+| | top-1 ADE | top-1 FDE | minADE5 | minFDE5 | minADE20 | minFDE20 | Brier-minFDE20 |
+|---|---|---|---|---|---|---|---|
+| DGAN | {row} |
+{nomap_row(metrics)}{cv_row(metrics)}
+
+- **Licence**: the weights are derived from ETH (BIWI) and UCY data, which are for **non-commercial research use
+  only**. Cite Pellegrini et al. 2009 and Lerner et al. 2007.{extra_licence_line(cfg)}
+- **Reproduce**: `python -m training.results --train` (all five folds) or
+  `python -m training.train --config training/configs/ethucy_{scene}.toml --out runs/ethucy_{scene}`.
+"""
+
+
+MULTICLASS = {
+    "sdd": {
+        "title": "Stanford Drone (multi-class)",
+        "data": "Stanford Drone Dataset in Multiclass-SGCN's `multiclass_step10` release: all 60 videos split 30/13/17 "
+        "by video (train/val/test), box centres in pixels, one step = 10 video frames (1/3 s). Positions are "
+        "converted to metres with each video's scale (`estimated_scales.yaml`); errors are reported in **pixels**. "
+        "Labels → classes as in the paper: Pedestrian → pedestrian; Biker, Skater → cyclist; Cart, Car, Bus → "
+        "vehicle. Lengths and widths are the class defaults (the release has no boxes). The map is each video's "
+        "`reference.jpg`, box-filtered to about 0.25 m/px, cropped heading-aligned.",
+        "protocol": "8 observed steps (2.7 s), 12 predicted (4 s); windows of 20 consecutive steps, targets present "
+        "at all of them, windows with at least two targets (Multiclass-SGCN's windows).",
+        "licence": "Stanford Drone Dataset: **CC BY-NC-SA 3.0**, non-commercial. Cite Robicquet et al. 2016.",
+        "reproduce": "--train-multiclass` (this model and its per-class baselines)",
+        "scene": "`dgan demo --model sdd` (hyang video0 of the test split). On a new frame of an SDD video, pass "
+        "metres (pixels × the video's scale) and the map `dgan.scenes.sdd_raster_map(reference_jpg, scale)`",
+    },
+    "apolloscape": {
+        "title": "ApolloScape trajectory (multi-class)",
+        "data": "ApolloScape trajectory (urban traffic recorded from a vehicle, 2 Hz) with each agent's measured "
+        "class, length and width. Its heading column follows the direction of motion in some recordings and is "
+        "reversed, mirrored or turned by 90° in others, so the model takes headings from the motion (contract 5, "
+        '`heading = "motion"`). '
+        "Split by recording: test 9048, 9056, 9058, 9061; val 9049, 9060; "
+        "train the other eight. Small and big vehicles → vehicle; bicyclists and motorcyclists → cyclist; "
+        'pedestrians; "others" are neighbours only. No map: the model has no map branch.',
+        "protocol": "6 observed steps (3 s), 6 predicted (3 s); targets present at all 12 steps.",
+        "licence": "ApolloScape: **non-commercial academic research** only. Cite Ma et al. 2019 (TrafficPredict).",
+        "reproduce": "--train-multiclass` (this model and its per-class baselines)",
+        "scene": "`dgan demo --model apolloscape` (recording 9048 of the test split). Pass lengths and widths in "
+        "the frame, as in training; the model ignores given headings",
+    },
+    "hdmap": {
+        "title": "driving scenes with a vector HD map (nuScenes mini and Waymo Open Motion)",
+        "data": "nuScenes v1.0-mini (all 10 scenes, ScenarioNet conversion) and 35 Waymo Open Motion scenarios "
+        "(GPUDrive JSON and ScenarioNet), read by `dgan.datasets.hdmaps`, split by scene "
+        "(`training.data.driving.HDMAP_TEST`: "
+        "nuScenes scene-0103 and scene-1094 and six Waymo scenarios; val: scene-0553 and two Waymo scenarios; the "
+        "other 34 scenes train). Measured headings and boxes. The map branch sees each agent's heading-aligned crop of "
+        "the vector map (lane centre lines, dashed and solid lane lines, road edges, crosswalks, bike lanes, medians "
+        "and static obstacles) rasterised by the engine in the paper's colours, other agents as blue boxes.",
+        "protocol": "5 Hz: 10 observed steps (2 s), 15 predicted (3 s). The 10 Hz sources are sampled every second "
+        "step; nuScenes annotates at 2 Hz only and its test windows end at a keyframe. Targets: every agent seen "
+        "at all 25 steps, standing ones too (moving: at least 1 m from the first to the last position).",
+        "licence": "nuScenes: **CC BY-NC-SA 4.0**; Waymo Open Dataset: its own licence, **non-commercial use "
+        "only**, which also limits redistribution. Cite Caesar et al. 2020 and Ettinger et al. 2021.",
+        "reproduce": "--train-hdmap` (this model and its no-map variant)",
+        "scene": "`dgan demo --model hdmap` (Waymo scenario 2bd577a009790706 of the test split, over its map as the "
+        "engine rasterises it, and one agent's crop). Build frames with `dgan.hdmaps.read_scenario(path).frame(step, "
+        "10, every=2)` for 10 Hz sources, with a `dgan.VectorMap`",
+    },
+}
+
+
+def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
+    rows, seconds, best = training_log(run)
+    d = MULTICLASS[cfg["data"]["dataset"]]
+    m = cfg["model"]
+    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20", "cv_ade", "cv_fde")
+    groups = [("all", metrics)] + [(c, r) for c, r in metrics["by_class"].items()]
+    groups += [(m, r) for m, r in metrics.get("by_motion", {}).items() if r["agents"]]
+    groups += [(f"label {k}", r) for k, r in metrics["by_label"].items() if k.lower() not in metrics["by_class"]]
+    table = "\n".join(f"| {g} | {r['agents']} | " + " | ".join(f"{r[k]:.2f}" for k in keys) + " |" for g, r in groups)
+    map_line = (
+        f"map CNN (width {m['map_channels']}) over {cfg['data']['map_height_px']}×{cfg['data']['map_width_px']} px "
+        f"crops at {cfg['data']['map_resolution_m']} m/px, "
+        if m["use_map"] and cfg["data"]["use_map"] and cfg["data"]["dataset"] != "apolloscape"
+        else ""
+    )
+    return f"""# Model card: `{name}`
+
+DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on {d["title"]}, with
+{cfg["train"]["anchors_per_class"]} k-means anchors per class and the hierarchical class × anchor probability.
+
+- **Data**: {d["data"]}
+- **Protocol**: {d["protocol"]}
+- **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP (speed, acceleration, yaw rate,
+  direction of motion, length, width, one-hot class), {map_line}{m["gat_layers"]} GAT layers × {m["gat_heads"]} heads
+  over the attention-zone graph (λ = 0.5) with neighbour geometry on the edges. Loss: {classification_words(cfg)} and
+  closest-anchor regression (α = {cfg["train"]["alpha"]}) plus β = {cfg["train"]["beta"]} times the error of the most
+  probable mode. {contract_line(cfg, metrics)}
+- **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}
+  ({KEPT[cfg["train"].get("select", "val_loss")]}),
+  {seconds / 60:.1f} min on {_threads(cfg)}; seed {cfg["train"]["seed"]}; left-right mirroring.
+- **Test metrics** (engine, {metrics["unit"]}, {metrics["windows"]} windows; most probable class correct for
+  {100 * metrics["class_accuracy"]:.1f}% of agents, since the class is an input as in the paper; mode-probability
+  calibration error {metrics["calibration"]["ece"]:.3f}, see `docs/results.md`):
+
+| agents | n | top-1 ADE | top-1 FDE | minADE5 | minFDE5 | minADE20 | minFDE20 | Brier-minFDE20 | CV ADE | CV FDE |
+|---|---|---|---|---|---|---|---|---|---|---|
+{table}
+
+- **Try it**: {d["scene"]}.
+- **Licence**: {d["licence"]} The weights are derived from this data: non-commercial research use only.
+- **Reproduce**: `python -m training.results {d["reproduce"]}, or
+  `python -m training.train --config training/configs/{cfg["data"]["dataset"]}.toml --out runs/{name}`.
+"""
+
+
+def ensemble_line(
+    runs: list[Path], predictor: dgan.Predictor, cfg: dict[str, Any], scale: list[float] | None = None
+) -> str:
+    """The card's line for a model that is the consensus of several runs (``scale``: its top-mode scales)."""
+    seeds = [json.loads((r / "config.json").read_text())["config"]["train"]["seed"] for r in runs]
+    scaled = [f"{c} {s:g}" for c, s in zip(predictor.classes, scale or [], strict=False) if s != 1.0]
+    scale_words = (
+        f" The most probable mode keeps this share of its refinement of the prior, fitted on validation "
+        f"(`training.ensemble.fit_top_scale`): {', '.join(scaled)}; every other class keeps all of it."
+        if scaled
+        else ""
+    )
+    return (
+        f"- **Ensemble**: the consensus of {len(runs)} runs of this configuration, seeds "
+        f"{', '.join(map(str, seeds))} (`training.ensemble`): its most probable mode (of the agent's most probable "
+        f"class) is the mean of the runs' most probable modes, its other modes are seed {seeds[0]}'s. Weights "
+        f"stored as float16; temperature {float(predictor.contract.get('temperature', 1.0)):.3f}, "
+        f"{fitted_where(cfg, ' for the consensus')}. The training line above is seed {seeds[0]}'s run. A prediction "
+        f"runs all {len(runs)} networks.{scale_words}\n"
+    )

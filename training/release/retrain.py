@@ -1,0 +1,89 @@
+"""Retraining the bundled models from their configurations, one run per seed (``python -m training.results
+--train...``): the ETH/UCY folds, the multi-class models with their per-class baselines, the HD-map model with and
+without its map."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from training.calibrate import calibrate_checkpoint
+from training.config import Config
+from training.ensemble import ensemble_checkpoint, fit_top_scale
+from training.release.bundle import bundle, model_checkpoint, slim_checkpoint
+from training.release.cards import calibration_folds
+from training.reports import hdmap, multiclass
+from training.reports.ethucy import SCENES
+from training.train import main as train
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def train_multiclass(root: Path) -> None:
+    """Trains each multi-class model and its per-class baselines, bundles the multi-class models and keeps the
+    baselines' checkpoints (``training/checkpoints/baselines``). A baseline has as many runs as its multi-class
+    model (:data:`ENSEMBLE_SEEDS`), kept as their consensus when there are several, so the two are compared alike."""
+    from training.ensemble import fit_top_scale
+    from training.release.bundle import bundle
+
+    for ds in multiclass.MULTICLASS_DATASETS:
+        toml = ROOT / "training" / "configs" / f"{ds}.toml"
+        seeds = ENSEMBLE_SEEDS.get(ds, (0,))
+        members = _seed_runs(toml, root, seeds, ds)
+        folds = [
+            _seed_runs(toml, root, seeds, f"{ds}_val{fold.replace(',', '_')}", "--set", f"data.val_recordings={fold}")
+            for fold in calibration_folds(Config.load(toml).train.calibration_folds)
+        ]
+        bundle(members, ds, root, folds)
+        for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines
+            runs = _seed_runs(toml, root, seeds, f"{ds}-{cls}", "--set", f"data.target_class={cls}")
+            path = model_checkpoint(runs, multiclass.BASELINES / f"{ds}-{cls}.pt")
+            if len(seeds) > 1:
+                fit_top_scale(path, root)
+                calibrate_checkpoint(path, root)
+
+
+def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: str) -> list[Path]:
+    """One training run of the configuration ``toml`` (with ``args``) per seed, under ``runs/<tag>_s<seed>``."""
+
+    out = []
+    for seed in seeds:
+        run = ROOT / "runs" / f"{tag}_s{seed}"
+        config = ["--config", str(toml), "--set", f"data.root={root}", "--set", f"train.seed={seed}"]
+        train([*config, "--out", str(run), *args, "--no-export"])
+        out.append(run)
+    return out
+
+
+#: The seeds of each bundled ensemble's members (``training.ensemble``), chosen on validation (`docs/seed_study.json`).
+#: HD map: one network since the standing agents, the robust prior and the noisy copies (issue 26: one network per
+#: model); its single run was below the earlier five-run consensus on validation, all targets (0.476 against 0.576 m).
+#: ETH/UCY: three runs were 3.3–4.4% below their
+#: members on every fold's validation split, five runs 0.6–1.4% below three on every fold's (rule set before the
+#: runs: lower on average and on four folds of five). ApolloScape: three runs, 2.8% below its members on validation.
+ENSEMBLE_SEEDS = {"hdmap": (0,), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1, 2)}
+
+
+def train_hdmap(root: Path) -> None:
+    """Trains the HD-map model with and without its map, one run per seed of :data:`ENSEMBLE_SEEDS`; bundles the first
+    configuration's consensus as ``hdmap`` and keeps the second's as ``training/checkpoints/baselines/hdmap-nomap.pt``.
+    """
+    from training.release.bundle import bundle
+
+    runs = {
+        config: _seed_runs(ROOT / "training" / "configs" / f"{config}.toml", root, ENSEMBLE_SEEDS["hdmap"], config)
+        for config in ("hdmap", "hdmap_nomap")
+    }
+    bundle(runs["hdmap"], "hdmap", root)
+    if len(runs["hdmap_nomap"]) > 1:
+        ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)
+        fit_top_scale(hdmap.NOMAP, root)
+    else:
+        slim_checkpoint(runs["hdmap_nomap"][0], hdmap.NOMAP)
+    calibrate_checkpoint(hdmap.NOMAP, root)
+
+
+def train_ethucy(root: Path) -> None:
+    """Trains and bundles the five ETH/UCY folds, one run per seed of :data:`ENSEMBLE_SEEDS`."""
+    for s in SCENES:
+        toml = ROOT / "training" / "configs" / f"ethucy_{s}.toml"
+        bundle(_seed_runs(toml, root, ENSEMBLE_SEEDS["ethucy"], f"ethucy_{s}"), s, root)

@@ -1,0 +1,103 @@
+"""One step of training: the network on a batch and its loss (with a distillation teacher, ``train.distill``), and the
+validation figures an epoch is chosen by."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+import dgan
+from training.config import Config
+from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
+from training.data.windows import Windows
+from training.export import load_checkpoint
+from training.losses import decode_torch, dgan_loss
+from training.modules.dgan import DGAN
+
+
+@dataclass(frozen=True)
+class Teacher:
+    """A trained model whose most probable mode is a second target of the student's loss (``train.distill``)."""
+
+    model: torch.nn.Module
+    anchors: torch.Tensor
+    class_of: torch.Tensor
+    temperature: float
+
+    @classmethod
+    def load(cls, path: str, spec: dgan.InputSpec) -> Teacher:
+        model, tspec, anchors, class_of, _, temperature = load_checkpoint(Path(path))
+        if tspec.to_json() != spec.to_json():
+            raise ValueError(f"train.distill: {path} takes other inputs than this configuration ({tspec.to_json()})")
+        return cls(model.eval(), torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long(), temperature)
+
+    @torch.no_grad()
+    def top_residual(self, b: dict[str, torch.Tensor]) -> torch.Tensor:
+        """``(targets, T_f, 2)`` the teacher's most probable mode of each target, as a residual from the prior."""
+        cl, al, off = self.model(*forward_inputs(b))
+        t = b["target"]
+        modes, _ = decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, self.temperature)
+        return modes[:, 0]
+
+
+def forward_loss(
+    net: torch.nn.Module,
+    b: dict[str, torch.Tensor],
+    anchors: torch.Tensor,
+    class_of: torch.Tensor,
+    cfg: Config,
+    weight_of_class: torch.Tensor | None = None,
+    teacher: Teacher | None = None,
+) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+    """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior),
+    each weighted by its class's ``weight_of_class`` if given (``train.class_balance``); also the targets' outputs.
+    With a ``teacher``, the same loss towards its most probable mode is added, weighing ``train.distill_weight``."""
+    cl, al, off = net(*forward_inputs(b))
+    t = b["target"]
+    outs = (cl[t], al[t], off[t])
+    residual = b["future"][t] - b["prior"][t]
+    classes = b["class_index"][t]
+    weights = None if weight_of_class is None else weight_of_class[classes]
+    tr = cfg.train
+
+    def loss_to(target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+        return dgan_loss(
+            *outs, target, classes, anchors, class_of, tr.alpha, tr.beta, weights, tr.cls_target, tr.anchor_pool
+        )
+
+    loss, parts = loss_to(residual)
+    if teacher is not None:
+        distilled, _ = loss_to(teacher.top_residual(b))
+        loss = loss + tr.distill_weight * distilled
+    return loss, parts, outs
+
+
+@torch.no_grad()
+def validate(
+    model: DGAN, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor, cfg: Config
+) -> dict[str, float]:
+    model.eval()
+    losses, ade1, fde1, ade20, fde20, n = [], [], [], [], [], 0
+    keep = windows_with_targets(w)
+    for start in range(0, len(keep), 64):
+        b = prepared_batch(w, keep[start : start + 64], spec)
+        t = b["target"]
+        loss, _, (cl, al, off) = forward_loss(model, b, anchors, class_of, cfg)
+        traj, _ = decode_torch(cl, al, off, anchors, class_of, b["prior"][t])
+        d = torch.linalg.norm(traj - b["future"][t].unsqueeze(1), dim=-1)  # (n, K, T)
+        losses.append(float(loss) * int(t.sum()))
+        ade1.append(d[:, 0].mean(-1).sum())
+        fde1.append(d[:, 0, -1].sum())
+        ade20.append(d[:, :20].mean(-1).min(1).values.sum())
+        fde20.append(d[:, :20, -1].min(1).values.sum())
+        n += int(t.sum())
+    model.train()
+    return {
+        "val_loss": sum(losses) / n,
+        "val_ade": float(sum(ade1)) / n,
+        "val_fde": float(sum(fde1)) / n,
+        "val_min_ade20": float(sum(ade20)) / n,
+        "val_min_fde20": float(sum(fde20)) / n,
+    }

@@ -1,0 +1,2 @@
+"""Studies behind the choices in ``docs/results.md``: calibration, the kinematic prior, seeds
+(``python -m training.studies.<name>``)."""
