@@ -16,9 +16,10 @@ median over ``--repeat`` runs after warm-up:
   (`benches/flops.py`), and ``GFLOP/s`` of the bare session: those operations over its time, against the same run's
   single-thread float32 sgemm (numpy, 1024², printed first).
 
-Then the throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of
-`predict`. The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark,
-not a test; no figure here is asserted anywhere.
+Then one `predict` on 1 and 2 intra-op threads (also as multiples of the run's single-thread 512³ matmul), the
+throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of `predict`.
+The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark, not a test;
+no figure here is asserted anywhere.
 """
 
 from __future__ import annotations
@@ -179,6 +180,32 @@ def throughput(name: str, n: int, calls: int, rounds: int = 5) -> None:
     print(f"| {name} | {n} | {one:.0f} | {two:.0f} | {two / one:.2f}× |", flush=True)
 
 
+def latency(name: str, agents: list[int], repeat: int, matmul_ms: float) -> None:
+    """One `predict` on 1 and on 2 intra-op threads (``Predictor(threads=...)``), and each as a multiple of the same
+    run's single-thread 512³ float32 matrix product, so that the figure travels between machines."""
+    frame = scene_for(dgan.Predictor(name, sessions=1).spec).frame
+    by_threads = {t: dgan.Predictor(name, threads=t, sessions=1) for t in (1, 2) if t <= (os.cpu_count() or 1)}
+    for n in agents:
+        f = tiled(frame, n)
+        ms = {t: median_ms(partial(p.predict, f), repeat) for t, p in by_threads.items()}
+        two = ms.get(2, float("nan"))
+        cells = [
+            f"{ms[1]:.2f}",
+            f"{two:.2f}",
+            f"{two / ms[1]:.2f}",
+            f"{ms[1] / matmul_ms:.2f}",
+            f"{two / matmul_ms:.2f}",
+        ]
+        print(f"| {name} | {n} | " + " | ".join(cells) + " |", flush=True)
+
+
+def latency_table(models: list[str], repeat: int, matmul_ms: float) -> None:
+    print("\n| model | N | predict ms, 1 thread | 2 threads | 2 / 1 | 1 thread / 512³ matmul | 2 threads / matmul |")
+    print("|---|---|---|---|---|---|---|")
+    for name in models:
+        latency(name, [32, 256], repeat, matmul_ms)
+
+
 def real_frames(predictor: dgan.Predictor, count: int) -> list[dgan.Frame]:
     """``count`` real frames of the bundled scene at successive times (cycling when the scene is shorter)."""
     first = scene_for(predictor.spec)
@@ -218,12 +245,19 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=30)
     ap.add_argument("--calls", type=int, default=200, help="predictions per throughput measurement")
     ap.add_argument("--flops", action="store_true", help="only the operations per agent (no timing)")
+    ap.add_argument("--latency", action="store_true", help="only one predict on 1 and 2 threads")
     a = ap.parse_args()
     if a.flops:
         flops_table(a.models, a.agents)
         return
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
     print(f"single-thread sgemm (numpy float32, 1024²): {sgemm_gflops():.1f} GFLOP/s")
+    matmul_ms = 2 * 512**3 / sgemm_gflops(512, 15) / 1e6
+    print(f"single-thread 512³ float32 matmul: {matmul_ms:.2f} ms")
+    if a.latency:
+        latency_table(a.models, a.repeat, matmul_ms)
+        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+        return
     print(
         "\n| model | N | E | predict ms | preprocess ms | bare ORT ms | torch ms | torch pipeline ms | vs torch "
         "| MFLOP/agent | bare ORT GFLOP/s |"
@@ -231,6 +265,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in a.models:
         bench_model(name, a.agents, a.repeat)
+    latency_table(a.models, a.repeat, matmul_ms)
     print("\n| model | N | 1 thread /s | 2 threads /s | 2 vs 1 |")
     print("|---|---|---|---|---|")
     for name in a.models:
