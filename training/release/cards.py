@@ -262,7 +262,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
   probable mode. {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}
   ({KEPT[cfg["train"].get("select", "val_loss")]}),
-  {seconds / 60:.1f} min on {_threads(cfg)}; seed {cfg["train"]["seed"]}; left-right mirroring.
+  {seconds / 60:.1f} min on {_threads(cfg)}; seed {cfg["train"]["seed"]}; left-right mirroring.{distill_words(cfg)}
 - **Test metrics** (engine, {metrics["unit"]}, {metrics["windows"]} windows; most probable class correct for
   {100 * metrics["class_accuracy"]:.1f}% of agents, since the class is an input as in the paper; mode-probability
   calibration error {metrics["calibration"]["ece"]:.3f}, see `docs/results.md`):
@@ -276,6 +276,18 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 - **Reproduce**: `python -m training.results {d["reproduce"]}, or
   `python -m training.train --config training/configs/{cfg["data"]["dataset"]}.toml --out runs/{name}`.
 """
+
+
+def distill_words(cfg: dict[str, Any]) -> str:
+    """The card's words for a student (``train.distill``): one network that learned from a consensus."""
+    teacher = cfg["train"].get("distill", "")
+    if not teacher:
+        return ""
+    return (
+        f"\n  **Distilled**: one network that also learned the most probable mode of a consensus of runs "
+        f"(`training/checkpoints/teachers/{cfg['data']['dataset']}.pt`, weight {cfg['train']['distill_weight']:g}), "
+        "at one network's cost."
+    )
 
 
 def ensemble_line(

@@ -4,6 +4,7 @@ without its map."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from training.calibrate import calibrate_checkpoint
@@ -22,9 +23,6 @@ def train_multiclass(root: Path) -> None:
     """Trains each multi-class model and its per-class baselines, bundles the multi-class models and keeps the
     baselines' checkpoints (``training/checkpoints/baselines``). A baseline has as many runs as its multi-class
     model (:data:`ENSEMBLE_SEEDS`), kept as their consensus when there are several, so the two are compared alike."""
-    from training.ensemble import fit_top_scale
-    from training.release.bundle import bundle
-
     for ds in multiclass.MULTICLASS_DATASETS:
         toml = ROOT / "training" / "configs" / f"{ds}.toml"
         seeds = ENSEMBLE_SEEDS.get(ds, (0,))
@@ -33,6 +31,8 @@ def train_multiclass(root: Path) -> None:
             _seed_runs(toml, root, seeds, f"{ds}_val{fold.replace(',', '_')}", "--set", f"data.val_recordings={fold}")
             for fold in calibration_folds(Config.load(toml).train.calibration_folds)
         ]
+        if ds in DISTILLED:
+            members, folds = _distilled(ds, toml, root, members, folds)
         bundle(members, ds, root, folds)
         for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines
             runs = _seed_runs(toml, root, seeds, f"{ds}-{cls}", "--set", f"data.target_class={cls}")
@@ -40,6 +40,38 @@ def train_multiclass(root: Path) -> None:
             if len(seeds) > 1:
                 fit_top_scale(path, root)
                 calibrate_checkpoint(path, root)
+
+
+#: The multi-class models bundled as one network distilled from their members' consensus (issue 26), with the
+#: epoch chosen by validation top-1 ADE (``train.select``): ApolloScape's student was within 1% of the consensus on
+#: validation and on the test recordings (1.997/3.636 against 1.998/3.631 m; 1.460/2.650 against 1.462/2.648).
+DISTILLED = {"apolloscape": ("--set", "train.distill_weight=1.0", "--set", "train.select=val_ade")}
+#: The consensus each distilled model learned from (its members, top-mode scale and temperature fitted as bundling
+#: fits them), kept so that a student can be trained again without its members.
+TEACHERS = ROOT / "training" / "checkpoints" / "teachers"
+
+
+def _distilled(
+    ds: str, toml: Path, root: Path, members: list[Path], folds: list[list[Path]]
+) -> tuple[list[Path], list[list[Path]]]:
+    """The student of the members' consensus, and for each calibration fold the student of that fold's consensus
+    (no top-mode scale or temperature: the fold stands in for the model before calibration)."""
+    teacher = model_checkpoint(members, TEACHERS / f"{ds}.pt")
+    fit_top_scale(teacher, root)
+    calibrate_checkpoint(teacher, root)
+    student = _seed_runs(toml, root, (0,), f"{ds}_student", "--set", f"train.distill={teacher}", *DISTILLED[ds])
+    fold_students = []
+    for i, fold in enumerate(folds):
+        fold_teacher = model_checkpoint(fold, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")
+        args = ("--set", f"train.distill={fold_teacher}", *DISTILLED[ds])
+        fold_students.append(_seed_runs(toml, root, (0,), f"{fold[0].name}_student", *_fold_args(fold[0]), *args))
+    return student, fold_students
+
+
+def _fold_args(run: Path) -> tuple[str, ...]:
+    """The ``--set`` of a fold run's held-out validation recordings."""
+    held = json.loads((run / "config.json").read_text())["config"]["data"]["val_recordings"]
+    return ("--set", f"data.val_recordings={held}")
 
 
 def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: str) -> list[Path]:

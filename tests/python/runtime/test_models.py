@@ -97,8 +97,13 @@ def test_a_bundled_model_beats_standing_still(name: str) -> None:
 
 #: Bundled models that still move a perfectly still lone agent of some class by more than 0.05 m (issue 25: not yet
 #: retrained with the standing prior; `hdmap` moved a still vehicle 1.12 m before it was); strict, so the mark must go
-#: when they are.
-STILL_AGENT_FAILS = {("apolloscape", "vehicle"): 0.08, ("apolloscape", "pedestrian"): 0.14}
+#: when they are. `apolloscape` as one distilled network (2026-12-02): its cyclist 0.053 m, which the consensus's
+#: top-mode scale of 0.5 had kept under 0.05.
+STILL_AGENT_FAILS = {
+    ("apolloscape", "vehicle"): 0.08,
+    ("apolloscape", "cyclist"): 0.05,
+    ("apolloscape", "pedestrian"): 0.11,
+}
 
 
 @pytest.mark.parametrize(
