@@ -11,9 +11,10 @@ import numpy.typing as npt
 from dgan import contract
 
 MIN_MOVING_SPEED = 0.2
-CLASS_CODES = {"vehicle": 0, "cyclist": 1, "pedestrian": 2}
-DEFAULT_LENGTH = {"vehicle": 4.5, "cyclist": 1.8, "pedestrian": 0.5}
-DEFAULT_WIDTH = {"vehicle": 1.9, "cyclist": 0.7, "pedestrian": 0.5}
+#: The classes' codes and default sizes are the engine's (the contract's text names them; dgan.contract holds them).
+CLASS_CODES = {c: i for i, c in enumerate(contract.CLASSES)}
+DEFAULT_LENGTH = {c: size[0] for c, size in contract.CLASS_SIZES_M.items()}
+DEFAULT_WIDTH = {c: size[1] for c, size in contract.CLASS_SIZES_M.items()}
 
 Arr = npt.NDArray[Any]
 

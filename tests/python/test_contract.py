@@ -57,10 +57,12 @@ def literal_copies(path: Path) -> list[str]:
     text = path.read_text()
     found = []
     for node in ast.walk(ast.parse(text)):
+        # Lists of names, not mappings keyed by them (a class's colour in a picture is the picture's own knowledge).
         if not isinstance(node, (ast.Tuple, ast.List, ast.Set)):
             continue
-        items = [e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)]
-        if len(items) != len(node.elts) or len(items) < 2 or len(set(items)) != len(items):
+        elts = list(node.elts)
+        items = [e.value for e in elts if isinstance(e, ast.Constant) and isinstance(e.value, str)]
+        if len(items) != len(elts) or len(items) < 2 or len(set(items)) != len(items):
             continue  # per-agent data (a class for each agent, repeated) is not a copy of a list
         line = text.splitlines()[node.lineno - 1]
         if "# not a contract copy" in line:  # a source's own vocabulary, or what one map is expected to hold
