@@ -183,8 +183,8 @@ def throughput(name: str, n: int, calls: int, rounds: int = 5) -> None:
 def latency(name: str, agents: list[int], repeat: int, matmul_ms: float) -> None:
     """One `predict` on 1 and on 2 intra-op threads (``Predictor(threads=...)``), and each as a multiple of the same
     run's single-thread 512³ float32 matrix product, so that the figure travels between machines."""
-    frame = scene_for(dgan.Predictor(name, sessions=1).spec).frame
     by_threads = {t: dgan.Predictor(name, threads=t, sessions=1) for t in (1, 2) if t <= (os.cpu_count() or 1)}
+    frame = scene_for(by_threads[1].spec).frame
     for n in agents:
         f = tiled(frame, n)
         ms = {t: median_ms(partial(p.predict, f), repeat) for t, p in by_threads.items()}

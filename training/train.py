@@ -188,13 +188,11 @@ def main(argv: list[str] | None = None) -> Path:
     bars = show and sys.stderr.isatty()
     ckpt = torch.load(out / "last.pt", weights_only=False) if args.resume and (out / "last.pt").is_file() else None
     train, val, anchors_np, class_of_np = training_data(cfg, spec, ckpt, bars)
-    anchors = torch.from_numpy(anchors_np)
-    class_of = torch.from_numpy(class_of_np).long()
     weight_of_class = None
     if cfg.train.class_balance > 0:
         train_classes = torch.from_numpy(train.class_index[train.target]).long()
         weight_of_class = class_weights(train_classes, len(spec.classes), cfg.train.class_balance)
-    model = build_model(cfg, spec, len(anchors))
+    model = build_model(cfg, spec, len(anchors_np))
     teacher = Teacher.load(cfg.train.distill, spec) if cfg.train.distill else None
     opt, sched = optimiser(cfg, model)
     start_epoch, best = resume(ckpt, model, opt, sched)
@@ -206,7 +204,7 @@ def main(argv: list[str] | None = None) -> Path:
         )
         print(
             f"{run_name(cfg)}: {train.num_windows} train windows ({train.num_targets} targets), "
-            f"{val.num_windows} val windows ({val.num_targets} targets); {len(anchors)} anchors; "
+            f"{val.num_windows} val windows ({val.num_targets} targets); {len(anchors_np)} anchors; "
             f"{sum(p.numel() for p in model.parameters()):,} parameters; {world} process(es)"
         )
     last_epoch = min(cfg.train.epochs, args.stop_after) if args.stop_after else cfg.train.epochs
@@ -216,7 +214,7 @@ def main(argv: list[str] | None = None) -> Path:
         dist.barrier()
         dist.destroy_process_group()
     if show and last_epoch == cfg.train.epochs:
-        finish(out, cfg, model, val, spec, anchors, class_of, export=not args.no_export)
+        finish(out, cfg, model, val, spec, run.anchors, run.class_of, export=not args.no_export)
     return out
 
 
@@ -239,14 +237,23 @@ class Run:
     weight_of_class: torch.Tensor | None
     teacher: Teacher | None
 
+    @property
+    def anchors(self) -> torch.Tensor:
+        """``(K, T_f, 2)`` the anchors, sharing the array's memory."""
+        return torch.from_numpy(self.anchors_np)
+
+    @property
+    def class_of(self) -> torch.Tensor:
+        """``(K,)`` the class of each anchor."""
+        return torch.from_numpy(self.class_of_np).long()
+
 
 def run_epochs(run: Run, start_epoch: int, last_epoch: int, best: float, rank: int, world: int, bars: bool) -> None:
     """The epochs ``start_epoch..last_epoch``: train, then (on rank 0) validate, checkpoint and log each one."""
     from tqdm import tqdm
 
     cfg, spec, model, opt, sched, out = run.cfg, run.spec, run.model, run.opt, run.sched, run.out
-    anchors, class_of = torch.from_numpy(run.anchors_np), torch.from_numpy(run.class_of_np).long()
-    anchors_np, class_of_np, val = run.anchors_np, run.class_of_np, run.val
+    anchors, class_of, val = run.anchors, run.class_of, run.val
     show = rank == 0
     rng = np.random.default_rng(cfg.train.seed)
     windows = windows_with_targets(run.train)
@@ -271,7 +278,7 @@ def run_epochs(run: Run, start_epoch: int, last_epoch: int, best: float, rank: i
         best = row[key] if key is not None and improved else best
         state = {
             **{"model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict()},
-            **{"epoch": epoch, "best": best, "anchors": anchors_np, "class_of": class_of_np},
+            **{"epoch": epoch, "best": best, "anchors": run.anchors_np, "class_of": run.class_of_np},
             **{"config": asdict(cfg), "rng": torch.get_rng_state()},
         }
         save_atomic(state, out / "last.pt")

@@ -21,7 +21,6 @@ __all__ = [
     "__version__",
     "attention_graph",
     "available_execution_providers",
-    "check_headings",
     "frame_from_rows",
     "init_onnxruntime",
     "kinematic_prior",
@@ -164,7 +163,6 @@ def frame_from_rows(
 ) -> tuple[Frame, float | None, bool]: ...
 def preprocess(frame: Frame, spec_json: str) -> dict[str, Any]: ...
 def validate_spec(json: str) -> str: ...
-def check_headings(frame: Frame, dt_s: float) -> tuple[int, float, bool, bool] | None: ...
 def kinematic_prior(
     trajectory: npt.NDArray[np.float32],
     trajectory_mask: npt.NDArray[np.float32],

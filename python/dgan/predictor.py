@@ -166,9 +166,8 @@ class Predictor:
         """
         m = self._modes if modes is None else self._check_modes(modes)
         frame = self._known(frame, unknown_classes)
-        check = not self._heading_warned and self._spec.heading == "measured"
         try:
-            native = self._predictor.predict(_native(frame), m, check)
+            native = self._predictor.predict(_native(frame), m, self._checks_headings)
         except UnknownClassError as e:
             raise UnknownClassError(f"{e}; unknown_classes='ignore' predicts only the agents of its classes") from None
         self._warn_headings(native.headings)
@@ -182,6 +181,12 @@ class Predictor:
             return frame
         keep = np.fromiter((c in self.classes for c in frame.classes), dtype=bool, count=len(frame))
         return frame if keep.all() else frame.select(keep)
+
+    @property
+    def _checks_headings(self) -> bool:
+        """Whether the engine should check the frame's headings within the call: this model takes measured headings
+        as they are and has not warned yet (:meth:`_warn_headings`)."""
+        return not self._heading_warned and self._spec.heading == "measured"
 
     def _warn_headings(self, check: tuple[int, float, bool, bool] | None) -> None:
         """Warns once (:class:`~dgan.exceptions.HeadingWarning`) if the frame's measured headings, which this model
@@ -220,9 +225,8 @@ class Predictor:
         if isinstance(frames, Frame) or not isinstance(frames, Sequence):
             raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {typename(frames)}")
         frames = [self._known(f, unknown_classes) for f in frames]
-        check = not self._heading_warned and self._spec.heading == "measured"
         natives = [_native(f, f"frame {i} of the batch") for i, f in enumerate(frames)]
-        outs = self._predictor.predict_batch(natives, m, check)
+        outs = self._predictor.predict_batch(natives, m, self._checks_headings)
         for o in outs:
             self._warn_headings(o.headings)
         dt_s = self._spec.dt_s

@@ -55,22 +55,21 @@ def literal_copies(path: Path) -> list[str]:
     """Tuple, list or set literals of three or more distinct strings that all belong to one of the engine's lists
     (or all of a shorter one), and a state width typed as a number."""
     text = path.read_text()
+    lines = text.splitlines()
     found = []
     for node in ast.walk(ast.parse(text)):
         # Lists of names, not mappings keyed by them (a class's colour in a picture is the picture's own knowledge).
         if not isinstance(node, (ast.Tuple, ast.List, ast.Set)):
             continue
-        elts = list(node.elts)
-        items = [e.value for e in elts if isinstance(e, ast.Constant) and isinstance(e.value, str)]
-        if len(items) != len(elts) or len(items) < 2 or len(set(items)) != len(items):
+        items = [e.value for e in node.elts if isinstance(e, ast.Constant) and isinstance(e.value, str)]
+        if len(items) != len(node.elts) or len(items) < 2 or len(set(items)) != len(items):
             continue  # per-agent data (a class for each agent, repeated) is not a copy of a list
-        line = text.splitlines()[node.lineno - 1]
-        if "# not a contract copy" in line:  # a source's own vocabulary, or what one map is expected to hold
-            continue
+        if "# not a contract copy" in lines[node.lineno - 1]:
+            continue  # a source's own vocabulary, or what one map is expected to hold
         for what, owned in OWNED.items():
             if set(items) <= set(owned) and (len(items) >= 3 or set(items) == set(owned)):
                 found.append(f"{path.relative_to(ROOT)}:{node.lineno}: a copy of the engine's {what} {items}")
-    for i, line in enumerate(text.splitlines(), 1):
+    for i, line in enumerate(lines, 1):
         if re.search(r"\b7 \+ len\(", line):
             found.append(f"{path.relative_to(ROOT)}:{i}: the state width typed as 7 + len(...)")
     return found

@@ -4,7 +4,6 @@ without its map."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from training.calibrate import calibrate_checkpoint
@@ -27,12 +26,13 @@ def train_multiclass(root: Path) -> None:
         toml = ROOT / "training" / "configs" / f"{ds}.toml"
         seeds = ENSEMBLE_SEEDS.get(ds, (0,))
         members = _seed_runs(toml, root, seeds, ds)
+        held = calibration_folds(Config.load(toml).train.calibration_folds)
         folds = [
             _seed_runs(toml, root, seeds, f"{ds}_val{fold.replace(',', '_')}", "--set", f"data.val_recordings={fold}")
-            for fold in calibration_folds(Config.load(toml).train.calibration_folds)
+            for fold in held
         ]
         if ds in DISTILLED:
-            members, folds = _distilled(ds, toml, root, members, folds)
+            members, folds = _distilled(ds, toml, root, members, list(zip(held, folds, strict=True)))
         bundle(members, ds, root, folds)
         for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines
             runs = _seed_runs(toml, root, seeds, f"{ds}-{cls}", "--set", f"data.target_class={cls}")
@@ -52,26 +52,21 @@ TEACHERS = ROOT / "training" / "checkpoints" / "teachers"
 
 
 def _distilled(
-    ds: str, toml: Path, root: Path, members: list[Path], folds: list[list[Path]]
+    ds: str, toml: Path, root: Path, members: list[Path], folds: list[tuple[str, list[Path]]]
 ) -> tuple[list[Path], list[list[Path]]]:
-    """The student of the members' consensus, and for each calibration fold the student of that fold's consensus
-    (no top-mode scale or temperature: the fold stands in for the model before calibration)."""
+    """The student of the members' consensus, and for each calibration fold (its held-out recordings and runs) the
+    student of that fold's consensus (no top-mode scale or temperature: the fold stands in for the model before
+    calibration)."""
     teacher = model_checkpoint(members, TEACHERS / f"{ds}.pt")
     fit_top_scale(teacher, root)
     calibrate_checkpoint(teacher, root)
     student = _seed_runs(toml, root, (0,), f"{ds}_student", "--set", f"train.distill={teacher}", *DISTILLED[ds])
     fold_students = []
-    for i, fold in enumerate(folds):
-        fold_teacher = model_checkpoint(fold, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")
-        args = ("--set", f"train.distill={fold_teacher}", *DISTILLED[ds])
-        fold_students.append(_seed_runs(toml, root, (0,), f"{fold[0].name}_student", *_fold_args(fold[0]), *args))
+    for i, (recordings, runs) in enumerate(folds):
+        fold_teacher = model_checkpoint(runs, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")
+        args = ("--set", f"data.val_recordings={recordings}", "--set", f"train.distill={fold_teacher}")
+        fold_students.append(_seed_runs(toml, root, (0,), f"{runs[0].name}_student", *args, *DISTILLED[ds]))
     return student, fold_students
-
-
-def _fold_args(run: Path) -> tuple[str, ...]:
-    """The ``--set`` of a fold run's held-out validation recordings."""
-    held = json.loads((run / "config.json").read_text())["config"]["data"]["val_recordings"]
-    return ("--set", f"data.val_recordings={held}")
 
 
 def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: str) -> list[Path]:

@@ -372,6 +372,9 @@ impl VectorMap {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use ndarray::Array3;
+
     #[test]
     fn the_palette_holds_every_kind_once_in_drawing_order() {
         use MapElementKind::*;
@@ -384,9 +387,6 @@ mod tests {
         let regions = PALETTE.iter().take_while(|s| s.polygon).count();
         assert!(PALETTE[regions..].iter().all(|s| !s.polygon), "regions are drawn before lines");
     }
-
-    use super::*;
-    use ndarray::Array3;
 
     #[test]
     fn dense_lines_are_drawn_through_few_vertices_within_tolerance() {

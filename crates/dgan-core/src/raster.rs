@@ -32,7 +32,7 @@ pub fn colour(kind: MapElementKind) -> Rgb {
 }
 
 /// Drawn width in metres of each polyline kind (at least one pixel is drawn; [`crate::map::PALETTE`]).
-pub fn line_width_m(kind: MapElementKind) -> f64 {
+fn line_width_m(kind: MapElementKind) -> f64 {
     kind.style().width_m
 }
 

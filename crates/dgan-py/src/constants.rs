@@ -3,7 +3,8 @@
 //! columns, tensor names, versions).
 
 use dgan_core::contract as c;
-use dgan_core::{raster, AgentClass, MapElementKind};
+use dgan_core::map::PALETTE;
+use dgan_core::{raster, AgentClass};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -21,12 +22,12 @@ pub(crate) fn contract(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
         sizes.set_item(class.name(), (class.default_length_m(), class.default_width_m()))?;
     }
     d.set_item("class_sizes_m", sizes)?;
-    let kinds = MapElementKind::ALL.map(|kind| -> PyResult<Bound<'_, PyDict>> {
+    let kinds = PALETTE.map(|style| -> PyResult<Bound<'_, PyDict>> {
         let k = PyDict::new(py);
-        k.set_item("name", kind.name())?;
-        k.set_item("polygon", kind.is_polygon())?;
-        k.set_item("colour", rgb(raster::colour(kind)))?;
-        k.set_item("width_m", (!kind.is_polygon()).then(|| raster::line_width_m(kind)))?;
+        k.set_item("name", style.name)?;
+        k.set_item("polygon", style.polygon)?;
+        k.set_item("colour", rgb(style.colour))?;
+        k.set_item("width_m", (!style.polygon).then_some(style.width_m))?;
         Ok(k)
     });
     d.set_item("map_kinds", kinds.into_iter().collect::<PyResult<Vec<_>>>()?)?;

@@ -37,12 +37,14 @@ pub struct PyPrediction {
     /// `(E, 2)` undirected attention-zone edges.
     #[pyo3(get)]
     edges: Py<PyArray2<i64>>,
-    /// The frame's measured headings against its agents' motion, when `predict` was asked to check them
-    /// (`check_headings`' tuple; None when not asked or when the frame has no measured heading).
+    /// The frame's measured headings against its agents' motion, when `predict` was asked to check them.
     #[pyo3(get)]
-    headings: Option<(usize, f64, bool, bool)>,
+    headings: Headings,
 }
 
+/// How well a frame's measured headings follow its agents' motion (`dgan_core::state::check_headings`): `(moving
+/// agents, median error in degrees, some |heading| > 2π, whether they most likely follow another convention)`, or
+/// `None` when not asked or when the frame has no measured heading.
 type Headings = Option<(usize, f64, bool, bool)>;
 
 fn native_prediction(py: Python<'_>, p: Prediction, headings: Headings) -> PyPrediction {

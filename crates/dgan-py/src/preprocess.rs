@@ -74,12 +74,3 @@ pub fn kinematic_prior<'py>(
     let prior = py.detach(|| spec.prior.rollout(t, m, s, spec.dt_s, spec.t_f)).py()?;
     Ok(prior.into_pyarray(py))
 }
-
-/// How well a frame's measured headings follow its agents' motion at `dt_s` seconds a step
-/// (`dgan_core::state::check_headings`): `(moving agents, median error in degrees, some |heading| > 2π, whether they
-/// most likely follow another convention)`, or `None` when the frame has no measured heading.
-#[pyfunction]
-pub fn check_headings(frame: &crate::frame::PyFrame, dt_s: f64) -> Option<(usize, f64, bool, bool)> {
-    dgan_core::state::check_headings(&frame.inner, dt_s)
-        .map(|c| (c.moving, c.median_error_deg, c.beyond_two_pi, c.disagrees()))
-}
