@@ -9,7 +9,7 @@ import numpy.typing as npt
 
 import dgan
 from training.config import Config
-from training.data.windows import Windows
+from training.data.arrays import Windows
 
 Arr = npt.NDArray[Any]
 

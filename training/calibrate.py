@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 import dgan
-from training.data.windows import Windows
+from training.data.arrays import Windows
 from training.losses import mode_probabilities
 from training.metrics import worst_gap
 
@@ -142,13 +142,13 @@ def validation_logits(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """:func:`best_mode_logits` of the checkpoint at ``path`` on its configuration's validation split (under
     ``data_root`` if given), and the class of each of its anchors."""
-    from training.data.batches import load_windows
+    from training.data.splits import split_windows
     from training.export import load_checkpoint
 
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
-    val = load_windows(cfg, spec, "val", progress)
+    val = split_windows(cfg, spec, "val", progress)
     cl, al, best = best_mode_logits(model, val, spec, torch.from_numpy(anchors).float())
     return cl, al, best, torch.from_numpy(class_of).long()
 

@@ -85,7 +85,8 @@ def top_mode_errors(
     of :data:`TOP_SCALES` ``(N, S)`` (:func:`scaled_errors`), its class index ``(N,)``, and the model's classes."""
     from dataclasses import replace
 
-    from training.data.batches import forward_inputs, load_windows, prepared_batch, windows_with_targets
+    from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
+    from training.data.splits import split_windows
     from training.losses import mode_probabilities
 
     model, spec, anchors_np, class_of_np, cfg, temperature = load_checkpoint(path)
@@ -94,7 +95,7 @@ def top_mode_errors(
     model.top_scale.fill_(1.0)
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
-    w = load_windows(cfg, spec, "val", progress)
+    w = split_windows(cfg, spec, "val", progress)
     anchors, class_of = torch.from_numpy(anchors_np).float(), torch.from_numpy(class_of_np).long()
     errors, classes = [], []
     keep = windows_with_targets(w)

@@ -10,8 +10,8 @@ import torch
 
 import dgan
 from training.config import Config
+from training.data.arrays import Windows
 from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
-from training.data.windows import Windows
 from training.export import load_checkpoint
 from training.losses import decode_torch, dgan_loss
 from training.modules.dgan import DGAN

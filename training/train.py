@@ -32,14 +32,9 @@ from training.build import build_model, input_spec, run_name
 from training.calibrate import fit_temperature
 from training.checkpoint import save_atomic
 from training.config import Config
-from training.data.batches import (
-    load_window_parts,
-    load_windows,
-    prepared_batch,
-    restrict_targets,
-    windows_with_targets,
-)
-from training.data.windows import Windows, concat_windows
+from training.data.arrays import Windows
+from training.data.batches import prepared_batch, windows_with_targets
+from training.data.splits import training_splits
 from training.export import export_checkpoint
 from training.losses import check_anchor_pool, check_cls_target, class_weights
 from training.modules.dgan import DGAN
@@ -292,17 +287,15 @@ def training_data(
 ) -> tuple[Windows, Windows, np.ndarray, np.ndarray]:
     """The training and validation windows (restricted to ``data.target_class`` if set) and the anchors with the
     class of each: a resumed run's ``ckpt`` keeps its own, a new run fits them (:func:`anchor_windows`)."""
-    parts = load_window_parts(cfg, spec, "train", bars)
-    train = concat_windows(parts)
-    val = load_windows(cfg, spec, "val", bars)
+    data = training_splits(cfg, spec, bars)
     if ckpt is not None:
         anchors, class_of = ckpt["anchors"], ckpt["class_of"]
     else:
-        anchors, class_of = fit_anchors(cfg, anchor_windows(cfg, parts, train), spec, len(spec.classes))
-    if cfg.data.target_class:
-        restrict_targets(train, spec, cfg.data.target_class)
-        restrict_targets(val, spec, cfg.data.target_class)
-    return train, val, anchors, class_of
+        anchors, class_of = fit_anchors(cfg, anchor_windows(cfg, data.parts, data.train), spec, len(spec.classes))
+    if data.target_class is not None:  # a per-class run: only that class's agents stay targets, after the anchors
+        for w in (data.train, data.val):
+            w.target &= w.class_index == data.target_class
+    return data.train, data.val, anchors, class_of
 
 
 def finish(

@@ -36,7 +36,7 @@ from dgan.scenes import APOLLO_TYPES, SDD_LABEL_CLASS
 from training.data.apolloscape import apollo_files, apollo_recording
 from training.data.driving import argoverse2_files, hdmap_files, hdmap_recordings
 from training.data.ethucy import ethucy_recording, split_files
-from training.data.recording import DatasetInfo, Recording
+from training.data.recording import DatasetInfo, Located, Recording, WindowSet
 from training.data.sdd import sdd_files, sdd_recording
 
 DATASETS: dict[str, DatasetInfo] = {
@@ -125,17 +125,19 @@ def source_files(dataset: str, root: Path, split: str, fold: str = "") -> list[P
     return SOURCES[dataset].files(root, split, fold)
 
 
+def locate(part: WindowSet, root: Path, dt_s: float, with_map: bool) -> Located:
+    """``part``'s files under ``root`` and a reader of its recordings (at the model's time base ``dt_s`` for other
+    sources' pedestrians; without maps unless ``with_map``). Refuses an unknown dataset, split or source first."""
+    if part.pedestrians:
+        files = source_files(part.dataset, root, "train")
+        return Located(part, files, DATASETS["ethucy"], lambda: pedestrian_recordings(part.dataset, root, dt_s))
+    files = source_files(part.dataset, root, part.split, part.fold)
+    info = DATASETS[part.dataset]
+    return Located(part, files, info, lambda: recordings(part.dataset, root, part.split, part.fold, with_map))
+
+
 #: Sources whose pedestrians can join the ETH/UCY training windows (``data.extra_pedestrians``).
 PEDESTRIAN_SOURCES = ("sdd",)
-
-
-def pedestrian_sources(names: str) -> list[str]:
-    """The sources named by ``data.extra_pedestrians`` (comma-separated; empty for none), each checked."""
-    sources = [s.strip() for s in names.split(",") if s.strip()]
-    unknown = [s for s in sources if s not in PEDESTRIAN_SOURCES]
-    if unknown:
-        raise ValueError(f"unknown pedestrian source(s) {unknown}; known: {', '.join(PEDESTRIAN_SOURCES)}")
-    return sources
 
 
 def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
@@ -176,7 +178,8 @@ def pedestrian_recordings(source: str, root: Path, dt_s: float) -> list[Recordin
     """The pedestrians of ``source``'s training split, in metres, resampled to ``dt_s`` and labelled with ETH/UCY's one
     label, without their maps (a model whose map is optional sees a blank crop for them, as under map dropout). The
     source's other agents are left out: the ETH/UCY models know only pedestrians."""
-    pedestrian_sources(source)
+    if source not in PEDESTRIAN_SOURCES:
+        raise ValueError(f"unknown pedestrian source {source!r}; known: {', '.join(PEDESTRIAN_SOURCES)}")
     info = DATASETS[source]
     pedestrian = info.labels.index("Pedestrian")
     out = []

@@ -1,9 +1,12 @@
 """What every dataset reader gives: a :class:`Recording` (rows in world metres with per-row labels) of a dataset
-whose time base, protocol and labels are its :class:`DatasetInfo`."""
+whose time base, protocol and labels are its :class:`DatasetInfo`; and what a training split is made of: the
+:class:`WindowSet` parts a configuration asks for, each :class:`Located` by the registry before it is cached."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -62,3 +65,30 @@ class Recording:
             if v is not None:
                 setattr(rec, k, v[order])
         return rec
+
+
+@dataclass(frozen=True)
+class WindowSet:
+    """One part of a split as the window cache keys it: ``split`` of ``dataset`` (``fold``: the held-out ETH/UCY
+    scene, or ApolloScape's validation recordings) with windows ending every ``stride`` steps, its observed histories
+    corrupted as a tracker would with ``noise = (sigma_m, drop)``; or, with ``pedestrians``, the training pedestrians
+    of the source ``dataset`` for an ETH/UCY model."""
+
+    dataset: str
+    split: str
+    fold: str = ""
+    stride: int = 1
+    noise: tuple[float, float] = (0.0, 0.0)
+    pedestrians: bool = False
+
+
+@dataclass(frozen=True)
+class Located:
+    """A :class:`WindowSet` found on disk: its source ``files`` (what its cache key holds), the dataset whose
+    protocol its windows follow, and ``read``, which reads its recordings (called only when the windows are not
+    cached)."""
+
+    part: WindowSet
+    files: list[Path]
+    info: DatasetInfo
+    read: Callable[[], list[Recording]]

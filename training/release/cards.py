@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import dgan
-from training.data.datasets import pedestrian_sources
+from training.data.splits import pedestrian_sources
 
 
 def training_log(run: Path) -> tuple[list[dict[str, str]], float, dict[str, str]]:

@@ -41,7 +41,9 @@ import dgan
 from training.config import DataConfig
 from training.data.augment import tracker_noise
 from training.data.datasets import DATASETS, recordings
-from training.data.windows import cached_windows, iter_windows
+from training.data.recording import WindowSet
+from training.data.splits import window_set
+from training.data.windows import iter_windows
 from training.ensemble import TOP_SCALES, top_mode_errors
 
 Arr = npt.NDArray[np.float64]
@@ -76,7 +78,7 @@ def study(root: Path) -> dict[str, dict[str, dict[str, tuple[float, float]]]]:
     for model, dataset in MODELS:
         spec = dgan.Predictor(model).spec
         cache = Path(DataConfig().cache_dir).expanduser()
-        w = cached_windows(dataset, root, "val", spec, cache, progress=False)
+        w = window_set(WindowSet(dataset, "val"), root, spec, cache)
         t = w.target
         traj, mask, state, future = w.trajectory[t], w.trajectory_mask[t], w.state[t], w.future[t]
         cv = np.asarray(dgan.kinematic_prior(traj, mask, state, spec), dtype=np.float64)

@@ -73,7 +73,7 @@ def test_the_robust_prior_through_the_engine() -> None:
 
 
 def test_augment_levels_are_checked() -> None:
-    from training.data.batches import augment_sigmas
+    from training.data.splits import augment_sigmas
 
     assert augment_sigmas("") == []
     assert augment_sigmas("0.1, 0.3") == [0.1, 0.3]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pickle
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -170,20 +171,32 @@ def test_bad_dataset_files_are_clear_errors(tmp_path: Path) -> None:
         sdd_raster_map(ROOT / "python/dgan/data/sdd/hyang_0/reference.jpg", 0.0)
 
 
-def test_a_per_class_run_needs_a_known_class() -> None:
-    import torch  # noqa: F401  (training.train needs torch)
-
+def test_a_per_class_run_needs_a_known_class_and_keeps_its_targets_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("torch")
+    from training import train
     from training.build import input_spec
     from training.config import Config
-    from training.data.batches import restrict_targets
+    from training.data.splits import TrainingSplits, target_class_index
 
-    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml")
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", {"data.target_class": "cyclist"})
     spec = input_spec(cfg)
-    w = type("W", (), {"target": np.ones(3, bool), "class_index": np.array([0, 1, 2])})()
-    restrict_targets(w, spec, "cyclist")
-    assert w.target.tolist() == [False, True, False]
+    assert target_class_index("", spec) is None
+    assert target_class_index("cyclist", spec) == list(spec.classes).index("cyclist")
     with pytest.raises(ValueError, match="'bus' is not among the classes"):
-        restrict_targets(w, spec, "bus")
+        target_class_index("bus", spec)
+
+    def windows() -> Any:
+        return type("W", (), {"target": np.ones(3, bool), "class_index": np.arange(3)})()
+
+    def splits(*_: object) -> TrainingSplits:
+        train, val = windows(), windows()
+        return TrainingSplits([train], train, val, target_class_index("cyclist", spec))
+
+    monkeypatch.setattr(train, "training_splits", splits)
+    kept = {"anchors": np.zeros((1, spec.t_f, 2)), "class_of": np.zeros(1, np.int64)}
+    tr, val, _, _ = train.training_data(cfg, spec, kept, False)
+    cyclist = np.arange(3) == list(spec.classes).index("cyclist")
+    assert tr.target.tolist() == val.target.tolist() == cyclist.tolist()
 
 
 def test_hdmap_splits_by_scene_and_samples_5_hz() -> None:
@@ -278,12 +291,12 @@ def test_other_sources_pedestrians_join_the_ethucy_time_base() -> None:
     a = rec.agent == rec.agent[0]
     gaps = np.diff(rec.step[a]) == 1
     assert (np.linalg.norm(np.diff(rec.xy[a], axis=0), axis=1)[gaps] < 5.0).all()
-    with pytest.raises(ValueError, match="unknown pedestrian source"):
+    with pytest.raises(ValueError, match="unknown pedestrian source 'apolloscape'"):
         pedestrian_recordings("apolloscape", root, 0.4)
 
 
 def test_extra_pedestrian_sources_are_parsed_and_checked() -> None:
-    from training.data.datasets import pedestrian_sources
+    from training.data.splits import pedestrian_sources
 
     assert pedestrian_sources("") == []
     assert pedestrian_sources(" sdd , ") == ["sdd"]

@@ -234,13 +234,12 @@ def test_fresh_exports_match_pytorch(config: str, variant: dict[str, object], tm
 
 @pytest.mark.slow
 def test_ddp_on_two_cpu_processes_and_resume(tmp_path: Path) -> None:
-    from training.data.windows import cached_windows
+    from training.data.splits import training_splits
 
     root = data_root()
     cfg = Config.load(CONFIG)
-    cache = Path(cfg.data.cache_dir).expanduser()
-    for split in ("train", "val"):  # build the cache once, before two processes read it
-        cached_windows("ethucy", root, split, input_spec(cfg), cache, fold="zara1", progress=False)
+    # Build the cache once, before two processes read it.
+    training_splits(replace(cfg, data=replace(cfg.data, root=str(root))), input_spec(cfg), progress=False)
     out = tmp_path / "run"
     common = [
         "-m",
@@ -305,13 +304,15 @@ def test_a_checkpoint_save_stopped_midway_keeps_the_previous_one(
 
 
 def test_concatenated_windows_batch_as_their_parts() -> None:
-    from training.data.windows import cached_windows, concat_windows
+    from training.data.arrays import concat_windows
+    from training.data.recording import WindowSet
+    from training.data.splits import window_set
 
     root = data_root()
     cfg = Config.load(CONFIG)
     spec = input_spec(cfg)
     cache = Path(cfg.data.cache_dir).expanduser()
-    val = cached_windows("ethucy", root, "val", spec, cache, fold="zara1", progress=False)
+    val = window_set(WindowSet("ethucy", "val", fold="zara1"), root, spec, cache)
     both = concat_windows([val, val])
     assert both.num_windows == 2 * val.num_windows
     assert both.files == val.files * 2
@@ -329,13 +330,15 @@ def test_concatenated_windows_batch_as_their_parts() -> None:
 @pytest.mark.slow
 def test_anchors_can_leave_the_extra_windows_out() -> None:
     from training.anchors import anchor_windows, fit_anchors
-    from training.data.windows import cached_windows, concat_windows
+    from training.data.arrays import concat_windows
+    from training.data.recording import WindowSet
+    from training.data.splits import window_set
 
     root = data_root()
     cfg = Config.load(CONFIG, {"train.anchors_per_class": 4})
     spec = input_spec(cfg)
     cache = Path(cfg.data.cache_dir).expanduser()
-    parts = [cached_windows("ethucy", root, "val", spec, cache, fold=f, progress=False) for f in ("zara1", "eth")]
+    parts = [window_set(WindowSet("ethucy", "val", fold=f), root, spec, cache) for f in ("zara1", "eth")]
     both = concat_windows(parts)
     own = replace(cfg, data=replace(cfg.data, extra_in_anchors=False))
     assert anchor_windows(own, parts, both) is parts[0]
@@ -377,14 +380,14 @@ def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
         input_spec(Config.load(CONFIG, {"data.dataset": "kitti"}))
     with pytest.raises(ValueError, match="3 futures cannot make 20 anchors"):
         kmeans_anchors(np.zeros((3, 12, 2)), 20)
-    from training.data.batches import load_windows
+    from training.data.splits import split_windows
 
     sdd = Config.load(ROOT / "training" / "configs" / "sdd.toml", {"data.extra_pedestrians": "sdd"})
     with pytest.raises(ValueError, match="for the ETH/UCY models"):
-        load_windows(replace(sdd, data=replace(sdd.data, root=str(data_root()))), input_spec(sdd), "train", False)
+        split_windows(replace(sdd, data=replace(sdd.data, root=str(data_root()))), input_spec(sdd), "train", False)
     sdd_val = Config.load(ROOT / "training" / "configs" / "sdd.toml", {"data.val_recordings": "9050,9055"})
     with pytest.raises(ValueError, match="val_recordings is for ApolloScape"):
-        load_windows(
+        split_windows(
             replace(sdd_val, data=replace(sdd_val.data, root=str(data_root()))), input_spec(sdd_val), "val", False
         )
 

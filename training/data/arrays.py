@@ -1,0 +1,122 @@
+"""Preprocessed windows as the network takes them, concatenated into arrays (:class:`Windows`, built by
+:mod:`training.data.windows` and cached by :mod:`training.data.cache`): batches of windows as one graph, mirroring, and
+several window sets as one (:func:`concat_windows`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Final
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan.contract import EDGE_FEATURES, EDGE_MIRRORED, STATE_FEATURES, STATE_MIRRORED
+
+Arr = npt.NDArray[Any]
+
+
+@dataclass
+class Windows:
+    """Preprocessed windows, concatenated: agents of window w are rows ``agent_ptr[w]:agent_ptr[w + 1]`` and its
+    directed edges ``edge_ptr[w]:edge_ptr[w + 1]`` (edge indices local to the window)."""
+
+    trajectory: Arr  # (A, T_obs, 2) f32
+    trajectory_mask: Arr  # (A, T_obs) f32
+    state: Arr  # (A, S) f32
+    edge_index: Arr  # (Ed, 2) i64, window-local
+    edge_features: Arr  # (Ed, 6) f32
+    map: Arr | None  # (A, 3, H, W) u8
+    future: Arr  # (A, T_f, 2) f32, agent frame (valid for targets)
+    target: Arr  # (A,) bool
+    class_index: Arr  # (A,) i64 into the spec's classes
+    origin: Arr  # (A, 2) f64 world
+    heading: Arr  # (A,) f64 world
+    agent_ptr: Arr  # (W + 1,)
+    edge_ptr: Arr  # (W + 1,)
+    window_file: Arr  # (W,) index into files
+    window_frame: Arr  # (W,) t_obs frame id
+    files: list[str]
+
+    @property
+    def num_windows(self) -> int:
+        return len(self.agent_ptr) - 1
+
+    @property
+    def num_targets(self) -> int:
+        return int(self.target.sum())
+
+    def batch(self, windows: Sequence[int] | Arr, flip: Arr | None = None) -> dict[str, Arr]:
+        """Concatenates windows into one graph; ``flip`` (per window, bool) mirrors left and right."""
+        w = np.asarray(windows)
+        n_agents = self.agent_ptr[w + 1] - self.agent_ptr[w]
+        n_edges = self.edge_ptr[w + 1] - self.edge_ptr[w]
+        a_idx = np.concatenate([np.arange(self.agent_ptr[i], self.agent_ptr[i + 1]) for i in w])
+        e_idx = np.concatenate([np.arange(self.edge_ptr[i], self.edge_ptr[i + 1]) for i in w])
+        # Each window's edge indices shift by the agents of the windows before it in the batch.
+        shift = np.repeat(np.cumsum(n_agents) - n_agents, n_edges)
+        out = {
+            "trajectory": self.trajectory[a_idx].copy(),
+            "trajectory_mask": self.trajectory_mask[a_idx],
+            "state": self.state[a_idx].copy(),
+            "edge_index": self.edge_index[e_idx] + shift[:, None],
+            "edge_features": self.edge_features[e_idx].copy(),
+            "future": self.future[a_idx].copy(),
+            "target": self.target[a_idx],
+            "class_index": self.class_index[a_idx],
+        }
+        if self.map is not None:
+            out["map"] = self.map[a_idx].astype(np.float32) / 255.0
+        if flip is not None and flip.any():
+            mirror(out, np.repeat(flip, n_agents), np.repeat(flip, n_edges))
+        return out
+
+
+#: The columns of the state and edge features that mirroring negates (the engine's, ``dgan.contract``).
+STATE_MIRROR_COLUMNS: Final = tuple(STATE_FEATURES.index(c) for c in STATE_MIRRORED)
+EDGE_MIRROR_COLUMNS: Final = tuple(EDGE_FEATURES.index(c) for c in EDGE_MIRRORED)
+
+
+def mirror(batch: dict[str, Arr], agents: Arr, edges: Arr) -> None:
+    """Mirrors the selected agents' inputs and futures across their x axis (y → -y), in place.
+
+    Valid because every input is agent-centric: y coordinates, lateral velocities, yaw rates and the sines of
+    relative headings change sign; map crops flip left-right about the agent's column (the crop must be symmetric
+    about it: ``width_px == 2 * agent_col + 1``).
+    """
+    batch["trajectory"][agents, :, 1] *= -1
+    batch["future"][agents, :, 1] *= -1
+    for col in STATE_MIRROR_COLUMNS:
+        batch["state"][agents, col] *= -1
+    for col in EDGE_MIRROR_COLUMNS:
+        batch["edge_features"][edges, col] *= -1
+    if "map" in batch:
+        batch["map"][agents] = batch["map"][agents][..., ::-1]
+
+
+def concat_windows(parts: Sequence[Windows]) -> Windows:
+    """Several window sets as one: agent and edge pointers and file indices shifted, files listed in order (one set
+    is returned as it is). Their maps must all be present or all absent."""
+    if not parts:
+        raise ValueError("concat_windows needs at least one window set")
+    if len(parts) == 1:
+        return parts[0]
+    if len({p.map is None for p in parts}) > 1:
+        raise ValueError("window sets with and without map crops cannot be concatenated")
+    agent_ptr, edge_ptr, window_file = [np.zeros(1, np.int64)], [np.zeros(1, np.int64)], []
+    agents = edges = files = 0
+    for p in parts:
+        agent_ptr.append(p.agent_ptr[1:] + agents)
+        edge_ptr.append(p.edge_ptr[1:] + edges)
+        window_file.append(p.window_file + files)
+        agents, edges, files = agents + int(p.agent_ptr[-1]), edges + int(p.edge_ptr[-1]), files + len(p.files)
+    rows = [*("trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "future", "target")]
+    rows += ["class_index", "origin", "heading", "window_frame"]
+    return Windows(
+        map=None if parts[0].map is None else np.concatenate([p.map for p in parts if p.map is not None]),
+        agent_ptr=np.concatenate(agent_ptr),
+        edge_ptr=np.concatenate(edge_ptr),
+        window_file=np.concatenate(window_file),
+        files=[f for p in parts for f in p.files],
+        **{k: np.concatenate([getattr(p, k) for p in parts]) for k in rows},
+    )

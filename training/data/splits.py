@@ -1,0 +1,113 @@
+"""A configuration's training and validation windows, in one pass down the data layers.
+
+The ``data`` section is read here once, into the :class:`~training.data.recording.WindowSet` parts of each split
+(the dataset's own windows; for training, copies with tracker-like histories and other sources' pedestrians) and
+checked before anything is read. The registry then locates each part's files and hands down a reader
+(:func:`~training.data.datasets.locate`), the cache reads or builds each part's windows (:func:`~training.data.cache
+.cached`, which calls the window builder and the tracker noise), and the parts are concatenated
+(:func:`~training.data.arrays.concat_windows`). No module below is entered twice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import dgan
+from training.config import Config, DataConfig
+from training.data.arrays import Windows, concat_windows
+from training.data.cache import cached
+from training.data.datasets import PEDESTRIAN_SOURCES, locate
+from training.data.recording import Located, WindowSet
+
+
+@dataclass
+class TrainingSplits:
+    """What a training run trains and validates on. ``parts`` are the training split's window sets (the dataset's
+    own first) and ``train`` their concatenation; ``target_class`` is the class index of ``data.target_class``
+    (None: every class), which the trainer applies once the anchors are fitted."""
+
+    parts: list[Windows]
+    train: Windows
+    val: Windows
+    target_class: int | None
+
+
+def training_splits(cfg: Config, spec: dgan.InputSpec, progress: bool) -> TrainingSplits:
+    """The training parts and validation windows of ``cfg`` (each read from the window cache or built into it)."""
+    d = cfg.data
+    target = target_class_index(d.target_class, spec)
+    train_sets, val_sets = window_sets(d, "train"), window_sets(d, "val")
+    root, cache = Path(d.root).expanduser(), Path(d.cache_dir).expanduser()
+    found = located(train_sets + val_sets, root, spec)
+    windows = cached(found, spec, cache, progress)
+    parts, val = windows[: len(train_sets)], windows[len(train_sets) :]
+    return TrainingSplits(parts, concat_windows(parts), concat_windows(val), target)
+
+
+def split_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> Windows:
+    """One split's windows of ``cfg``, its parts concatenated (calibration and the ensemble's top-mode scales read
+    ``val``)."""
+    d = cfg.data
+    root, cache = Path(d.root).expanduser(), Path(d.cache_dir).expanduser()
+    return concat_windows(cached(located(window_sets(d, split), root, spec), spec, cache, progress))
+
+
+def window_set(part: WindowSet, root: Path, spec: dgan.InputSpec, cache_dir: Path, progress: bool = False) -> Windows:
+    """The windows of one part under ``root`` (studies and tests that need one set without a configuration)."""
+    return cached(located([part], root, spec), spec, cache_dir, progress)[0]
+
+
+def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
+    """The parts of ``split`` that ``d`` asks for: the dataset's own windows; for training, then one noisy copy per
+    level of ``data.augment_noise`` and the pedestrians of each ``data.extra_pedestrians`` source."""
+    fold = {"ethucy": d.scene, "apolloscape": d.val_recordings}.get(d.dataset, "")
+    if d.val_recordings and d.dataset != "apolloscape":
+        raise ValueError(f"data.val_recordings is for ApolloScape, not {d.dataset!r}")
+    sources = pedestrian_sources(d.extra_pedestrians)
+    if sources and d.dataset != "ethucy":
+        raise ValueError(f"data.extra_pedestrians is for the ETH/UCY models, not {d.dataset!r}")
+    own = WindowSet(d.dataset, split, fold, d.window_stride)
+    if split != "train":
+        return [own]
+    noisy = [replace(own, noise=(sigma, d.augment_drop)) for sigma in augment_sigmas(d.augment_noise)]
+    extra = [WindowSet(s, "train", stride=d.extra_stride, pedestrians=True) for s in sources]
+    return [own, *noisy, *extra]
+
+
+def augment_sigmas(declared: str) -> list[float]:
+    """The noise levels of ``data.augment_noise`` (comma-separated metres; "" = none)."""
+    try:
+        sigmas = [float(x) for x in declared.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"data.augment_noise must be comma-separated metres, got {declared!r}") from None
+    if any(not (0.0 < x <= 5.0) for x in sigmas):
+        raise ValueError(f"data.augment_noise must hold noise levels in (0, 5] metres, got {declared!r}")
+    return sigmas
+
+
+def pedestrian_sources(names: str) -> list[str]:
+    """The sources named by ``data.extra_pedestrians`` (comma-separated; empty for none), each checked."""
+    sources = [s.strip() for s in names.split(",") if s.strip()]
+    unknown = [s for s in sources if s not in PEDESTRIAN_SOURCES]
+    if unknown:
+        raise ValueError(f"unknown pedestrian source(s) {unknown}; known: {', '.join(PEDESTRIAN_SOURCES)}")
+    return sources
+
+
+def target_class_index(target_class: str, spec: dgan.InputSpec) -> int | None:
+    """The class index of ``data.target_class`` among the model's classes ("" = every class: None)."""
+    if not target_class:
+        return None
+    if target_class not in spec.classes:
+        raise ValueError(f"data.target_class {target_class!r} is not among the classes {spec.classes}")
+    return list(spec.classes).index(target_class)
+
+
+def located(sets: list[WindowSet], root: Path, spec: dgan.InputSpec) -> list[Located]:
+    """Each of ``sets`` located under ``root`` by the registry, with a reader at ``spec``'s time base (maps read
+    only for a model that takes them)."""
+    found = []
+    for part in sets:
+        found.append(locate(part, root, spec.dt_s, spec.map is not None))
+    return found
