@@ -142,6 +142,7 @@ def extra_licence_line(cfg: dict[str, Any]) -> str:
 
 def card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
     rows, seconds, best = training_log(run)
+    kept, distilled = KEPT[cfg["train"].get("select", "val_loss")], distill_words(name, cfg)
     scene = cfg["data"]["scene"]
     others = ", ".join(s for s in ("eth", "hotel", "univ", "zara1", "zara2") if s != scene)
     m = cfg["model"]
@@ -164,8 +165,8 @@ training.
   Loss: {classification_words(cfg)} and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
   β = {cfg["train"]["beta"]} times the error of the most probable mode (see `docs/results.md`).
   One class (pedestrian). {contract_line(cfg, metrics)}
-- **Training**: {len(rows)} epochs, best at epoch {best["epoch"]}, {seconds / 60:.1f} min on {_threads(cfg)}; seed
-  {cfg["train"]["seed"]}; left-right mirroring.
+- **Training**: {len(rows)} epochs, weights of epoch {best["epoch"]} ({kept}), {seconds / 60:.1f} min on
+  {_threads(cfg)}; seed {cfg["train"]["seed"]}; left-right mirroring.{distilled}
 - **Test metrics** (engine, world metres, {metrics["windows"]} windows, {metrics["agents"]} agents):
 
 | | top-1 ADE | top-1 FDE | minADE5 | minFDE5 | minADE20 | minFDE20 | Brier-minFDE20 |
@@ -235,6 +236,7 @@ MULTICLASS = {
 
 def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
     rows, seconds, best = training_log(run)
+    kept, distilled = KEPT[cfg["train"].get("select", "val_loss")], distill_words(name, cfg)
     d = MULTICLASS[cfg["data"]["dataset"]]
     m = cfg["model"]
     keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20", "cv_ade", "cv_fde")
@@ -261,8 +263,7 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
   closest-anchor regression (α = {cfg["train"]["alpha"]}) plus β = {cfg["train"]["beta"]} times the error of the most
   probable mode. {contract_line(cfg, metrics)}
 - **Training**: {len(rows)} epochs on every {cfg["data"]["window_stride"]}. window, weights of epoch {best["epoch"]}
-  ({KEPT[cfg["train"].get("select", "val_loss")]}),
-  {seconds / 60:.1f} min on {_threads(cfg)}; seed {cfg["train"]["seed"]}; left-right mirroring.{distill_words(cfg)}
+  ({kept}), {seconds / 60:.1f} min on {_threads(cfg)}; seed {cfg["train"]["seed"]}; left-right mirroring.{distilled}
 - **Test metrics** (engine, {metrics["unit"]}, {metrics["windows"]} windows; most probable class correct for
   {100 * metrics["class_accuracy"]:.1f}% of agents, since the class is an input as in the paper; mode-probability
   calibration error {metrics["calibration"]["ece"]:.3f}, see `docs/results.md`):
@@ -278,14 +279,13 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 """
 
 
-def distill_words(cfg: dict[str, Any]) -> str:
+def distill_words(name: str, cfg: dict[str, Any]) -> str:
     """The card's words for a student (``train.distill``): one network that learned from a consensus."""
-    teacher = cfg["train"].get("distill", "")
-    if not teacher:
+    if not cfg["train"].get("distill", ""):
         return ""
     return (
         f"\n  **Distilled**: one network that also learned the most probable mode of a consensus of runs "
-        f"(`training/checkpoints/teachers/{cfg['data']['dataset']}.pt`, weight {cfg['train']['distill_weight']:g}), "
+        f"(`training/checkpoints/teachers/{name}.pt`, weight {cfg['train']['distill_weight']:g}), "
         "at one network's cost."
     )
 
