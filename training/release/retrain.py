@@ -121,7 +121,7 @@ def train_hdmap(root: Path) -> None:
 #: The ETH/UCY folds bundled as one network distilled from their five-run consensus (issue 26), each within 1% of it
 #: on validation and on its test scene: univ (validation top-1 0.315/0.672 m against 0.314/0.673) and zara1 (its
 #: run's last epoch, 0.00005 m from the epoch that ``train.select = "val_ade"`` keeps: 0.379/0.820 against
-#: 0.378/0.820). eth's student was ahead on validation but 1.7%/1.0% behind on its test scene (its configuration).
+#: 0.378/0.820). The students of eth and hotel were not within 1% on their test scenes (their configurations).
 DISTILLED_SCENES = ("univ", "zara1")
 
 
