@@ -38,9 +38,7 @@ def training_splits(cfg: Config, spec: dgan.InputSpec, progress: bool) -> Traini
     d = cfg.data
     target = target_class_index(d.target_class, spec)
     train_sets, val_sets = window_sets(d, "train"), window_sets(d, "val")
-    root, cache = Path(d.root).expanduser(), Path(d.cache_dir).expanduser()
-    found = located(train_sets + val_sets, root, spec)
-    windows = cached(found, spec, cache, progress)
+    windows = set_windows(d, train_sets + val_sets, spec, progress)
     parts, val = windows[: len(train_sets)], windows[len(train_sets) :]
     return TrainingSplits(parts, concat_windows(parts), concat_windows(val), target)
 
@@ -48,9 +46,14 @@ def training_splits(cfg: Config, spec: dgan.InputSpec, progress: bool) -> Traini
 def split_windows(cfg: Config, spec: dgan.InputSpec, split: str, progress: bool) -> Windows:
     """One split's windows of ``cfg``, its parts concatenated (calibration and the ensemble's top-mode scales read
     ``val``)."""
-    d = cfg.data
+    return concat_windows(set_windows(cfg.data, window_sets(cfg.data, split), spec, progress))
+
+
+def set_windows(d: DataConfig, sets: list[WindowSet], spec: dgan.InputSpec, progress: bool) -> list[Windows]:
+    """The windows of each of ``sets``, located under ``data.root`` and cached under ``data.cache_dir``."""
     root, cache = Path(d.root).expanduser(), Path(d.cache_dir).expanduser()
-    return concat_windows(cached(located(window_sets(d, split), root, spec), spec, cache, progress))
+    found = located(sets, root, spec)
+    return cached(found, spec, cache, progress)
 
 
 def window_set(part: WindowSet, root: Path, spec: dgan.InputSpec, cache_dir: Path, progress: bool = False) -> Windows:
