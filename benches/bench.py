@@ -12,6 +12,9 @@ median over ``--repeat`` runs after warm-up:
 - ``torch``: the training code's model from the same checkpoint (`training/checkpoints/<name>.pt`), eager, one
   thread, on the same tensors, plus `decode_torch`; ``torch pipeline`` adds the engine's preprocessing to it;
 - ``vs torch``: torch pipeline / predict (above 1: the engine is faster);
+- ``research``: the research-style pipeline (`benches/research.py`: preprocessing in numpy from the contract, the
+  same network in eager PyTorch, decoding in numpy; what a researcher would run instead), on the same frame;
+  ``vs research``: research / predict;
 - ``MFLOP/agent``: the network's operations per agent on this call, counted node by node from the shapes it runs
   (`benches/flops.py`), and ``GFLOP/s`` of the bare session: those operations over its time, against the same run's
   single-thread float32 sgemm (numpy, 1024², printed first).
@@ -43,6 +46,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import dgan  # noqa: E402
+from benches import research  # noqa: E402
 from benches.flops import graph_flops, sgemm_gflops  # noqa: E402
 from dgan.demo import scene_for  # noqa: E402
 
@@ -121,6 +125,7 @@ def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any
     session = bare_session(predictor.path)
     names = [i.name for i in session.get_inputs()]
     torch_run = torch_pipeline(name)
+    research_run = research.pipeline(name)
     rows = []
     for n in agents:
         f = tiled(frame, n)
@@ -137,6 +142,9 @@ def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any
             row["torch"] = median_ms(partial(torch_run, x), repeat)
             row["torch_pipeline"] = row["preprocess"] + row["torch"]
             row["vs_torch"] = row["torch_pipeline"] / row["predict"]
+        if research_run is not None:
+            row["research"] = median_ms(partial(research_run, f), max(3, repeat // 5), warmup=1)
+            row["vs_research"] = row["research"] / row["predict"]
         rows.append(row)
         print(fmt_row(row), flush=True)
     return rows
@@ -147,6 +155,8 @@ def fmt_row(r: dict[str, Any]) -> str:
     cells += [f"{r[k]:.2f}" for k in ("predict", "preprocess", "ort")]
     cells += [f"{r[k]:.2f}" if k in r else "-" for k in ("torch", "torch_pipeline")]
     cells.append(f"{r['vs_torch']:.2f}×" if "vs_torch" in r else "-")
+    cells.append(f"{r['research']:.1f}" if "research" in r else "-")
+    cells.append(f"{r['vs_research']:.1f}×" if "vs_research" in r else "-")
     cells += [f"{r['mflop_per_agent']:.2f}", f"{r['gflops']:.1f}"]
     return "| " + " | ".join(cells) + " |"
 
@@ -260,9 +270,9 @@ def main() -> None:
         return
     print(
         "\n| model | N | E | predict ms | preprocess ms | bare ORT ms | torch ms | torch pipeline ms | vs torch "
-        "| MFLOP/agent | bare ORT GFLOP/s |"
+        "| research ms | vs research | MFLOP/agent | bare ORT GFLOP/s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in a.models:
         bench_model(name, a.agents, a.repeat)
     latency_table(a.models, a.repeat, matmul_ms)

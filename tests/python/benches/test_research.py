@@ -1,0 +1,86 @@
+"""benches/research.py, the research-style pipeline, computes what the engine computes: the same tensors from the
+contract's text, the same crops of a raster map, a vector map's crops up to anti-aliasing, the same predictions."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import dgan
+from benches import research
+from dgan.demo import scene_for
+
+TENSORS = ("trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "prior", "map_present")
+
+
+def frame_and_spec(name: str) -> tuple[dgan.Frame, dgan.InputSpec]:
+    spec = dgan.Predictor(name, sessions=1).spec
+    return scene_for(spec).frame, spec
+
+
+@pytest.mark.parametrize("name", ["apolloscape", "zara1", "sdd", "hdmap"])
+def test_the_network_inputs_are_the_engines(name: str) -> None:
+    frame, spec = frame_and_spec(name)
+    engine, ours = dgan.preprocess(frame, spec), research.preprocess(frame, spec)
+    for key in TENSORS:
+        assert (key in engine) == (key in ours), key
+        if key in engine:
+            assert ours[key].shape == engine[key].shape, key
+            np.testing.assert_allclose(ours[key], engine[key], atol=1e-5, err_msg=key)
+
+
+@pytest.mark.parametrize("name", ["zara1", "sdd"])
+def test_raster_crops_are_the_engines(name: str) -> None:
+    frame, spec = frame_and_spec(name)
+    assert spec.map is not None
+    bare = dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=False))
+    np.testing.assert_array_equal(research.preprocess(frame, bare)["map"], dgan.preprocess(frame, bare)["map"])
+    # With the agents' boxes: the engine's are anti-aliased, ours cover the pixel centres inside them.
+    diff = np.abs(research.preprocess(frame, spec)["map"] - dgan.preprocess(frame, spec)["map"])
+    assert (diff > 1.01 / 255).mean() < 0.05
+
+
+def test_vector_crops_light_the_engines_pixels() -> None:
+    frame, spec = frame_and_spec("hdmap")
+    engine, ours = dgan.preprocess(frame, spec)["map"], research.preprocess(frame, spec)["map"]
+    lit_engine, lit_ours = engine.max(axis=1) > 0.25, ours.max(axis=1) > 0.25
+    assert lit_engine.mean() > 0.1  # a real map under the agents
+    assert (lit_engine == lit_ours).mean() > 0.8  # the rest: the engine's anti-aliased thin lines
+
+
+@pytest.mark.parametrize("fit", ["endpoints", "least_squares", "quadratic"])
+def test_the_prior_fits_are_the_engines(fit: str) -> None:
+    # Noisy tracks with dropped steps, some standing: every branch of the fits and of the standing rule.
+    rng = np.random.default_rng(3)
+    n, t_obs = 64, 10
+    steps = np.arange(t_obs)[None, :, None]
+    speed = rng.choice([0.0, 0.1, 1.5, 8.0], size=(n, 1, 1))
+    traj = speed * 0.2 * (steps - t_obs + 1) * np.array([1.0, 0.2]) + rng.normal(0, 0.05, (n, t_obs, 2))
+    mask = rng.random((n, t_obs)) > 0.2
+    mask[:3, :-1] = False  # one valid step
+    mask[3:6, :-2] = False  # two
+    traj = np.where(mask[..., None], traj, 0.0).astype(np.float32)
+    state = np.zeros((n, 10), dtype=np.float32)
+    state[:, 0], state[:, 3] = speed[:, 0, 0], 1.0
+    prior = dgan.PriorSpec("constant_velocity", window_s=1.2, fit=fit, standing_mps=0.3)
+    spec = dataclasses.replace(frame_and_spec("hdmap")[1], prior=prior)
+    ours = research.prior_rollout(traj.astype(np.float64), mask, state, spec)
+    engine = dgan.kinematic_prior(traj, mask.astype(np.float32), state, spec)
+    np.testing.assert_allclose(ours, engine, atol=2e-5)
+
+
+@pytest.mark.parametrize(("name", "atol"), [("apolloscape", 1e-3), ("zara1", 0.05)])
+def test_the_pipeline_predicts_what_the_engine_does(name: str, atol: float) -> None:
+    pytest.importorskip("torch")
+    predictor = dgan.Predictor(name, sessions=1)
+    frame = scene_for(predictor.spec).frame
+    run = research.pipeline(name)
+    assert run is not None
+    trajectories, probabilities = run(frame)
+    engine = predictor.predict(frame)
+    modes = engine.trajectories.shape[1]
+    # The same network in PyTorch and ONNX Runtime (zara1: on crops whose agents' box edges differ).
+    np.testing.assert_allclose(trajectories[:, 0], engine.trajectories[:, 0], atol=atol)
+    np.testing.assert_allclose(probabilities[:, :modes], engine.probabilities, atol=atol)
