@@ -34,7 +34,10 @@ class Predictor:
     Args:
         model: path of the ``.onnx`` file, or the name of a bundled model (:func:`dgan.models.list`).
         modes: how many modes :meth:`predict` returns by default (all K = Σ K_c if None).
-        threads: threads ONNX Runtime may use inside one operator.
+        threads: cores one call may use: ONNX Runtime's threads inside one operator, and the threads that draw
+            the map crops (and preprocess the frames of :meth:`predict_batch`). The default, 1, keeps each call on
+            its own thread, so that predictors sharing a machine do not compete; ``os.cpu_count()`` gives one call
+            the lowest latency.
         sessions: ONNX Runtime sessions of the model: threads sharing this predictor run concurrently, up to this
             many at a time (default: 2, or 1 on a one-core machine).
         onnxruntime_library: absolute path of ``libonnxruntime``; found in the ``onnxruntime`` wheel if None.

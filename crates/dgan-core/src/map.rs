@@ -23,6 +23,9 @@ pub enum SceneMap {
 pub struct RasterMap {
     image: Array3<u8>,
     world_to_pixel: Matrix3<f64>,
+    /// The homography's last row is `(0, 0, 1)` (every ETH/UCY and Stanford Drone map): the projection's `z` is
+    /// exactly 1 at every finite point, so [`RasterMap::project`] skips the division, which changes no bit.
+    affine: bool,
 }
 
 impl RasterMap {
@@ -42,7 +45,8 @@ impl RasterMap {
         if !det.is_normal() {
             return Err(DganError::InvalidMap(format!("world_to_pixel is singular (determinant {det:e})")));
         }
-        Ok(Self { image: image.as_standard_layout().to_owned(), world_to_pixel: m })
+        let affine = world_to_pixel[2] == [0.0, 0.0, 1.0];
+        Ok(Self { image: image.as_standard_layout().to_owned(), world_to_pixel: m, affine })
     }
 
     /// Reads a PNG or JPEG image (converted to RGB) and pairs it with its world→pixel homography.
@@ -68,8 +72,14 @@ impl RasterMap {
     }
 
     /// Projects a world point to continuous pixel coordinates `(u, v)`; `None` behind the projection's horizon.
+    #[inline]
     pub fn project(&self, world: [f64; 2]) -> Option<[f64; 2]> {
         let p = self.world_to_pixel * Vector3::new(world[0], world[1], 1.0);
+        if self.affine {
+            // z = 0·x + 0·y + 1 = 1 exactly; a point at infinity gives NaN coordinates, which sample as black (as
+            // `None` does).
+            return Some([p.x, p.y]);
+        }
         if p.z.abs() < 1e-12 || !p.z.is_finite() {
             return None;
         }
@@ -77,6 +87,7 @@ impl RasterMap {
     }
 
     /// Bilinear sample of the image at continuous pixel `(u, v)`; black outside the image.
+    #[inline]
     pub fn sample(&self, uv: [f64; 2]) -> [f32; 3] {
         let (h, w, _) = self.image.dim();
         let (u, v) = (uv[0], uv[1]);
@@ -442,6 +453,22 @@ mod tests {
         assert_eq!(m.sample([1.0, 0.0])[0], 200.0);
         assert!((m.sample([0.5, 0.0])[0] - 100.0).abs() < 1e-4);
         assert_eq!(m.sample([5.0, 0.0]), [0.0; 3]);
+    }
+
+    #[test]
+    fn an_affine_homography_projects_as_the_division_does() {
+        // The same homography times 2 has last row (0, 0, 2): it takes the division, which by 2 is exact.
+        let h = [[47.5, 0.3, 1.0], [-0.2, -41.9, 576.0], [0.0, 0.0, 1.0]];
+        let doubled = h.map(|row| row.map(|v| 2.0 * v));
+        let image = Array3::<u8>::zeros((4, 4, 3));
+        let (affine, general) = (RasterMap::new(image.clone(), h).unwrap(), RasterMap::new(image, doubled).unwrap());
+        assert!(affine.affine && !general.affine);
+        for k in 0..1000 {
+            let world = [(k as f64 * 0.37).sin() * 1e3, (k as f64 * 0.11).cos() * 37.0 + k as f64];
+            assert_eq!(affine.project(world), general.project(world), "{world:?}");
+        }
+        let far = affine.project([f64::INFINITY, 0.0]).unwrap();
+        assert_eq!(affine.sample(far), [0.0; 3]); // black, as a point the division refuses
     }
 
     #[test]

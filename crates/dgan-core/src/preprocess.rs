@@ -4,7 +4,7 @@
 use crate::error::{invalid_frame, DganError, Result};
 use crate::frame::Frame;
 use crate::graph::{attention_radius, attention_zone_edges_within};
-use crate::raster::rasterize;
+use crate::raster::rasterize_on;
 use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
 use crate::state::{traffic_states_with, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
@@ -136,6 +136,13 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
 
 /// Builds the network inputs of a frame, refusing one beyond `limits` before allocating for it.
 pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Result<Preprocessed> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    preprocess_on(frame, spec, limits, cores)
+}
+
+/// [`preprocess_within`] with the map crops drawn on at most `threads` threads ([`crate::raster::rasterize_on`]);
+/// the tensors are the same whatever the threads.
+pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: usize) -> Result<Preprocessed> {
     spec.validate()?;
     frame.check_dt(spec.dt_s)?;
     let n = frame.len();
@@ -221,7 +228,7 @@ pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Re
     let prior = spec.prior.rollout(trajectory.view(), trajectory_mask.view(), state.view(), spec.dt_s, spec.t_f)?;
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
-        (Some(m), Some(_)) => (Some(rasterize(frame, &states, m)?), m.optional.then(|| Array1::ones(n))),
+        (Some(m), Some(_)) => (Some(rasterize_on(frame, &states, m, threads)?), m.optional.then(|| Array1::ones(n))),
         (Some(m), None) if m.optional || n == 0 => {
             (Some(Array4::zeros((n, 3, m.height_px, m.width_px))), m.optional.then(|| Array1::zeros(n)))
         }

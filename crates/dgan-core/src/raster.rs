@@ -353,8 +353,16 @@ impl Drop for InFlight {
     }
 }
 
-/// Crops `(N, 3, H, W)` with values in [0, 1], one per agent, from the frame's map (black where there is none).
+/// Crops `(N, 3, H, W)` with values in [0, 1], one per agent, from the frame's map (black where there is none),
+/// drawn on up to all the machine's cores ([`rasterize_on`]).
 pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Result<Array4<f32>> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    rasterize_on(frame, states, spec, cores)
+}
+
+/// [`rasterize`] on at most `threads` threads (the calling one included), shared with the other predictions in
+/// flight in this process, and at least 8 crops to a thread. The crops are the same whatever the threads.
+pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, threads: usize) -> Result<Array4<f32>> {
     spec.validate()?;
     if states.len() != frame.len() {
         return Err(DganError::InvalidFrame(format!("{} states for {} agents", states.len(), frame.len())));
@@ -388,8 +396,7 @@ pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Resu
     // Scoped threads that end with the call, rather than a pool whose idle workers keep spinning on the cores that
     // ONNX Runtime runs on next (on two cores that cost as much as the parallel drawing saved).
     let per = 3 * h * w;
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = (cores / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(states.len() / 8).max(1);
+    let threads = (threads / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(states.len() / 8).max(1);
     if threads == 1 {
         for (crop, s) in flat.chunks_mut(per).zip(states) {
             draw(crop, s)?;
@@ -544,6 +551,25 @@ mod tests {
         // The road edge at x = 95 (10 px left of the agent) is yellow; the polygon covers x > 104 above y = 55.
         assert_eq!(rgb(&img, 25, 10), [1.0, 1.0, 0.0]);
         assert!((rgb(&img, 5, 35)[0] - 1.0).abs() < 1e-6); // obstacle pink: (255, 105, 180)
+    }
+
+    #[test]
+    fn crops_do_not_depend_on_the_threads() {
+        // 40 agents along a road with lines, regions and their boxes: one thread and several draw the same bytes.
+        let p =
+            Array3::from_shape_fn((40, 2, 2), |(i, t, d)| if d == 0 { 90.0 + i as f64 * 0.7 } else { 49.0 + t as f64 });
+        let classes = vec![AgentClass::Vehicle; 40];
+        let line = MapElement::new(MapElementKind::LaneLineDashed, vec![[80.0, 0.0], [130.0, 100.0]]).unwrap();
+        let region =
+            MapElement::new(MapElementKind::Crosswalk, vec![[95.0, 50.0], [99.0, 50.0], [99.0, 54.0]]).unwrap();
+        let map = Arc::new(SceneMap::Vector(VectorMap::new(vec![line, region])));
+        let f = Frame::new(p, None, classes).unwrap().with_map(map);
+        let s = traffic_states(&f, 1.0);
+        let one = rasterize_on(&f, &s, &spec(true), 1).unwrap();
+        for threads in [2, 3, 5] {
+            assert_eq!(rasterize_on(&f, &s, &spec(true), threads).unwrap(), one, "{threads} threads");
+        }
+        assert!(one.iter().any(|v| *v > 0.0));
     }
 
     #[test]

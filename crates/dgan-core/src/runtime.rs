@@ -14,11 +14,10 @@ use crate::contract::{
 use crate::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
-use crate::preprocess::{preprocess_within, Limits, NetworkInputs, Preprocessed};
+use crate::preprocess::{preprocess_on, Limits, NetworkInputs, Preprocessed};
 use ndarray::{s, Array2, Array4, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
 use ort::value::{Tensor, TensorElementType, ValueType};
-use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, TryLockError};
@@ -76,7 +75,10 @@ pub const BATCH_AGENTS_PER_CALL: usize = 256;
 pub struct PredictorOptions {
     /// Absolute path of the ONNX Runtime library; `None` reads `ORT_DYLIB_PATH`.
     pub onnxruntime_library: Option<PathBuf>,
-    /// Threads ONNX Runtime may use inside one operator.
+    /// Threads one call may use: ONNX Runtime's threads inside one operator, and the threads that draw the map crops
+    /// (and, in [`Predictor::predict_batch`], preprocess the frames). 1 (the default) keeps a call on its own
+    /// thread, so that several predictors share a machine without competing; up to the machine's cores for the
+    /// lowest latency of one call.
     pub intra_threads: usize,
     /// ONNX Runtime sessions of the model (at least 1): calls from several threads run concurrently on different
     /// sessions (a session runs one call at a time). More sessions cost memory and load time, not accuracy.
@@ -187,6 +189,7 @@ pub struct Predictor {
     anchors: Anchors,
     path: PathBuf,
     limits: Limits,
+    threads: usize,
 }
 
 fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
@@ -334,7 +337,15 @@ impl Predictor {
         for _ in 1..options.sessions {
             sessions.push(Mutex::new(open_session(&path, &bytes, options)?));
         }
-        Ok(Self { sessions, next: AtomicUsize::new(0), contract, anchors, path, limits: options.limits })
+        Ok(Self {
+            sessions,
+            next: AtomicUsize::new(0),
+            contract,
+            anchors,
+            path,
+            limits: options.limits,
+            threads: options.intra_threads,
+        })
     }
 
     /// How many ONNX Runtime sessions serve this predictor.
@@ -380,7 +391,7 @@ impl Predictor {
     pub fn predict_modes(&self, frame: &Frame, modes: usize) -> Result<Prediction> {
         check_modes(modes)?;
         let _in_flight = crate::raster::InFlight::enter();
-        let pre = preprocess_within(frame, &self.contract.input, &self.limits)?;
+        let pre = preprocess_on(frame, &self.contract.input, &self.limits, self.threads)?;
         let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes)?;
         out.pop().ok_or_else(|| DganError::Inference("no prediction for the frame".into()))
     }
@@ -396,8 +407,32 @@ impl Predictor {
             return Ok(vec![]);
         }
         let spec = &self.contract.input;
-        let pres: Vec<Result<Preprocessed>> =
-            frames.par_iter().map(|f| preprocess_within(f, spec, &self.limits)).collect();
+        // The frames in `threads` runs, one thread each (each frame's crops on that thread).
+        let per_thread = frames.len().div_ceil(self.threads.max(1));
+        let pres: Vec<Result<Preprocessed>> = if per_thread == frames.len() {
+            frames.iter().map(|f| preprocess_on(f, spec, &self.limits, 1)).collect()
+        } else {
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = frames
+                    .chunks(per_thread)
+                    .map(|part| {
+                        scope.spawn(move || {
+                            part.iter().map(|f| preprocess_on(f, spec, &self.limits, 1)).collect::<Vec<_>>()
+                        })
+                    })
+                    .collect();
+                let mut out = Vec::with_capacity(frames.len());
+                for (handle, part) in handles.into_iter().zip(frames.chunks(per_thread)) {
+                    match handle.join() {
+                        Ok(done) => out.extend(done),
+                        Err(_) => out.extend(
+                            part.iter().map(|_| Err(DganError::Inference("a preprocessing thread panicked".into()))),
+                        ),
+                    }
+                }
+                out
+            })
+        };
         // The first bad frame by index, whichever thread finished first, named in its error.
         let pres = pres
             .into_iter()
