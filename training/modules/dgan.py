@@ -26,6 +26,9 @@ class ModelConfig:
     state_dim_out: int = 64
     map_channels: int = 8  # width multiplier of the map CNN (sized to train on a CPU)
     map_dim: int = 64
+    #: A residual block after each of the map CNN's first two strided convolutions (False: three strided
+    #: convolutions alone, about a quarter of the operations; issue 26).
+    map_res_blocks: bool = True
     node_dim: int = 128
     gat_layers: int = 2
     gat_heads: int = 4
@@ -54,17 +57,18 @@ class ResBlock(nn.Module):
 class MapEncoder(nn.Module):
     """A small ResNet over the ``(3, H, W)`` crop; the flattened 4× downsampled map keeps where things are."""
 
-    def __init__(self, c: int, out: int, h: int, w: int) -> None:
+    def __init__(self, c: int, out: int, h: int, w: int, res_blocks: bool = True) -> None:
         super().__init__()
+        blocks = (ResBlock(c), ResBlock(2 * c)) if res_blocks else (nn.Identity(), nn.Identity())
         self.net = nn.Sequential(
             nn.Conv2d(3, c, 3, stride=2, padding=1),
             nn.BatchNorm2d(c),
             nn.ReLU(),
-            ResBlock(c),
+            blocks[0],
             nn.Conv2d(c, 2 * c, 3, stride=2, padding=1),
             nn.BatchNorm2d(2 * c),
             nn.ReLU(),
-            ResBlock(2 * c),
+            blocks[1],
             nn.Conv2d(2 * c, 2 * c, 3, stride=2, padding=1),
             nn.ReLU(),
         )
@@ -179,7 +183,11 @@ class DGAN(nn.Module):
             nn.Linear(cfg.state_dim_out, cfg.state_dim_out),
             nn.ReLU(),
         )
-        self.map_enc = MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw) if (cfg.use_map and map_hw) else None
+        self.map_enc = (
+            MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw, res_blocks=cfg.map_res_blocks)
+            if (cfg.use_map and map_hw)
+            else None
+        )
         # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
         # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
         self.map_optional = map_optional and self.map_enc is not None
