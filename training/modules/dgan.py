@@ -26,9 +26,10 @@ class ModelConfig:
     state_dim_out: int = 64
     map_channels: int = 8  # width multiplier of the map CNN (sized to train on a CPU)
     map_dim: int = 64
-    #: A residual block after each of the map CNN's first two strided convolutions (False: three strided
-    #: convolutions alone, about a quarter of the operations; issue 26).
-    map_res_blocks: bool = True
+    #: Residual blocks of the map CNN, after its first two strided convolutions: 2 (both), 1 (only the second, at a
+    #: quarter of the first's pixels: about 1.3 MFLOP an agent less on a 48 × 47 crop) or 0 (three strided
+    #: convolutions alone); issue 26.
+    map_res_blocks: int = 2
     node_dim: int = 128
     gat_layers: int = 2
     gat_heads: int = 4
@@ -57,9 +58,14 @@ class ResBlock(nn.Module):
 class MapEncoder(nn.Module):
     """A small ResNet over the ``(3, H, W)`` crop; the flattened 4× downsampled map keeps where things are."""
 
-    def __init__(self, c: int, out: int, h: int, w: int, res_blocks: bool = True) -> None:
+    def __init__(self, c: int, out: int, h: int, w: int, res_blocks: int = 2) -> None:
         super().__init__()
-        blocks = (ResBlock(c), ResBlock(2 * c)) if res_blocks else (nn.Identity(), nn.Identity())
+        if not 0 <= res_blocks <= 2:
+            raise ValueError(f"model.map_res_blocks must be 0, 1 or 2, got {res_blocks}")
+        blocks = (
+            ResBlock(c) if res_blocks == 2 else nn.Identity(),
+            ResBlock(2 * c) if res_blocks >= 1 else nn.Identity(),
+        )
         self.net = nn.Sequential(
             nn.Conv2d(3, c, 3, stride=2, padding=1),
             nn.BatchNorm2d(c),

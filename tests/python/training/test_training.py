@@ -45,6 +45,18 @@ def test_config_is_typed() -> None:
         Config.from_dict({"optimizer": {}})
 
 
+def test_the_map_cnn_keeps_zero_one_or_two_residual_blocks() -> None:
+    cfg = Config.load(ROOT / "training" / "configs" / "hdmap.toml")
+    spec = input_spec(cfg)
+    sizes = {}
+    for blocks in (0, 1, 2):
+        model = build_model(replace(cfg, model=replace(cfg.model, map_res_blocks=blocks)), spec, 30)
+        sizes[blocks] = sum(p.numel() for p in model.parameters())
+    assert sizes[0] < sizes[1] < sizes[2]
+    with pytest.raises(ValueError, match="map_res_blocks must be 0, 1 or 2"):
+        build_model(replace(cfg, model=replace(cfg.model, map_res_blocks=3)), spec, 30)
+
+
 def test_loss_picks_the_closest_anchor_of_the_class() -> None:
     anchors = torch.tensor([[[1.0, 0.0]], [[2.0, 0.0]], [[0.0, 5.0]]])
     class_of = torch.tensor([0, 0, 1])
@@ -207,6 +219,8 @@ def randomised_batch_norm(model: DGAN) -> DGAN:
         ("apolloscape", {}),
         ("hdmap", {}),
         ("hdmap", {"train.map_dropout": 0.0}),
+        ("hdmap", {"model.map_res_blocks": 1}),
+        ("hdmap", {"model.map_res_blocks": 0}),
         ("ethucy_zara1", {"data.prior": "none", "train.map_dropout": 0.0}),
     ],
 )
