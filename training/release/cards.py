@@ -283,8 +283,11 @@ def distill_words(name: str, cfg: dict[str, Any]) -> str:
     """The card's words for a student (``train.distill``): one network that learned from a consensus."""
     if not cfg["train"].get("distill", ""):
         return ""
+    teacher = "a consensus of runs"
+    if cfg.get("model", {}).get("map_res_blocks", 2) < 2:
+        teacher = "a larger network (the same configuration with the map CNN's two residual blocks)"
     return (
-        f"\n  **Distilled**: one network that also learned the most probable mode of a consensus of runs "
+        f"\n  **Distilled**: one network that also learned the most probable mode of {teacher} "
         f"(`training/checkpoints/teachers/{name}.pt`, weight {cfg['train']['distill_weight']:g}), "
         "at one network's cost."
     )
