@@ -37,9 +37,8 @@ MIN_MOVING_SPEED = 0.2
 MOTION_HEADING_SPEED = 1.0
 #: Dashed lane lines: 3 m painted, 6 m blank.
 DASH_M = (3.0, 6.0)
-KINDS: list[dict[str, Any]] = list(dgan._dgan.CONTRACT["map_kinds"])
 ROOT = Path(__file__).resolve().parents[1]
-AGENT_COLOUR = np.array(dgan._dgan.CONTRACT["agent_colour"], dtype=np.uint8)
+AGENT_COLOUR = np.array(contract.AGENT_COLOUR, dtype=np.uint8)
 
 
 def wrap(a: Arr) -> Arr:
@@ -235,9 +234,9 @@ class Elements:
     (made once per frame, as research code caches its map)."""
 
     def __init__(self, elements: list[tuple[str, Arr]]) -> None:
-        order = {k["name"]: i for i, k in enumerate(KINDS)}
+        order = {k.name: i for i, k in enumerate(contract.MAP_KINDS)}
         ranked = sorted(elements, key=lambda e: order[e[0]])
-        self.kinds = [KINDS[order[name]] for name, _ in ranked]
+        self.kinds = [contract.MAP_KINDS[order[name]] for name, _ in ranked]
         self.points = np.concatenate([p for _, p in ranked]) if ranked else np.zeros((0, 2))
         self.ends = np.cumsum([0] + [len(p) for _, p in ranked])
         self.lo = np.array([p.min(axis=0) for _, p in ranked]).reshape(-1, 2)
@@ -264,13 +263,13 @@ def vector_crop(els: Elements, origin: Arr, heading: float, m: Any) -> Arr:
     for k in near:
         kind, count = els.kinds[k], els.ends[k + 1] - els.ends[k]
         part, at = px[at : at + count], at + count
-        colour = tuple(kind["colour"])
-        if kind["polygon"]:
+        colour = kind.colour
+        if kind.polygon or kind.width_m is None:
             draw.polygon(part.ravel().tolist(), fill=colour)
             continue
-        width = max(1, round(kind["width_m"] / m.resolution_m))
+        width = max(1, round(kind.width_m / m.resolution_m))
         pieces = [part]
-        if kind["name"] == "lane_line_dashed":
+        if kind.name == "lane_line_dashed":
             pieces = dashes(part, DASH_M[0] / m.resolution_m, sum(DASH_M) / m.resolution_m, (m.height_px, m.width_px))
         for piece in pieces:
             draw.line(piece.ravel().tolist(), fill=colour, width=width)

@@ -69,13 +69,14 @@ def _distilled(
     return student, fold_students
 
 
-def _student(members: list[Path], teacher: Path, toml: Path, root: Path, tag: str) -> list[Path]:
-    """The members' consensus kept at ``teacher`` (top-mode scale and temperature fitted as bundling fits them),
-    and one run of ``toml`` distilled from it."""
+def _student(members: list[Path], teacher: Path, toml: Path, root: Path, tag: str, *args: str) -> list[Path]:
+    """The members' consensus (or one member) kept at ``teacher`` (top-mode scale, for a consensus, and temperature
+    fitted as bundling fits them), and one run of ``toml`` (with ``args``) distilled from it."""
     model_checkpoint(members, teacher)
-    fit_top_scale(teacher, root)
+    if len(members) > 1:
+        fit_top_scale(teacher, root)
     calibrate_checkpoint(teacher, root)
-    return _seed_runs(toml, root, (0,), tag, "--set", f"train.distill={teacher}", *DISTILL)
+    return _seed_runs(toml, root, (0,), tag, *args, "--set", f"train.distill={teacher}", *DISTILL)
 
 
 def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: str) -> list[Path]:
@@ -99,28 +100,23 @@ def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: 
 ENSEMBLE_SEEDS = {"hdmap": (0,), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1, 2)}
 
 
-#: The bundled hdmap's student (issue 26): the map CNN keeps only its second residual block (3.94 against 5.30 MFLOP
+#: The bundled hdmap's student (issue 26): the map CNN keeps only its second residual block (3.95 against 5.30 MFLOP
 #: an agent), distilled from one run of hdmap.toml; on validation it was ahead of that run (engine top-1 below).
 HDMAP_STUDENT = ("--set", "model.map_res_blocks=1")
 
 
 def train_hdmap(root: Path) -> None:
-    """Trains the HD-map model with and without its map, one run per seed of :data:`ENSEMBLE_SEEDS`; bundles the first
-    configuration's consensus as ``hdmap`` and keeps the second's as ``training/checkpoints/baselines/hdmap-nomap.pt``.
-    """
+    """Trains the HD-map model with and without its map, one run per seed of :data:`ENSEMBLE_SEEDS`; bundles the
+    slimmer student (:data:`HDMAP_STUDENT`) of the first configuration's run as ``hdmap``, that run kept as its teacher,
+    and keeps the second's as ``training/checkpoints/baselines/hdmap-nomap.pt``."""
     from training.release.bundle import bundle
 
     runs = {
         config: _seed_runs(ROOT / "training" / "configs" / f"{config}.toml", root, ENSEMBLE_SEEDS["hdmap"], config)
         for config in ("hdmap", "hdmap_nomap")
     }
-    # The bundled network is a slimmer student (one residual block in the map CNN: HDMAP_STUDENT) of that run.
-    teacher = model_checkpoint(runs["hdmap"], TEACHERS / "hdmap.pt")
-    calibrate_checkpoint(teacher, root)
     toml = ROOT / "training" / "configs" / "hdmap.toml"
-    student = _seed_runs(
-        toml, root, (0,), "hdmap_student", *HDMAP_STUDENT, "--set", f"train.distill={teacher}", *DISTILL
-    )
+    student = _student(runs["hdmap"], TEACHERS / "hdmap.pt", toml, root, "hdmap_student", *HDMAP_STUDENT)
     bundle(student, "hdmap", root)
     if len(runs["hdmap_nomap"]) > 1:
         ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)

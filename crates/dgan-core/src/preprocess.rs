@@ -136,8 +136,7 @@ pub fn preprocess(frame: &Frame, spec: &InputSpec) -> Result<Preprocessed> {
 
 /// Builds the network inputs of a frame, refusing one beyond `limits` before allocating for it.
 pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Result<Preprocessed> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    preprocess_on(frame, spec, limits, cores)
+    preprocess_on(frame, spec, limits, crate::limits::cores())
 }
 
 /// [`preprocess_within`] with the map crops drawn on at most `threads` threads ([`crate::raster::rasterize_on`]);

@@ -356,8 +356,7 @@ impl Drop for InFlight {
 /// Crops `(N, 3, H, W)` with values in [0, 1], one per agent, from the frame's map (black where there is none),
 /// drawn on up to all the machine's cores ([`rasterize_on`]).
 pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Result<Array4<f32>> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    rasterize_on(frame, states, spec, cores)
+    rasterize_on(frame, states, spec, crate::limits::cores())
 }
 
 /// [`rasterize`] on at most `threads` threads (the calling one included), shared with the other predictions in

@@ -157,7 +157,7 @@ pub fn available_execution_providers(onnxruntime_library: Option<&Path>) -> Resu
 
 /// Most threads one operator may use: the machine's cores.
 pub fn max_intra_threads() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+    crate::limits::cores()
 }
 
 /// Most sessions one predictor may hold.
