@@ -23,6 +23,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
             d.map_agent_row,
             d.map_width_px // 2,
             optional=cfg.train.map_dropout > 0,
+            render=d.map_render,
         )
     return dgan.InputSpec(
         dt_s=info.dt_s,

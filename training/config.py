@@ -24,6 +24,9 @@ class DataConfig:
     map_width_px: int = 31
     map_resolution_m: float = 0.5
     map_agent_row: int = 24
+    # How a vector map becomes the crops (dgan.MapSpec.render): "agent" (each crop drawn from the elements) or "tiles"
+    # (the map drawn once into tiles kept with it, each crop resampled from them: the map's cost stops growing with N).
+    map_render: str = "agent"
     # The kinematic prior the network refines (dgan.PriorSpec): "none" (absolute anchors, contract 1) or
     # "constant_velocity"; prior_window_s > 0 estimates its velocity over that many seconds of observed positions.
     prior: str = "none"

@@ -33,6 +33,11 @@ class MapSpec:
     #: without a map gets blank crops flagged absent. A model whose map is not optional refuses such frames
     #: (:class:`dgan.exceptions.MapRequiredError`).
     optional: bool = False
+    #: How a vector map becomes the crops (contract 7): ``"agent"`` draws each agent's crop from the map's
+    #: elements; ``"tiles"`` draws the map once into north-up tiles at half the crop's pixel size, kept with the
+    #: :class:`dgan.VectorMap` for every later call, and resamples each crop from them (a raster map is always
+    #: resampled per crop).
+    render: str = "agent"
 
 
 @dataclass(frozen=True)

@@ -137,6 +137,22 @@ def reexport(name: str) -> Path:
     return export_checkpoint(ckpt, MODELS / f"{name}.onnx", old.get("name", name), old.get("description", ""))
 
 
+def rerender(name: str, render: str) -> Path:
+    """Sets how the bundled model ``name``'s vector map becomes its crops (``data.map_render``, ``dgan.MapSpec.render``)
+    in its kept checkpoint and exports it again (:func:`reexport`); its weights and temperature are unchanged. Whether
+    a network trained on one way's crops keeps its accuracy on the other's is measured on validation before
+    bundling (``python -m training.evaluate MODEL --dataset D --split val``)."""
+    from training.checkpoint import update_checkpoint
+
+    if render not in ("agent", "tiles"):
+        raise ValueError(f"render must be 'agent' or 'tiles', got {render!r}")
+    ckpt = CHECKPOINTS / f"{name}.pt"
+    cfg = torch.load(ckpt, weights_only=False)["config"]
+    cfg["data"]["map_render"] = render
+    update_checkpoint(ckpt, config=cfg)
+    return reexport(name)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
@@ -153,7 +169,13 @@ def main() -> None:
         help="the runs of one fold of a cross-fitted temperature (train.calibration_folds); once per fold",
     )
     ap.add_argument("--reexport", nargs="+", metavar="MODEL", help="export bundled models again from their checkpoints")
+    ap.add_argument(
+        "--render", nargs=2, metavar=("MODEL", "RENDER"), help="set a bundled model's map.render and export it again"
+    )
     a = ap.parse_args()
+    if a.render:
+        print(rerender(*a.render))
+        return
     if a.reexport:
         for name in a.reexport:
             print(reexport(name))

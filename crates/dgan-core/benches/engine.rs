@@ -8,7 +8,8 @@
 //!   needs `ORT_DYLIB_PATH`.
 //! - `hdmap_waymo/raster` and `hdmap_waymo/predict`: a real Waymo Open Motion frame (45 agents, its whole vector map
 //!   of 148 elements; `tests/fixtures/waymo_frame.json`) with the bundled `hdmap` model: the rasterisation of every
-//!   agent's crop at the model's map spec, and the whole predict it is part of; needs `ORT_DYLIB_PATH`.
+//!   agent's crop at the model's map spec (from the map's tiles, kept after the first iteration; `raster_per_agent`:
+//!   each crop drawn from the elements), and the whole predict it is part of; needs `ORT_DYLIB_PATH`.
 //! - `tracker/zara1_excerpt` and `tracker/crowd_10hz/200`: the streaming tracker's cost per tick (update plus the
 //!   frame at the tick; throughput in ticks): the bundled real zara1 excerpt replayed tick by tick (20 ticks, up to
 //!   22 pedestrians), and 200 agents at 10 Hz resampled to a 0.4 s model (100 ticks).
@@ -99,6 +100,7 @@ fn bench_raster(c: &mut Criterion) {
         agent_col: 32,
         draw_agents: true,
         optional: false,
+        render: dgan_core::MapRender::Agent,
     };
     let mut g = c.benchmark_group("raster");
     let frame = road_frame(vector_map());
@@ -191,6 +193,9 @@ fn bench_hdmap(c: &mut Criterion) {
     let states = traffic_states(&frame, spec.dt_s);
     let mut g = c.benchmark_group("hdmap_waymo");
     g.bench_function("raster", |b| b.iter(|| rasterize(black_box(&frame), &states, &map_spec)));
+    // The same crops drawn per agent (map.render = "agent", as before contract 7).
+    let per_agent = MapSpec { render: dgan_core::MapRender::Agent, ..map_spec.clone() };
+    g.bench_function("raster_per_agent", |b| b.iter(|| rasterize(black_box(&frame), &states, &per_agent)));
     g.bench_function("predict", |b| b.iter(|| predictor.predict(black_box(&frame))));
     // predict split into its three parts: preprocessing, the network, decoding.
     g.bench_function("preprocess", |b| b.iter(|| preprocess(black_box(&frame), &spec)));

@@ -5,7 +5,7 @@ use crate::class::AgentClass;
 use crate::decode::Anchors;
 use crate::error::{DganError, Result};
 use crate::prior::{PriorSpec, VelocityFit};
-use crate::spec::{GraphLayout, HeadingSource, InputSpec, EDGE_FEATURES};
+use crate::spec::{GraphLayout, HeadingSource, InputSpec, MapRender, EDGE_FEATURES};
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -14,10 +14,10 @@ use std::collections::BTreeMap;
 /// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph; version 4 the
 /// sealed weights (`weights_sha256`); version 5 where headings come from (`heading`); version 6 how the prior's
 /// velocity is fitted (`prior.fit`) and its standing threshold (`prior.standing_mps`).
-pub const CONTRACT_VERSION: u32 = 6;
+pub const CONTRACT_VERSION: u32 = 7;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 6] = [1, 2, 3, 4, 5, 6];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 7] = [1, 2, 3, 4, 5, 6, 7];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -226,6 +226,12 @@ impl ModelContract {
                 "prior.fit and prior.standing_mps are contract-6 keys; versions 1 to 5 fit endpoints and never \
                  clamp standing agents"
                     .into(),
+            ));
+        }
+        let render = self.input.map.as_ref().map_or(MapRender::Agent, |m| m.render);
+        if self.contract_version < 7 && render != MapRender::Agent {
+            return Err(DganError::Contract(
+                "map.render is a contract-7 key; versions 1 to 6 draw each agent's crop (\"agent\")".into(),
             ));
         }
         match (self.contract_version >= 4, &self.weights_sha256) {
@@ -464,6 +470,16 @@ mod tests {
         assert_eq!((prior.fit, prior.standing_mps), (VelocityFit::LeastSquares, 0.3));
         let v5_robust = v5.replace("\"window_s\": 0.8", robust);
         assert!(matches!(ModelContract::from_json(&v5_robust), Err(DganError::Contract(_))));
+        // Version 7 may draw the crops from tiles of the map; version 6 cannot.
+        let tiles = "\"optional\": true, \"render\": \"tiles\"";
+        let v7 = v6.replace("\"contract_version\": 6", "\"contract_version\": 7").replace("\"optional\": true", tiles);
+        let map = ModelContract::from_json(&v7).unwrap().input.map.unwrap();
+        assert_eq!(map.render, MapRender::Tiles);
+        assert_eq!(ModelContract::from_json(&v6).unwrap().input.map.unwrap().render, MapRender::Agent);
+        let err = ModelContract::from_json(&v6.replace("\"optional\": true", tiles)).unwrap_err().to_string();
+        assert!(err.contains("map.render is a contract-7 key"), "{err}");
+        let err = ModelContract::from_json(&v7.replace("\"tiles\"", "\"tile\"")).unwrap_err().to_string();
+        assert!(err.contains("tile"), "{err}");
     }
 
     #[test]

@@ -30,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod batch;
+pub mod canvas;
 pub mod class;
 pub mod contract;
 pub mod decode;
@@ -46,6 +47,7 @@ pub mod raster;
 pub mod runtime;
 pub mod spec;
 pub mod state;
+pub mod tiles;
 pub mod transform;
 
 pub use class::AgentClass;
@@ -62,7 +64,7 @@ pub use prior::{PriorKind, PriorSpec, VelocityFit};
 pub use runtime::{
     available_execution_providers, init_onnxruntime, ExecutionProvider, Prediction, Predictor, PredictorOptions,
 };
-pub use spec::{GraphLayout, HeadingSource, InputSpec, MapSpec};
+pub use spec::{GraphLayout, HeadingSource, InputSpec, MapRender, MapSpec};
 
 /// The crate's folder as cargo gives it to the running test (`CARGO_MANIFEST_DIR` at run time; the compile-time
 /// value only as a fallback), so that a test binary reused from a checkout elsewhere still finds the repository.

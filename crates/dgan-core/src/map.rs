@@ -4,8 +4,10 @@
 use crate::error::{DganError, Result};
 use nalgebra::{Matrix3, Vector3};
 use ndarray::Array3;
+use std::collections::HashMap;
 use std::fmt;
 use std::str::FromStr;
+use std::sync::{Arc, Mutex};
 
 /// A map of the scene, shared by every frame of it.
 #[derive(Debug, Clone)]
@@ -366,18 +368,88 @@ impl MapElement {
 #[derive(Debug, Clone, Default)]
 pub struct VectorMap {
     elements: Vec<MapElement>,
+    tiles: TileStore,
 }
 
 impl VectorMap {
     /// A map of the given elements, kept in drawing order (regions under lines).
     pub fn new(mut elements: Vec<MapElement>) -> Self {
         elements.sort_by_key(|e| MapElementKind::ALL.iter().position(|k| *k == e.kind));
-        Self { elements }
+        Self { elements, tiles: TileStore::default() }
     }
 
     /// The elements, in drawing order.
     pub fn elements(&self) -> &[MapElement] {
         &self.elements
+    }
+
+    /// The tiles drawn of this map so far ([`crate::tiles`]), shared by every frame that holds it.
+    pub fn tiles(&self) -> &TileStore {
+        &self.tiles
+    }
+}
+
+/// Which tile of a map: its resolution (`f64::to_bits`) and its place on the world's tile grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TileKey {
+    /// Metres per tile pixel, as `f64::to_bits`.
+    pub resolution_bits: u64,
+    /// Tile column (east).
+    pub i: i64,
+    /// Tile row (south).
+    pub j: i64,
+}
+
+/// The tiles drawn of one vector map, at most [`TileStore::CAPACITY`] of them (all dropped when a new one would
+/// exceed it); a clone of the map starts with none. Shared by the threads drawing crops.
+#[derive(Default)]
+pub struct TileStore {
+    tiles: Mutex<HashMap<TileKey, Arc<[u8]>>>,
+}
+
+impl TileStore {
+    /// The most tiles kept per map (of 128² RGB pixels: 24 MiB).
+    pub const CAPACITY: usize = 512;
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<TileKey, Arc<[u8]>>> {
+        // A thread that panicked while holding the lock left the map of tiles whole (inserts are single calls).
+        self.tiles.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// A tile drawn before, if kept.
+    pub fn get(&self, key: &TileKey) -> Option<Arc<[u8]>> {
+        self.lock().get(key).cloned()
+    }
+
+    /// Keeps `tile` under `key` (or the one another thread kept first, which holds the same pixels) and returns it.
+    pub fn insert(&self, key: TileKey, tile: Arc<[u8]>) -> Arc<[u8]> {
+        let mut tiles = self.lock();
+        if tiles.len() >= Self::CAPACITY && !tiles.contains_key(&key) {
+            tiles.clear();
+        }
+        tiles.entry(key).or_insert(tile).clone()
+    }
+
+    /// How many tiles are kept.
+    pub fn len(&self) -> usize {
+        self.lock().len()
+    }
+
+    /// Whether no tile is kept.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl Clone for TileStore {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for TileStore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "TileStore({} tiles)", self.len())
     }
 }
 

@@ -291,6 +291,7 @@ mod tests {
                 agent_col: 4,
                 draw_agents: true,
                 optional,
+                render: crate::spec::MapRender::Agent,
             }),
             prior: PriorSpec::constant_velocity(0.0),
             graph: GraphLayout::Padded,

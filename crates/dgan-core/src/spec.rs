@@ -32,6 +32,46 @@ pub struct MapSpec {
     /// whose map is not optional refuses frames without a map.
     #[serde(default)]
     pub optional: bool,
+    /// How a vector map is drawn into the crops (contract 7); raster maps are always resampled per crop.
+    #[serde(default)]
+    pub render: MapRender,
+}
+
+/// How a vector map becomes the agents' crops (`map.render` of a contract-7 model).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapRender {
+    /// Each agent's crop is drawn from the map's elements in the agent's own frame: the cost grows with the agents.
+    #[default]
+    Agent,
+    /// The map is drawn once, north-up, into tiles at half the crop's pixel size that stay with the map for every
+    /// later crop and call ([`crate::tiles`]); each crop is resampled from them bilinearly, then the agents' boxes
+    /// are drawn on it as with `Agent`.
+    Tiles,
+}
+
+impl MapRender {
+    /// Every way, in the order of their names.
+    pub const ALL: [MapRender; 2] = [MapRender::Agent, MapRender::Tiles];
+
+    /// The name a contract gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            MapRender::Agent => "agent",
+            MapRender::Tiles => "tiles",
+        }
+    }
+}
+
+impl std::str::FromStr for MapRender {
+    type Err = DganError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|r| r.name() == s)
+            .ok_or_else(|| DganError::InvalidSpec(format!("map render must be one of \"agent\", \"tiles\", got {s:?}")))
+    }
 }
 
 fn default_true() -> bool {
@@ -39,6 +79,9 @@ fn default_true() -> bool {
 }
 
 impl MapSpec {
+    /// The largest crop side, pixels, that `render = "tiles"` serves: a crop then touches a few dozen tiles at most.
+    pub const MAX_TILED_PX: usize = 256;
+
     /// Checks the crop's size, resolution and agent pixel.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(DganError::InvalidSpec(m));
@@ -52,6 +95,13 @@ impl MapSpec {
             return bad(format!(
                 "agent pixel ({}, {}) is outside the {}×{} crop",
                 self.agent_row, self.agent_col, self.height_px, self.width_px
+            ));
+        }
+        let side = Self::MAX_TILED_PX;
+        if self.render == MapRender::Tiles && (self.height_px > side || self.width_px > side) {
+            return bad(format!(
+                "map render \"tiles\" serves crops of at most {side} pixels a side, got {}×{}; use \"agent\"",
+                self.height_px, self.width_px
             ));
         }
         Ok(())
@@ -205,6 +255,7 @@ mod tests {
                 agent_col: 16,
                 draw_agents: true,
                 optional: false,
+                render: MapRender::Agent,
             }),
             prior: PriorSpec::NONE,
             graph: GraphLayout::EdgeList,

@@ -91,6 +91,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
             agent_col: 32,
             draw_agents: true,
             optional: false,
+            render: dgan_core::MapRender::Agent,
         }),
         prior: PriorSpec::constant_velocity(0.8),
         graph: GraphLayout::Padded,

@@ -481,7 +481,15 @@ def contract_cases(tmp: Path) -> list[Case]:
         "t_f": [-1, 0, 10**9, 10**17, None, 12.5],
         "classes": [[], ["bus"], "pedestrian", None, [1], ["pedestrian", "pedestrian"]],
         "attention_lambda": [-1, "x", None],
-        "map": ["raster", 3, {"height_px": 10}, {**meta["map"], "height_px": 0}, {**meta["map"], "resolution_m": -1}],
+        "map": [
+            "raster",
+            3,
+            {"height_px": 10},
+            {**meta["map"], "height_px": 0},
+            {**meta["map"], "resolution_m": -1},
+            {"render": "tile", **meta["map"]},
+            {"render": "tiles", **meta["map"]},  # zara1 is a contract-6 model
+        ],
         "prior": [
             "cv",
             {"kind": "magic"},
@@ -493,7 +501,7 @@ def contract_cases(tmp: Path) -> list[Case]:
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 7, 99, "4", None, -1],
+        "contract_version": [0, 8, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",

@@ -1,0 +1,136 @@
+//! A vector map drawn once, north-up, into square tiles that stay with the map ([`VectorMap::tiles`]), and the
+//! agents' crops resampled from them (`map.render = "tiles"`): the map's cost is paid once per tile, not once per
+//! agent and call.
+//!
+//! Tiles are drawn by the same canvas as the crops ([`crate::canvas`]) at half the crop's pixel size, lines no
+//! narrower than one crop pixel, on a grid fixed in the world (tile `(i, j)` holds the world's tile pixels
+//! `(row, col)` with `col ∈ [128 i, 128 i + 128)` and `row ∈ [128 j, 128 j + 128)`, the pixel `(row, col)` centred
+//! at world `(col · r, −row · r)` for the tiles' resolution `r`): a tile is the same whichever crop or thread asked
+//! for it first, so crops do not depend on the order of the agents, the calls or the threads.
+
+use crate::canvas::Canvas;
+use crate::map::{TileKey, VectorMap};
+use crate::spec::{MapRender, MapSpec};
+use crate::transform::AgentPose;
+use std::sync::Arc;
+
+/// Tile side, pixels (a power of two: tile indices by shifts).
+pub const TILE_PX: usize = 128;
+const TILE_SHIFT: u32 = 7;
+/// Tile pixels per crop pixel along each axis.
+pub const SUPERSAMPLE: f64 = 2.0;
+
+/// The tiles' resolution for crops of `spec`, metres per pixel.
+fn tile_resolution(spec: &MapSpec) -> f64 {
+    spec.resolution_m / SUPERSAMPLE
+}
+
+/// Tile `(i, j)` of `map` for crops of `spec`, `TILE_PX² × 3` bytes of RGB (row-major; black where nothing is
+/// drawn), from the map's store or drawn now and kept there.
+fn tile(map: &VectorMap, spec: &MapSpec, i: i64, j: i64) -> Arc<[u8]> {
+    let res = tile_resolution(spec);
+    let key = TileKey { resolution_bits: res.to_bits(), i, j };
+    if let Some(t) = map.tiles().get(&key) {
+        return t;
+    }
+    let tile_spec = MapSpec {
+        height_px: TILE_PX,
+        width_px: TILE_PX,
+        resolution_m: res,
+        agent_row: 0,
+        agent_col: 0,
+        draw_agents: false,
+        optional: false,
+        render: MapRender::Agent,
+    };
+    let side = TILE_PX as f64 * res;
+    // Heading +y: the frame's forward is north (image up), its left is west (image left).
+    let pose = AgentPose::new([i as f64 * side, -(j as f64) * side], std::f64::consts::FRAC_PI_2);
+    let mut rgb = vec![0u8; TILE_PX * TILE_PX * 3];
+    if let Some(mut canvas) = Canvas::new(&tile_spec, pose) {
+        canvas.min_width_px = SUPERSAMPLE as f32;
+        canvas.draw_vector(map);
+        for (out, px) in rgb.chunks_exact_mut(3).zip(canvas.pixmap.data().chunks_exact(4)) {
+            out.copy_from_slice(&px[..3]);
+        }
+    }
+    map.tiles().insert(key, rgb.into())
+}
+
+/// Fills `canvas` (an agent's crop) with `map` resampled bilinearly from its tiles, opaque.
+pub(crate) fn resample(canvas: &mut Canvas<'_>, map: &VectorMap) {
+    let spec = canvas.spec;
+    let res = tile_resolution(spec);
+    let view = canvas.view;
+    // The tiles under the crop (its world bounds in tile pixels, one pixel more each side for the bilinear taps).
+    let (c0, c1) = ((view[0] / res).floor() as i64 - 1, (view[2] / res).ceil() as i64 + 1);
+    let (r0, r1) = ((-view[3] / res).floor() as i64 - 1, (-view[1] / res).ceil() as i64 + 1);
+    let (i0, i1, j0, j1) = (c0 >> TILE_SHIFT, c1 >> TILE_SHIFT, r0 >> TILE_SHIFT, r1 >> TILE_SHIFT);
+    let across = (i1 - i0 + 1) as usize;
+    let grid: Vec<Arc<[u8]>> =
+        (j0..=j1).flat_map(|j| (i0..=i1).map(move |i| (i, j))).map(|(i, j)| tile(map, spec, i, j)).collect();
+    let mask = TILE_PX as i64 - 1;
+    let stride = TILE_PX * 3;
+    // The tile holding tile pixel (r, c), and the pixel's offset in it.
+    let locate = |r: i64, c: i64| -> (&[u8], usize) {
+        let t = &grid[((r >> TILE_SHIFT) - j0) as usize * across + ((c >> TILE_SHIFT) - i0) as usize];
+        (t, (((r & mask) << TILE_SHIFT) + (c & mask)) as usize * 3)
+    };
+    // World position of pixel (0, 0) and its steps along a row and down a column, in tile pixels.
+    let at = |row: usize, col: usize| {
+        let w = canvas.pose.to_world(spec.pixel_to_local(row, col));
+        [w[0] / res, -w[1] / res]
+    };
+    let (o, right, down) = (at(0, 0), at(0, 1), at(1, 0));
+    let (dc, dr) = ([right[0] - o[0], right[1] - o[1]], [down[0] - o[0], down[1] - o[1]]);
+    let w = spec.width_px;
+    let data = canvas.pixmap.data_mut();
+    for (row, out) in data.chunks_exact_mut(w * 4).enumerate() {
+        let fr = row as f64;
+        let (mut gc, mut gr) = (o[0] + fr * dr[0], o[1] + fr * dr[1]);
+        for px in out.chunks_exact_mut(4) {
+            let (cc, rr) = (floor_i64(gc), floor_i64(gr));
+            // Bilinear weights in 1/256ths: the four taps' weights sum to 65,536.
+            let fu = ((gc - cc as f64) * 256.0) as u32;
+            let fv = ((gr - rr as f64) * 256.0) as u32;
+            let (t, k) = locate(rr, cc);
+            // The four taps: in one tile unless the pixel is on a tile's last row or column.
+            let (top, bottom): ([u8; 6], [u8; 6]) = if (cc & mask) < mask && (rr & mask) < mask {
+                (six(&t[k..k + 6]), six(&t[k + stride..k + stride + 6]))
+            } else {
+                let tap = |r: i64, c: i64| -> [u8; 3] {
+                    let (t, k) = locate(r, c);
+                    [t[k], t[k + 1], t[k + 2]]
+                };
+                let (a, b, c, d) = (tap(rr, cc), tap(rr, cc + 1), tap(rr + 1, cc), tap(rr + 1, cc + 1));
+                ([a[0], a[1], a[2], b[0], b[1], b[2]], [c[0], c[1], c[2], d[0], d[1], d[2]])
+            };
+            let weights = [(256 - fu) * (256 - fv), fu * (256 - fv), (256 - fu) * fv, fu * fv];
+            for ch in 0..3 {
+                let sum = u32::from(top[ch]) * weights[0]
+                    + u32::from(top[ch + 3]) * weights[1]
+                    + u32::from(bottom[ch]) * weights[2]
+                    + u32::from(bottom[ch + 3]) * weights[3];
+                px[ch] = ((sum + 32_768) >> 16) as u8;
+            }
+            px[3] = 255;
+            gc += dc[0];
+            gr += dc[1];
+        }
+    }
+}
+
+/// Six bytes of a slice of six.
+#[inline]
+fn six(s: &[u8]) -> [u8; 6] {
+    let mut out = [0u8; 6];
+    out.copy_from_slice(s);
+    out
+}
+
+/// `x.floor() as i64` without a call to libm (which the baseline x86-64 target makes for `floor`).
+#[inline]
+fn floor_i64(x: f64) -> i64 {
+    let t = x as i64;
+    t - i64::from((t as f64) > x)
+}
