@@ -7,7 +7,7 @@ For every bundled model, the real bundled scene of its time base (`dgan.demo.sce
 median over ``--repeat`` runs after warm-up:
 
 - ``predict``: `dgan.Predictor.predict` (preprocessing, the network in ONNX Runtime, decoding), one intra-op thread;
-- ``preprocess``: `dgan.preprocess` alone (traffic state, graph, map crops, prior);
+- ``preprocess``: `dgan.preprocess` alone (traffic state, graph, map crops, prior), on one thread as `predict`;
 - ``bare ORT``: an `onnxruntime.InferenceSession` (one thread) on the same preprocessed tensors;
 - ``torch``: the training code's model from the same checkpoint (`training/checkpoints/<name>.pt`), eager, one
   thread, on the same tensors, plus `decode_torch`; ``torch pipeline`` adds the engine's preprocessing to it;
@@ -133,7 +133,7 @@ def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any
         feed = {k: x[k] for k in names}
         row: dict[str, Any] = {"model": name, "N": n, "E": len(x["edge_index"])}
         row["predict"] = median_ms(partial(predictor.predict, f), repeat)
-        row["preprocess"] = median_ms(partial(dgan.preprocess, f, spec), repeat)
+        row["preprocess"] = median_ms(partial(dgan.preprocess, f, spec, threads=1), repeat)
         row["ort"] = median_ms(partial(session.run, None, feed), repeat)
         flops = graph_flops(predictor.path, feed).total
         row["mflop_per_agent"] = flops / n / 1e6

@@ -119,7 +119,7 @@ class InputSpec:
         return state_width(self.classes)
 
 
-def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:
+def preprocess(frame: Frame, spec: InputSpec, threads: int | None = None) -> dict[str, npt.NDArray[Any]]:
     """The network inputs of ``frame`` (see ``docs/model-contract.md``) plus its geometry.
 
     Returns ``trajectory (N, T_obs, 2)``, ``trajectory_mask (N, T_obs)``, ``state (N, 7 + C)``,
@@ -127,13 +127,16 @@ def preprocess(frame: Frame, spec: InputSpec) -> dict[str, npt.NDArray[Any]]:
     ``neighbor_mask (N, D)``, ``neighbor_features (N, D, 6)``), ``map (N, 3, H, W)`` for map models,
     ``map_present (N,)`` for models whose map is optional, the kinematic ``prior (N, T_f, 2)`` in each agent's
     frame, and ``origin (N, 2)``, ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and
-    undirected ``edges``.
+    undirected ``edges``. The map crops are drawn on at most ``threads`` threads (default: every core; a
+    ``Predictor`` draws them on its own ``threads``); the tensors are the same whatever the threads.
     """
     if not isinstance(frame, Frame):
         raise InvalidFrameError(
             f"preprocess takes a dgan.Frame, got {'None' if frame is None else type(frame).__name__}"
         )
-    out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, _spec_json(spec))
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise InvalidSpecError(f"threads must be a positive int or None, got {threads!r}")
+    out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, _spec_json(spec), threads)
     return out
 
 

@@ -69,42 +69,49 @@ pub(crate) fn resample(canvas: &mut Canvas<'_>, map: &VectorMap) {
     let across = (i1 - i0 + 1) as usize;
     let grid: Vec<Arc<[u8]>> =
         (j0..=j1).flat_map(|j| (i0..=i1).map(move |i| (i, j))).map(|(i, j)| tile(map, spec, i, j)).collect();
-    let mask = TILE_PX as i64 - 1;
-    let stride = TILE_PX * 3;
-    // The tile holding tile pixel (r, c), and the pixel's offset in it.
-    let locate = |r: i64, c: i64| -> (&[u8], usize) {
-        let t = &grid[((r >> TILE_SHIFT) - j0) as usize * across + ((c >> TILE_SHIFT) - i0) as usize];
-        (t, (((r & mask) << TILE_SHIFT) + (c & mask)) as usize * 3)
-    };
-    // World position of pixel (0, 0) and its steps along a row and down a column, in tile pixels.
+    // The crop's bounds as one patch of tile pixels, rows (r0..=r1) by columns (c0..=c1), copied row by row from the
+    // tiles: the taps below then read one array, whatever tile they fall in.
+    let (ph, pw) = ((r1 - r0 + 1) as usize, (c1 - c0 + 1) as usize);
+    let mut patch = vec![0u8; ph * pw * 3];
+    for (pr, line) in patch.chunks_exact_mut(pw * 3).enumerate() {
+        let r = r0 + pr as i64;
+        let (j, tr) = (r >> TILE_SHIFT, (r & (TILE_PX as i64 - 1)) as usize);
+        let mut c = c0;
+        while c <= c1 {
+            let i = c >> TILE_SHIFT;
+            let tc = (c & (TILE_PX as i64 - 1)) as usize;
+            let n = (TILE_PX - tc).min((c1 - c + 1) as usize);
+            let t = &grid[(j - j0) as usize * across + (i - i0) as usize];
+            let from = (tr * TILE_PX + tc) * 3;
+            let to = (c - c0) as usize * 3;
+            line[to..to + n * 3].copy_from_slice(&t[from..from + n * 3]);
+            c += n as i64;
+        }
+    }
+    // World position of pixel (0, 0) and its steps along a row and down a column, in patch pixels.
     let at = |row: usize, col: usize| {
         let w = canvas.pose.to_world(spec.pixel_to_local(row, col));
-        [w[0] / res, -w[1] / res]
+        [w[0] / res - c0 as f64, -w[1] / res - r0 as f64]
     };
     let (o, right, down) = (at(0, 0), at(0, 1), at(1, 0));
     let (dc, dr) = ([right[0] - o[0], right[1] - o[1]], [down[0] - o[0], down[1] - o[1]]);
-    let w = spec.width_px;
+    let (w, stride) = (spec.width_px, pw * 3);
+    // Within the patch by construction (its bounds hold every pixel centre, one pixel to spare); clamped so that a
+    // rounding at its edge cannot read outside it.
+    let (last_c, last_r) = (pw as f64 - 2.0, ph as f64 - 2.0);
     let data = canvas.pixmap.data_mut();
     for (row, out) in data.chunks_exact_mut(w * 4).enumerate() {
         let fr = row as f64;
         let (mut gc, mut gr) = (o[0] + fr * dr[0], o[1] + fr * dr[1]);
         for px in out.chunks_exact_mut(4) {
-            let (cc, rr) = (floor_i64(gc), floor_i64(gr));
+            let (x, y) = (gc.clamp(0.0, last_c), gr.clamp(0.0, last_r));
+            // Non-negative: truncation is the floor.
+            let (cc, rr) = (x as usize, y as usize);
             // Bilinear weights in 1/256ths: the four taps' weights sum to 65,536.
-            let fu = ((gc - cc as f64) * 256.0) as u32;
-            let fv = ((gr - rr as f64) * 256.0) as u32;
-            let (t, k) = locate(rr, cc);
-            // The four taps: in one tile unless the pixel is on a tile's last row or column.
-            let (top, bottom): ([u8; 6], [u8; 6]) = if (cc & mask) < mask && (rr & mask) < mask {
-                (six(&t[k..k + 6]), six(&t[k + stride..k + stride + 6]))
-            } else {
-                let tap = |r: i64, c: i64| -> [u8; 3] {
-                    let (t, k) = locate(r, c);
-                    [t[k], t[k + 1], t[k + 2]]
-                };
-                let (a, b, c, d) = (tap(rr, cc), tap(rr, cc + 1), tap(rr + 1, cc), tap(rr + 1, cc + 1));
-                ([a[0], a[1], a[2], b[0], b[1], b[2]], [c[0], c[1], c[2], d[0], d[1], d[2]])
-            };
+            let fu = ((x - cc as f64) * 256.0) as u32;
+            let fv = ((y - rr as f64) * 256.0) as u32;
+            let k = (rr * pw + cc) * 3;
+            let (top, bottom) = (six(&patch[k..k + 6]), six(&patch[k + stride..k + stride + 6]));
             let weights = [(256 - fu) * (256 - fv), fu * (256 - fv), (256 - fu) * fv, fu * fv];
             for ch in 0..3 {
                 let sum = u32::from(top[ch]) * weights[0]
@@ -126,11 +133,4 @@ fn six(s: &[u8]) -> [u8; 6] {
     let mut out = [0u8; 6];
     out.copy_from_slice(s);
     out
-}
-
-/// `x.floor() as i64` without a call to libm (which the baseline x86-64 target makes for `floor`).
-#[inline]
-fn floor_i64(x: f64) -> i64 {
-    let t = x as i64;
-    t - i64::from((t as f64) > x)
 }

@@ -2,7 +2,7 @@
 
 use crate::error::IntoPyResult;
 use crate::frame::PyFrame;
-use dgan_core::preprocess::preprocess as core_preprocess;
+use dgan_core::preprocess::{preprocess_on, Limits};
 use dgan_core::{DganError, InputSpec};
 use ndarray::Array2;
 use numpy::{IntoPyArray, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
@@ -24,12 +24,29 @@ pub fn validate_spec(json: &str) -> PyResult<String> {
 }
 
 /// The network inputs of `frame` under the JSON input specification, plus the agent-centric frames (`origin`,
-/// `heading`), traffic states, attention radii and undirected `edges`.
+/// `heading`), traffic states, attention radii and undirected `edges`; the map crops drawn on at most `threads`
+/// threads (all the machine's cores if `None`; the tensors are the same whatever the threads).
 #[pyfunction]
-pub fn preprocess<'py>(py: Python<'py>, frame: &PyFrame, spec_json: &str) -> PyResult<Bound<'py, PyDict>> {
+#[pyo3(signature = (frame, spec_json, threads = None))]
+pub fn preprocess<'py>(
+    py: Python<'py>,
+    frame: &PyFrame,
+    spec_json: &str,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
     let spec = parse_spec(spec_json).py()?;
+    let cores = dgan_core::limits::cores();
+    let threads = match threads {
+        None => cores,
+        Some(t) if (1..=cores).contains(&t) => t,
+        Some(t) => {
+            return Err(crate::error::to_py(DganError::InvalidSpec(format!(
+                "threads must be in 1..={cores} (this machine's cores), got {t}"
+            ))))
+        }
+    };
     let frame = &frame.inner;
-    let pre = py.detach(|| core_preprocess(frame, &spec)).py()?;
+    let pre = py.detach(|| preprocess_on(frame, &spec, &Limits::default(), threads)).py()?;
     let d = PyDict::new(py);
     let x = pre.inputs;
     d.set_item("trajectory", x.trajectory.into_pyarray(py))?;

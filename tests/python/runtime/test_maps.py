@@ -144,3 +144,15 @@ def test_tiles_are_refused_for_large_crops_and_unknown_ways() -> None:
     dataclasses.replace(SPEC, map=dataclasses.replace(big, render="agent"))  # drawn per agent: any size
     with pytest.raises(exc.InvalidSpecError, match="unknown variant `tile`"):
         dataclasses.replace(SPEC, map=dataclasses.replace(SPEC.map, render="tile"))
+
+
+def test_preprocess_threads_bound_the_crops_not_the_tensors(zara1_frame: dgan.Frame) -> None:
+    spec = dgan.Predictor("zara1").spec
+    every = dgan.preprocess(zara1_frame, spec)
+    one = dgan.preprocess(zara1_frame, spec, threads=1)
+    assert every.keys() == one.keys()
+    for k in every:
+        np.testing.assert_array_equal(every[k], one[k], err_msg=k)
+    for bad in (0, -1, 1.5, True, 10**6):
+        with pytest.raises(exc.InvalidSpecError, match="threads"):
+            dgan.preprocess(zara1_frame, spec, threads=bad)  # type: ignore[arg-type]
