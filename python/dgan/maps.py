@@ -138,6 +138,12 @@ class VectorMap:
         except (KeyError, TypeError):
             raise InvalidMapError(f"{path}: each element needs 'kind' and 'points'") from None
 
+    @property
+    def tiles_kept(self) -> int:
+        """How many tiles of this map are kept for the crops of models with ``map.render = "tiles"`` (drawn once,
+        reused by every later call with this map; at most 512, the least recently used replaced first)."""
+        return self._map.tiles_kept
+
     def __len__(self) -> int:
         return len(self._map)
 

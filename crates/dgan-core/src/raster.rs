@@ -320,14 +320,21 @@ mod tests {
     }
 
     #[test]
-    fn a_map_keeps_a_bounded_number_of_tiles() {
+    fn a_map_keeps_a_bounded_number_of_tiles_the_least_recently_used_leaving_first() {
         let m = VectorMap::default();
-        let cap = crate::map::TileStore::CAPACITY;
-        for i in 0..cap as i64 + 5 {
-            m.tiles().insert(crate::map::TileKey { resolution_bits: 1, i, j: 0 }, vec![0u8; 3].into());
-            assert!(m.tiles().len() <= cap);
+        let cap = crate::map::TileStore::CAPACITY as i64;
+        let key = |i: i64| crate::map::TileKey { resolution_bits: 1, i, j: 0 };
+        for i in 0..cap {
+            m.tiles().insert(key(i), vec![0u8; 3].into());
         }
-        assert!(!m.tiles().is_empty());
+        assert!(m.tiles().get(&key(0)).is_some()); // tile 0 used again: tile 1 is now the oldest
+        for i in cap..cap + 5 {
+            m.tiles().insert(key(i), vec![0u8; 3].into());
+            assert_eq!(m.tiles().len(), cap as usize);
+        }
+        assert!(m.tiles().contains(&key(0)));
+        assert!((1..6).all(|i| !m.tiles().contains(&key(i))));
+        assert!(m.tiles().contains(&key(6)) && m.tiles().contains(&key(cap + 4)));
     }
 
     #[test]

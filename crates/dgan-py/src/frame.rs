@@ -283,6 +283,15 @@ impl PyVectorMap {
         }
     }
 
+    /// How many tiles of the map are kept for `map.render = "tiles"` crops.
+    #[getter]
+    fn tiles_kept(&self) -> usize {
+        match self.inner.as_ref() {
+            SceneMap::Vector(v) => v.tiles().len(),
+            SceneMap::Raster(_) => 0,
+        }
+    }
+
     /// The elements as `(kind, points)` pairs, in drawing order.
     fn elements<'py>(&self, py: Python<'py>) -> Vec<(&'static str, Bound<'py, PyArray2<f64>>)> {
         match self.inner.as_ref() {

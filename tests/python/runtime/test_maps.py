@@ -132,6 +132,12 @@ def test_tiled_crops_match_the_drawn_ones_and_the_bundled_hdmap_serves_them() ->
     assert np.abs(drawn - first).mean() < 0.02
     assert abs(drawn.sum() - first.sum()) < 0.05 * drawn.sum()
     np.testing.assert_array_equal(dgan.preprocess(waymo_frame, tiles)["map"], first)
+    assert isinstance(waymo_frame.map, dgan.VectorMap)
+    kept = waymo_frame.map.tiles_kept
+    assert 4 <= kept <= 64
+    dgan.preprocess(waymo_frame, tiles)
+    assert waymo_frame.map.tiles_kept == kept  # drawn once: a second call reuses them
+    assert dgan.VectorMap(waymo_frame.map.elements()).tiles_kept == 0
     a, b = predictor.predict(waymo_frame), predictor.predict(waymo_frame)
     np.testing.assert_array_equal(a.trajectories, b.trajectories)
 
