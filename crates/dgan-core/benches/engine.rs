@@ -9,7 +9,8 @@
 //! - `hdmap_waymo/raster` and `hdmap_waymo/predict`: a real Waymo Open Motion frame (45 agents, its whole vector map
 //!   of 148 elements; `tests/fixtures/waymo_frame.json`) with the bundled `hdmap` model: the rasterisation of every
 //!   agent's crop at the model's map spec (from the map's tiles, kept after the first iteration; `raster_per_agent`:
-//!   each crop drawn from the elements), and the whole predict it is part of; needs `ORT_DYLIB_PATH`.
+//!   each crop drawn from the elements; `raster_first_call`: a fresh map, its tiles drawn), and the whole predict it
+//!   is part of, split into preprocessing, network and decoding; needs `ORT_DYLIB_PATH`.
 //! - `tracker/zara1_excerpt` and `tracker/crowd_10hz/200`: the streaming tracker's cost per tick (update plus the
 //!   frame at the tick; throughput in ticks): the bundled real zara1 excerpt replayed tick by tick (20 ticks, up to
 //!   22 pedestrians), and 200 agents at 10 Hz resampled to a 0.4 s model (100 ticks).
@@ -196,6 +197,13 @@ fn bench_hdmap(c: &mut Criterion) {
     // The same crops drawn per agent (map.render = "agent", as before contract 7).
     let per_agent = MapSpec { render: dgan_core::MapRender::Agent, ..map_spec.clone() };
     g.bench_function("raster_per_agent", |b| b.iter(|| rasterize(black_box(&frame), &states, &per_agent)));
+    // Map preparation: the first call on a map, which draws the tiles its crops need (a fresh copy of the map each
+    // iteration), crops included.
+    let Some(SceneMap::Vector(map)) = frame.map() else { unreachable!("the Waymo frame has a vector map") };
+    let fresh = || frame.clone().with_map(Arc::new(SceneMap::Vector(VectorMap::new(map.elements().to_vec()))));
+    g.bench_function("raster_first_call", |b| {
+        b.iter_batched(fresh, |f| rasterize(&f, &states, &map_spec), criterion::BatchSize::SmallInput)
+    });
     g.bench_function("predict", |b| b.iter(|| predictor.predict(black_box(&frame))));
     // predict split into its three parts: preprocessing, the network, decoding.
     g.bench_function("preprocess", |b| b.iter(|| preprocess(black_box(&frame), &spec)));
