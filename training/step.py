@@ -3,7 +3,7 @@ validation figures an epoch is chosen by."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
@@ -29,6 +29,9 @@ class Teacher:
     @classmethod
     def load(cls, path: str, spec: dgan.InputSpec) -> Teacher:
         model, tspec, anchors, class_of, _, temperature = load_checkpoint(Path(path))
+        # A teacher runs on the student's crops whichever way its own were drawn (map.render): the same tensors.
+        if tspec.map is not None and spec.map is not None:
+            tspec = replace(tspec, map=replace(tspec.map, render=spec.map.render))
         if tspec.to_json() != spec.to_json():
             raise ValueError(f"train.distill: {path} takes other inputs than this configuration ({tspec.to_json()})")
         return cls(model.eval(), torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long(), temperature)

@@ -440,3 +440,18 @@ def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None
         *outs, top, classes, anchors, class_of, tr.alpha, tr.beta, None, tr.cls_target, tr.anchor_pool
     )
     torch.testing.assert_close(taught, alone + 2.5 * second)
+
+
+def test_a_teacher_runs_on_the_student_s_crops_whichever_way_its_own_were_drawn() -> None:
+    from training.step import Teacher
+
+    cfg = Config.load(ROOT / "training" / "configs" / "hdmap.toml", {"model.map_res_blocks": 1})
+    spec = input_spec(cfg)
+    assert spec.map is not None
+    assert spec.map.render == "tiles"
+    # The kept teacher was trained on crops drawn per agent; it takes the tiled crops (the same tensors) ...
+    Teacher.load(str(ROOT / "training" / "checkpoints" / "teachers" / "hdmap.pt"), spec)
+    # ... but not a crop of another size.
+    other = replace(spec, map=replace(spec.map, height_px=40, agent_row=30))
+    with pytest.raises(ValueError, match="takes other inputs"):
+        Teacher.load(str(ROOT / "training" / "checkpoints" / "teachers" / "hdmap.pt"), other)
