@@ -19,6 +19,9 @@ median over ``--repeat`` runs after warm-up:
   (`benches/flops.py`), and ``GFLOP/s`` of the bare session: those operations over its time, against the same run's
   single-thread float32 sgemm (numpy, 1024², printed first).
 
+``--session-options``: the bare session under other ONNX Runtime options (no memory arena, no memory pattern, fewer
+graph optimisations) as multiples of the engine's options' time.
+
 Then one `predict` on 1 and 2 intra-op threads (also as multiples of the run's single-thread 512³ matmul), the
 throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of `predict`.
 The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark, not a test;
@@ -248,6 +251,46 @@ def flops_table(models: list[str], agents: list[int]) -> None:
             print(f"| {name} | {n} | {f.total / n / 1e6:.2f} ({f.dense / n / 1e6:.2f} + {f.other / n / 1e6:.2f}) |")
 
 
+#: ONNX Runtime session options against the engine's (all graph optimisations, the memory arena and patterns on).
+SESSION_VARIANTS: dict[str, dict[str, Any]] = {
+    "no memory arena": {"enable_cpu_mem_arena": False},
+    "no memory pattern": {"enable_mem_pattern": False},
+    "extended optimisations only": {"graph_optimization_level": "ORT_ENABLE_EXTENDED"},
+    "basic optimisations only": {"graph_optimization_level": "ORT_ENABLE_BASIC"},
+}
+
+
+def session_options_table(models: list[str], agents: list[int], repeat: int) -> None:
+    """The bare session (one thread) under each of :data:`SESSION_VARIANTS`, as a multiple of the engine's options'
+    time (above 1: slower), every session of a row timed in interleaved rounds on the same inputs."""
+    import onnxruntime as ort
+
+    print("\n| model | N | engine's options ms | " + " | ".join(SESSION_VARIANTS) + " |")
+    print("|---|---|---|" + "---|" * len(SESSION_VARIANTS))
+    for name in models:
+        p = dgan.Predictor(name, sessions=1)
+        for n in agents:
+            x = dgan.preprocess(tiled(scene_for(p.spec).frame, n), p.spec)
+            sessions = {"engine": bare_session(p.path)}
+            for label, options in SESSION_VARIANTS.items():
+                opts = ort.SessionOptions()
+                opts.intra_op_num_threads = opts.inter_op_num_threads = 1
+                for key, value in options.items():
+                    setattr(opts, key, getattr(ort.GraphOptimizationLevel, value) if isinstance(value, str) else value)
+                sessions[label] = ort.InferenceSession(str(p.path), opts, providers=["CPUExecutionProvider"])
+            feed = {i.name: x[i.name] for i in sessions["engine"].get_inputs()}
+            times: dict[str, list[float]] = {k: [] for k in sessions}
+            for k in range(repeat + 3):
+                for label, s in sessions.items():
+                    t = time.perf_counter()
+                    s.run(None, feed)
+                    if k >= 3:
+                        times[label].append(time.perf_counter() - t)
+            base = statistics.median(times["engine"])
+            cells = " | ".join(f"{statistics.median(times[k]) / base:.2f}" for k in SESSION_VARIANTS)
+            print(f"| {name} | {n} | {base * 1e3:.2f} | {cells} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", nargs="*", default=list(dgan.models.list()))
@@ -256,6 +299,7 @@ def main() -> None:
     ap.add_argument("--calls", type=int, default=200, help="predictions per throughput measurement")
     ap.add_argument("--flops", action="store_true", help="only the operations per agent (no timing)")
     ap.add_argument("--latency", action="store_true", help="only one predict on 1 and 2 threads")
+    ap.add_argument("--session-options", action="store_true", help="only ONNX Runtime's options against the engine's")
     a = ap.parse_args()
     if a.flops:
         flops_table(a.models, a.agents)
@@ -264,6 +308,10 @@ def main() -> None:
     print(f"single-thread sgemm (numpy float32, 1024²): {sgemm_gflops():.1f} GFLOP/s")
     matmul_ms = 2 * 512**3 / sgemm_gflops(512, 15) / 1e6
     print(f"single-thread 512³ float32 matmul: {matmul_ms:.2f} ms")
+    if a.session_options:
+        session_options_table(a.models, a.agents, a.repeat)
+        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+        return
     if a.latency:
         latency_table(a.models, a.repeat, matmul_ms)
         print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
