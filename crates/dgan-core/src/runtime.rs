@@ -230,6 +230,11 @@ fn open_session(path: &Path, bytes: &[u8], options: &PredictorOptions) -> Result
         .with_intra_threads(options.intra_threads.max(1))
         .map_err(builder_err)?
         .with_inter_threads(1)
+        .map_err(builder_err)?
+        // Intra-op workers spin while a run needs them and stop when it ends, so that they do not take a core from
+        // the next call's preprocessing (measured: docs/speed.md, `hdmap` at N = 256 on two threads 23-24 against
+        // 31-33 ms; spinning off altogether was slower for the small models).
+        .with_config_entry("session.force_spinning_stop", "1")
         .map_err(builder_err)?;
     if let ExecutionProvider::Cuda { device_id } = options.execution_provider {
         let cuda = ort::ep::CUDA::default().with_device_id(device_id).build().error_on_failure();
