@@ -57,12 +57,13 @@ fn tile(map: &VectorMap, spec: &MapSpec, i: i64, j: i64) -> Arc<[u8]> {
     map.tiles().insert(key, rgb.into())
 }
 
-/// Fills `canvas` (an agent's crop) with `map` resampled bilinearly from its tiles, opaque.
+/// Fills `canvas` (an agent's crop) with `map` resampled from its tiles, opaque: each crop pixel the mean of the 2 × 2
+/// tile pixels around its centre.
 pub(crate) fn resample(canvas: &mut Canvas<'_>, map: &VectorMap) {
     let spec = canvas.spec;
     let res = tile_resolution(spec);
     let view = canvas.view;
-    // The tiles under the crop (its world bounds in tile pixels, one pixel more each side for the bilinear taps).
+    // The tiles under the crop (its world bounds in tile pixels, one pixel more each side for the taps).
     let (c0, c1) = ((view[0] / res).floor() as i64 - 1, (view[2] / res).ceil() as i64 + 1);
     let (r0, r1) = ((-view[3] / res).floor() as i64 - 1, (-view[1] / res).ceil() as i64 + 1);
     let (i0, i1, j0, j1) = (c0 >> TILE_SHIFT, c1 >> TILE_SHIFT, r0 >> TILE_SHIFT, r1 >> TILE_SHIFT);
@@ -104,21 +105,15 @@ pub(crate) fn resample(canvas: &mut Canvas<'_>, map: &VectorMap) {
         let fr = row as f64;
         let (mut gc, mut gr) = (o[0] + fr * dr[0], o[1] + fr * dr[1]);
         for px in out.chunks_exact_mut(4) {
-            let (x, y) = (gc.clamp(0.0, last_c), gr.clamp(0.0, last_r));
-            // Non-negative: truncation is the floor.
-            let (cc, rr) = (x as usize, y as usize);
-            // Bilinear weights in 1/256ths: the four taps' weights sum to 65,536.
-            let fu = ((x - cc as f64) * 256.0) as u32;
-            let fv = ((y - rr as f64) * 256.0) as u32;
+            // The 2 × 2 tile pixels around the crop pixel's centre (non-negative: truncation is the floor), averaged:
+            // a box one crop pixel wide, as a crop drawn per agent covers its pixels.
+            let (cc, rr) = (gc.clamp(0.0, last_c) as usize, gr.clamp(0.0, last_r) as usize);
             let k = (rr * pw + cc) * 3;
             let (top, bottom) = (six(&patch[k..k + 6]), six(&patch[k + stride..k + stride + 6]));
-            let weights = [(256 - fu) * (256 - fv), fu * (256 - fv), (256 - fu) * fv, fu * fv];
             for ch in 0..3 {
-                let sum = u32::from(top[ch]) * weights[0]
-                    + u32::from(top[ch + 3]) * weights[1]
-                    + u32::from(bottom[ch]) * weights[2]
-                    + u32::from(bottom[ch + 3]) * weights[3];
-                px[ch] = ((sum + 32_768) >> 16) as u8;
+                let sum =
+                    u16::from(top[ch]) + u16::from(top[ch + 3]) + u16::from(bottom[ch]) + u16::from(bottom[ch + 3]);
+                px[ch] = ((sum + 2) >> 2) as u8;
             }
             px[3] = 255;
             gc += dc[0];
