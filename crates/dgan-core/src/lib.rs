@@ -47,6 +47,7 @@ pub mod raster;
 pub mod runtime;
 pub mod spec;
 pub mod state;
+pub mod tile_store;
 pub mod tiles;
 pub mod transform;
 

@@ -322,8 +322,8 @@ mod tests {
     #[test]
     fn a_map_keeps_a_bounded_number_of_tiles_the_least_recently_used_leaving_first() {
         let m = VectorMap::default();
-        let cap = crate::map::TileStore::CAPACITY as i64;
-        let key = |i: i64| crate::map::TileKey { resolution_bits: 1, i, j: 0 };
+        let cap = crate::tile_store::TileStore::CAPACITY as i64;
+        let key = |i: i64| crate::tile_store::TileKey { resolution_bits: 1, i, j: 0 };
         for i in 0..cap {
             m.tiles().insert(key(i), vec![0u8; 3].into());
         }

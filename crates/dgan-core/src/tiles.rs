@@ -9,8 +9,9 @@
 //! for it first, so crops do not depend on the order of the agents, the calls or the threads.
 
 use crate::canvas::Canvas;
-use crate::map::{TileKey, VectorMap};
+use crate::map::VectorMap;
 use crate::spec::{MapRender, MapSpec};
+use crate::tile_store::TileKey;
 use crate::transform::AgentPose;
 use std::sync::Arc;
 
