@@ -4,12 +4,13 @@
 //! obstacles), then yellow road edges, solid and dashed white lane lines and green centre lines. A raster map is
 //! resampled bilinearly through its homography. The agents themselves are drawn on top as blue boxes.
 
-use crate::canvas::Canvas;
+use crate::canvas::{world_bounds, Canvas};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
 use crate::map::SceneMap;
 use crate::spec::{MapRender, MapSpec};
 use crate::state::TrafficState;
+use crate::tiles::{resample, tile, Overlay};
 use ndarray::Array4;
 use rstar::primitives::GeomWithData;
 use rstar::{RTree, AABB};
@@ -63,21 +64,38 @@ pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, thre
     let max_half_diag = states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max);
     let mut out = Array4::<f32>::zeros((frame.len(), 3, h, w));
     let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("raster buffer is not contiguous".into()))?;
+    let threads = (threads / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(states.len() / 8).max(1);
+    // Every agent whose box can reach into world bounds `v`.
+    let boxes_near = |v: [f64; 4]| -> Vec<&TrafficState> {
+        let d = max_half_diag;
+        let near = AABB::from_corners([v[0] - d, v[1] - d], [v[2] + d, v[3] + d]);
+        agents.locate_in_envelope(&near).map(|o| &states[o.data]).collect()
+    };
+    // From tiles, the boxes are drawn once on the tiles the crops read instead of once on each crop.
+    let overlay = match frame.map() {
+        Some(SceneMap::Vector(m)) if spec.render == MapRender::Tiles && spec.draw_agents => {
+            let views: Vec<[f64; 4]> = states.iter().map(|s| world_bounds(spec, &s.pose())).collect();
+            Some(Overlay::new(m, spec, &views, boxes_near, threads))
+        }
+        _ => None,
+    };
     let draw = |crop: &mut [f32], s: &TrafficState| -> Result<()> {
         let mut canvas = Canvas::new(spec, s.pose())
             .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {w}×{h} crop")))?;
         let view = canvas.view;
-        match frame.map() {
-            Some(SceneMap::Vector(m)) if spec.render == MapRender::Tiles => crate::tiles::resample(&mut canvas, m),
-            Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
-            Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
-            None => {}
+        match (frame.map(), &overlay) {
+            (Some(SceneMap::Vector(m)), Some(o)) => {
+                resample(&mut canvas, |i, j| o.get(i, j).unwrap_or_else(|| tile(m, spec, i, j)));
+            }
+            (Some(SceneMap::Vector(m)), None) if spec.render == MapRender::Tiles => {
+                resample(&mut canvas, |i, j| tile(m, spec, i, j));
+            }
+            (Some(SceneMap::Vector(m)), None) => canvas.draw_vector(m),
+            (Some(SceneMap::Raster(m)), _) => canvas.draw_raster(m),
+            (None, _) => {}
         }
-        if spec.draw_agents {
-            // Every agent whose box can reach into the crop.
-            let d = max_half_diag;
-            let near = AABB::from_corners([view[0] - d, view[1] - d], [view[2] + d, view[3] + d]);
-            canvas.draw_boxes(agents.locate_in_envelope(&near).map(|o| &states[o.data]));
+        if spec.draw_agents && overlay.is_none() {
+            canvas.draw_boxes(boxes_near(view).into_iter());
         }
         canvas.write_chw(crop);
         Ok(())
@@ -85,7 +103,6 @@ pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, thre
     // Scoped threads that end with the call, rather than a pool whose idle workers keep spinning on the cores that
     // ONNX Runtime runs on next (on two cores that cost as much as the parallel drawing saved).
     let per = 3 * h * w;
-    let threads = (threads / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(states.len() / 8).max(1);
     if threads == 1 {
         for (crop, s) in flat.chunks_mut(per).zip(states) {
             draw(crop, s)?;
@@ -309,6 +326,33 @@ mod tests {
         let s_back = traffic_states(&back, 1.0);
         let reversed = rasterize_on(&back, &s_back, &tiles, 1).unwrap();
         assert_eq!(reversed.select(ndarray::Axis(0), &rev), first);
+    }
+
+    #[test]
+    fn tiled_crops_carry_the_agents_boxes_drawn_once_on_the_tiles() {
+        // The blue the boxes add to every crop, drawn on each crop (`Agent`) or once on the tiles (`Tiles`).
+        let blue = |render: MapRender, draw_agents: bool| {
+            let (f, s, spec) = road(render);
+            let img = rasterize_on(&f, &s, &MapSpec { draw_agents, ..spec }, 2).unwrap();
+            img.index_axis(ndarray::Axis(1), 2).sum()
+        };
+        let per_crop = blue(MapRender::Agent, true) - blue(MapRender::Agent, false);
+        let tiled = blue(MapRender::Tiles, true) - blue(MapRender::Tiles, false);
+        assert!(per_crop > 100.0, "{per_crop}");
+        assert!((tiled - per_crop).abs() < 0.1 * per_crop, "{tiled} against {per_crop}");
+        // The map's kept tiles hold no box: a frame of other agents on the same map draws its own.
+        let (f, s, spec) = road(MapRender::Tiles);
+        let with_boxes = rasterize_on(&f, &s, &spec, 1).unwrap();
+        let Some(SceneMap::Vector(m)) = f.map() else { unreachable!() };
+        let bare = Frame::new(f.positions().clone(), None, vec![AgentClass::Vehicle; 40])
+            .unwrap()
+            .with_map(Arc::new(SceneMap::Vector(m.clone())));
+        let plain = rasterize_on(&bare, &s, &MapSpec { draw_agents: false, ..spec }, 1).unwrap();
+        assert_ne!(with_boxes, plain);
+        assert_eq!(
+            rasterize_on(&f, &s, &MapSpec { draw_agents: false, ..road(MapRender::Tiles).2 }, 1).unwrap(),
+            plain
+        );
     }
 
     #[test]

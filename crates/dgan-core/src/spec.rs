@@ -45,8 +45,8 @@ pub enum MapRender {
     #[default]
     Agent,
     /// The map is drawn once, north-up, into tiles at half the crop's pixel size that stay with the map for every
-    /// later crop and call ([`crate::tiles`]); each crop pixel is the mean of the 2 × 2 tile pixels around its centre,
-    /// then the agents' boxes are drawn on it as with `Agent`.
+    /// later crop and call ([`crate::tiles`]); each call draws the agents' boxes once on copies of the tiles its crops
+    /// read, and each crop pixel is the mean of the 2 × 2 tile pixels around its centre.
     Tiles,
 }
 

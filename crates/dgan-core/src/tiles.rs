@@ -1,6 +1,7 @@
-//! A vector map drawn once, north-up, into square tiles that stay with the map ([`VectorMap::tiles`]), and the
-//! agents' crops resampled from them (`map.render = "tiles"`): the map's cost is paid once per tile, not once per
-//! agent and call.
+//! A vector map drawn once, north-up, into square tiles that stay with the map ([`VectorMap::tiles`]), the agents'
+//! boxes drawn once per call on copies of the tiles its crops read ([`Overlay`]), and each crop resampled from those
+//! (`map.render = "tiles"`): the map's cost is paid once per tile, not once per agent and call, and the boxes' once
+//! per tile, not once per crop.
 //!
 //! Tiles are drawn by the same canvas as the crops ([`crate::canvas`]) at half the crop's pixel size, lines no
 //! narrower than one crop pixel, on a grid fixed in the world (tile `(i, j)` holds the world's tile pixels
@@ -11,8 +12,10 @@
 use crate::canvas::Canvas;
 use crate::map::VectorMap;
 use crate::spec::{MapRender, MapSpec};
+use crate::state::TrafficState;
 use crate::tile_store::TileKey;
 use crate::transform::AgentPose;
+use std::collections::HashMap;
 use std::sync::Arc;
 
 /// Tile side, pixels (a power of two: tile indices by shifts).
@@ -26,51 +29,145 @@ fn tile_resolution(spec: &MapSpec) -> f64 {
     spec.resolution_m / SUPERSAMPLE
 }
 
-/// Tile `(i, j)` of `map` for crops of `spec`, `TILE_PX² × 3` bytes of RGB (row-major; black where nothing is
-/// drawn), from the map's store or drawn now and kept there.
-fn tile(map: &VectorMap, spec: &MapSpec, i: i64, j: i64) -> Arc<[u8]> {
-    let res = tile_resolution(spec);
-    let key = TileKey { resolution_bits: res.to_bits(), i, j };
-    if let Some(t) = map.tiles().get(&key) {
-        return t;
-    }
-    let tile_spec = MapSpec {
+/// The canvas of tile `(i, j)` at resolution `res` (north-up; its pixel `(row, col)` centred at the world's
+/// `((128 i + col) · res, −(128 j + row) · res)`), blank.
+fn tile_canvas(tile_spec: &MapSpec, i: i64, j: i64) -> Option<Canvas<'_>> {
+    let side = TILE_PX as f64 * tile_spec.resolution_m;
+    // Heading +y: the frame's forward is north (image up), its left is west (image left).
+    let pose = AgentPose::new([i as f64 * side, -(j as f64) * side], std::f64::consts::FRAC_PI_2);
+    let mut canvas = Canvas::new(tile_spec, pose)?;
+    canvas.min_width_px = SUPERSAMPLE as f32;
+    Some(canvas)
+}
+
+/// The specification of the tiles serving crops of `spec`.
+fn tile_spec(spec: &MapSpec) -> MapSpec {
+    MapSpec {
         height_px: TILE_PX,
         width_px: TILE_PX,
-        resolution_m: res,
+        resolution_m: tile_resolution(spec),
         agent_row: 0,
         agent_col: 0,
         draw_agents: false,
         optional: false,
         render: MapRender::Agent,
-    };
-    let side = TILE_PX as f64 * res;
-    // Heading +y: the frame's forward is north (image up), its left is west (image left).
-    let pose = AgentPose::new([i as f64 * side, -(j as f64) * side], std::f64::consts::FRAC_PI_2);
-    let mut rgb = vec![0u8; TILE_PX * TILE_PX * 3];
-    if let Some(mut canvas) = Canvas::new(&tile_spec, pose) {
-        canvas.min_width_px = SUPERSAMPLE as f32;
-        canvas.draw_vector(map);
-        for (out, px) in rgb.chunks_exact_mut(3).zip(canvas.pixmap.data().chunks_exact(4)) {
-            out.copy_from_slice(&px[..3]);
-        }
     }
+}
+
+/// A canvas's pixels as `TILE_PX² × 3` bytes of RGB.
+fn rgb_of(canvas: &Canvas<'_>) -> Vec<u8> {
+    let mut rgb = vec![0u8; TILE_PX * TILE_PX * 3];
+    for (out, px) in rgb.chunks_exact_mut(3).zip(canvas.pixmap.data().chunks_exact(4)) {
+        out.copy_from_slice(&px[..3]);
+    }
+    rgb
+}
+
+/// Tile `(i, j)` of `map` for crops of `spec`, `TILE_PX² × 3` bytes of RGB (row-major; black where nothing is
+/// drawn), from the map's store or drawn now and kept there.
+pub(crate) fn tile(map: &VectorMap, spec: &MapSpec, i: i64, j: i64) -> Arc<[u8]> {
+    let res = tile_resolution(spec);
+    let key = TileKey { resolution_bits: res.to_bits(), i, j };
+    if let Some(t) = map.tiles().get(&key) {
+        return t;
+    }
+    let tile_spec = tile_spec(spec);
+    let rgb = match tile_canvas(&tile_spec, i, j) {
+        Some(mut canvas) => {
+            canvas.draw_vector(map);
+            rgb_of(&canvas)
+        }
+        None => vec![0u8; TILE_PX * TILE_PX * 3],
+    };
     map.tiles().insert(key, rgb.into())
 }
 
-/// Fills `canvas` (an agent's crop) with `map` resampled from its tiles, opaque: each crop pixel the mean of the 2 × 2
-/// tile pixels around its centre.
-pub(crate) fn resample(canvas: &mut Canvas<'_>, map: &VectorMap) {
-    let spec = canvas.spec;
-    let res = tile_resolution(spec);
-    let view = canvas.view;
-    // The tiles under the crop (its world bounds in tile pixels, one pixel more each side for the taps).
+/// The tile pixels `[c0, c1] × [r0, r1]` under a crop of world bounds `view` (one pixel more each side for the taps)
+/// and the tiles `[i0, i1] × [j0, j1]` holding them.
+fn span(view: [f64; 4], res: f64) -> ([i64; 4], [i64; 4]) {
     let (c0, c1) = ((view[0] / res).floor() as i64 - 1, (view[2] / res).ceil() as i64 + 1);
     let (r0, r1) = ((-view[3] / res).floor() as i64 - 1, (-view[1] / res).ceil() as i64 + 1);
-    let (i0, i1, j0, j1) = (c0 >> TILE_SHIFT, c1 >> TILE_SHIFT, r0 >> TILE_SHIFT, r1 >> TILE_SHIFT);
+    ([c0, c1, r0, r1], [c0 >> TILE_SHIFT, c1 >> TILE_SHIFT, r0 >> TILE_SHIFT, r1 >> TILE_SHIFT])
+}
+
+/// The tiles one call's crops read, the agents' boxes drawn on those that boxes reach (the map's kept tiles stay
+/// without them): boxes are drawn once per tile rather than once per crop.
+pub(crate) struct Overlay {
+    tiles: HashMap<(i64, i64), Arc<[u8]>>,
+}
+
+impl Overlay {
+    /// Every tile under the crops of world bounds `views`, from `map`'s tiles with the boxes of `boxes(bounds)` (the
+    /// agents whose box may reach world bounds `bounds`) drawn on, built on up to `threads` threads.
+    pub(crate) fn new<'s, F>(map: &VectorMap, spec: &MapSpec, views: &[[f64; 4]], boxes: F, threads: usize) -> Self
+    where
+        F: Fn([f64; 4]) -> Vec<&'s TrafficState> + Sync,
+    {
+        let res = tile_resolution(spec);
+        let mut wanted: Vec<(i64, i64)> = views
+            .iter()
+            .flat_map(|v| {
+                let [i0, i1, j0, j1] = span(*v, res).1;
+                (j0..=j1).flat_map(move |j| (i0..=i1).map(move |i| (i, j)))
+            })
+            .collect();
+        wanted.sort_unstable();
+        wanted.dedup();
+        let tile_spec = tile_spec(spec);
+        let one = |&(i, j): &(i64, i64)| -> ((i64, i64), Arc<[u8]>) {
+            let base = tile(map, spec, i, j);
+            let side = TILE_PX as f64 * res;
+            let half = res / 2.0;
+            let bounds = [
+                i as f64 * side - half,
+                -((j + 1) as f64) * side + half,
+                (i + 1) as f64 * side - half,
+                -(j as f64) * side + half,
+            ];
+            let near = boxes(bounds);
+            let Some(mut canvas) = (!near.is_empty()).then(|| tile_canvas(&tile_spec, i, j)).flatten() else {
+                return ((i, j), base);
+            };
+            for (px, rgb) in canvas.pixmap.data_mut().chunks_exact_mut(4).zip(base.chunks_exact(3)) {
+                px[..3].copy_from_slice(rgb);
+                px[3] = 255;
+            }
+            canvas.draw_boxes(near.into_iter());
+            ((i, j), rgb_of(&canvas).into())
+        };
+        let per_thread = wanted.len().div_ceil(threads.max(1)).max(1);
+        let tiles = if per_thread >= wanted.len() {
+            wanted.iter().map(one).collect()
+        } else {
+            std::thread::scope(|scope| {
+                let one = &one;
+                let handles: Vec<_> = wanted
+                    .chunks(per_thread)
+                    .map(|part| scope.spawn(move || part.iter().map(one).collect::<Vec<_>>()))
+                    .collect();
+                // A thread that panicked leaves its tiles out; the crops then read the map's own tiles.
+                handles.into_iter().filter_map(|h| h.join().ok()).flatten().collect()
+            })
+        };
+        Self { tiles }
+    }
+
+    /// Tile `(i, j)`, if the overlay holds it.
+    pub(crate) fn get(&self, i: i64, j: i64) -> Option<Arc<[u8]>> {
+        self.tiles.get(&(i, j)).cloned()
+    }
+}
+
+/// Fills `canvas` (an agent's crop) from the tiles `fetch(i, j)` gives, opaque: each crop pixel the mean of the 2 × 2
+/// tile pixels around its centre.
+pub(crate) fn resample(canvas: &mut Canvas<'_>, fetch: impl Fn(i64, i64) -> Arc<[u8]>) {
+    let spec = canvas.spec;
+    let res = tile_resolution(spec);
+    // The tiles under the crop (its world bounds in tile pixels, one pixel more each side for the taps).
+    let ([c0, c1, r0, r1], [i0, i1, j0, j1]) = span(canvas.view, res);
     let across = (i1 - i0 + 1) as usize;
     let grid: Vec<Arc<[u8]>> =
-        (j0..=j1).flat_map(|j| (i0..=i1).map(move |i| (i, j))).map(|(i, j)| tile(map, spec, i, j)).collect();
+        (j0..=j1).flat_map(|j| (i0..=i1).map(move |i| (i, j))).map(|(i, j)| fetch(i, j)).collect();
     // The crop's bounds as one patch of tile pixels, rows (r0..=r1) by columns (c0..=c1), copied row by row from the
     // tiles: the taps below then read one array, whatever tile they fall in.
     let (ph, pw) = ((r1 - r0 + 1) as usize, (c1 - c0 + 1) as usize);
