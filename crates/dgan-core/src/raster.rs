@@ -75,7 +75,7 @@ pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, thre
     let overlay = match frame.map() {
         Some(SceneMap::Vector(m)) if spec.render == MapRender::Tiles && spec.draw_agents => {
             let views: Vec<[f64; 4]> = states.iter().map(|s| world_bounds(spec, &s.pose())).collect();
-            Some(Overlay::new(m, spec, &views, boxes_near, threads))
+            Some(Overlay::new(m, spec, &views, boxes_near, threads)?)
         }
         _ => None,
     };

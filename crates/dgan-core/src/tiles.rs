@@ -10,6 +10,7 @@
 //! for it first, so crops do not depend on the order of the agents, the calls or the threads.
 
 use crate::canvas::Canvas;
+use crate::error::{DganError, Result};
 use crate::map::VectorMap;
 use crate::spec::{MapRender, MapSpec};
 use crate::state::TrafficState;
@@ -99,7 +100,13 @@ pub(crate) struct Overlay {
 impl Overlay {
     /// Every tile under the crops of world bounds `views`, from `map`'s tiles with the boxes of `boxes(bounds)` (the
     /// agents whose box may reach world bounds `bounds`) drawn on, built on up to `threads` threads.
-    pub(crate) fn new<'s, F>(map: &VectorMap, spec: &MapSpec, views: &[[f64; 4]], boxes: F, threads: usize) -> Self
+    pub(crate) fn new<'s, F>(
+        map: &VectorMap,
+        spec: &MapSpec,
+        views: &[[f64; 4]],
+        boxes: F,
+        threads: usize,
+    ) -> Result<Self>
     where
         F: Fn([f64; 4]) -> Vec<&'s TrafficState> + Sync,
     {
@@ -145,11 +152,16 @@ impl Overlay {
                     .chunks(per_thread)
                     .map(|part| scope.spawn(move || part.iter().map(one).collect::<Vec<_>>()))
                     .collect();
-                // A thread that panicked leaves its tiles out; the crops then read the map's own tiles.
-                handles.into_iter().filter_map(|h| h.join().ok()).flatten().collect()
-            })
+                let mut tiles = HashMap::with_capacity(wanted.len());
+                for handle in handles {
+                    let part =
+                        handle.join().map_err(|_| DganError::InvalidSpec("a tile-drawing thread panicked".into()))?;
+                    tiles.extend(part);
+                }
+                Ok::<_, DganError>(tiles)
+            })?
         };
-        Self { tiles }
+        Ok(Self { tiles })
     }
 
     /// Tile `(i, j)`, if the overlay holds it.
