@@ -358,18 +358,20 @@ impl Predictor {
         self.sessions.len()
     }
 
-    /// A free session if there is one (starting from a rotating index), else the next one in turn, waited for.
+    /// The first free session, else one in turn, waited for. A lone caller keeps the same session, whose buffers stay
+    /// in the caches (taking them in turn made one thread's `apolloscape` predict at N = 256 16% slower with two
+    /// sessions than with one: docs/speed.md).
     fn session(&self) -> Result<MutexGuard<'_, Session>> {
-        let n = self.sessions.len();
-        let start = self.next.fetch_add(1, Ordering::Relaxed) % n;
-        for k in 0..n {
-            match self.sessions[(start + k) % n].try_lock() {
+        let poisoned = || DganError::Inference("session lock poisoned".into());
+        for session in &self.sessions {
+            match session.try_lock() {
                 Ok(guard) => return Ok(guard),
                 Err(TryLockError::WouldBlock) => continue,
-                Err(TryLockError::Poisoned(_)) => return Err(DganError::Inference("session lock poisoned".into())),
+                Err(TryLockError::Poisoned(_)) => return Err(poisoned()),
             }
         }
-        self.sessions[start].lock().map_err(|_| DganError::Inference("session lock poisoned".into()))
+        let start = self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len();
+        self.sessions[start].lock().map_err(|_| poisoned())
     }
 
     /// The model's contract (input specification, anchors, provenance).
