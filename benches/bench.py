@@ -112,12 +112,16 @@ def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
     return run
 
 
-def bare_session(path: Path) -> Any:
+def bare_session(path: Path, options: dict[str, Any] | None = None) -> Any:
+    """An ONNX Runtime session on one thread, with ``options`` (``SessionOptions`` attributes; a graph optimisation
+    level by its name) set beside ONNX Runtime's defaults."""
     import onnxruntime as ort  # type: ignore[import-untyped]
 
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = 1
     opts.inter_op_num_threads = 1
+    for key, value in (options or {}).items():
+        setattr(opts, key, getattr(ort.GraphOptimizationLevel, value) if isinstance(value, str) else value)
     return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
 
 
@@ -263,8 +267,6 @@ SESSION_VARIANTS: dict[str, dict[str, Any]] = {
 def session_options_table(models: list[str], agents: list[int], repeat: int) -> None:
     """The bare session (one thread) under each of :data:`SESSION_VARIANTS`, as a multiple of the engine's options'
     time (above 1: slower), every session of a row timed in interleaved rounds on the same inputs."""
-    import onnxruntime as ort
-
     print("\n| model | N | engine's options ms | " + " | ".join(SESSION_VARIANTS) + " |")
     print("|---|---|---|" + "---|" * len(SESSION_VARIANTS))
     for name in models:
@@ -272,12 +274,7 @@ def session_options_table(models: list[str], agents: list[int], repeat: int) -> 
         for n in agents:
             x = dgan.preprocess(tiled(scene_for(p.spec).frame, n), p.spec)
             sessions = {"engine": bare_session(p.path)}
-            for label, options in SESSION_VARIANTS.items():
-                opts = ort.SessionOptions()
-                opts.intra_op_num_threads = opts.inter_op_num_threads = 1
-                for key, value in options.items():
-                    setattr(opts, key, getattr(ort.GraphOptimizationLevel, value) if isinstance(value, str) else value)
-                sessions[label] = ort.InferenceSession(str(p.path), opts, providers=["CPUExecutionProvider"])
+            sessions.update({label: bare_session(p.path, options) for label, options in SESSION_VARIANTS.items()})
             feed = {i.name: x[i.name] for i in sessions["engine"].get_inputs()}
             times: dict[str, list[float]] = {k: [] for k in sessions}
             for k in range(repeat + 3):

@@ -50,30 +50,6 @@ pub enum MapRender {
     Tiles,
 }
 
-impl MapRender {
-    /// Every way, in the order of their names.
-    pub const ALL: [MapRender; 2] = [MapRender::Agent, MapRender::Tiles];
-
-    /// The name a contract gives it.
-    pub fn name(self) -> &'static str {
-        match self {
-            MapRender::Agent => "agent",
-            MapRender::Tiles => "tiles",
-        }
-    }
-}
-
-impl std::str::FromStr for MapRender {
-    type Err = DganError;
-
-    fn from_str(s: &str) -> Result<Self> {
-        Self::ALL
-            .into_iter()
-            .find(|r| r.name() == s)
-            .ok_or_else(|| DganError::InvalidSpec(format!("map render must be one of \"agent\", \"tiles\", got {s:?}")))
-    }
-}
-
 fn default_true() -> bool {
     true
 }
