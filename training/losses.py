@@ -117,6 +117,24 @@ def mode_probabilities(
     return pc * pk
 
 
+def log_mode_probabilities(class_logits: Tensor, anchor_logits: Tensor, class_of_anchor: Tensor) -> Tensor:
+    """``(N, K)`` log p(c(k)) + log p(k | c(k)) of every anchor (:func:`mode_probabilities` at T = 1, in logs)."""
+    log_pc = torch.log_softmax(class_logits, dim=1)[:, class_of_anchor]
+    log_pk = torch.zeros_like(anchor_logits)
+    for c in range(class_logits.shape[1]):
+        sel = class_of_anchor == c
+        log_pk[:, sel] = torch.log_softmax(anchor_logits[:, sel], dim=1)
+    return log_pc + log_pk
+
+
+def soft_class_loss(class_logits: Tensor, anchor_logits: Tensor, class_of_anchor: Tensor, target: Tensor) -> Tensor:
+    """``(N,)`` cross-entropy −Σ_k q_k log(p(c(k)) · p(k | c(k))) of the mode probabilities against a distribution
+    ``target (N, K)`` over the same anchors (a teacher's, ``training.step.Teacher.mode_targets``): the paper's
+    classification term with the closest anchor drawn from q instead of given."""
+    log_p = log_mode_probabilities(class_logits, anchor_logits, class_of_anchor)
+    return -(target.to(log_p.dtype) * log_p.masked_fill(target <= 0, 0.0)).sum(dim=1)
+
+
 def decode_torch(
     class_logits: Tensor,
     anchor_logits: Tensor,

@@ -13,7 +13,7 @@ from training.config import Config
 from training.data.arrays import Windows
 from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
 from training.export import load_checkpoint
-from training.losses import decode_torch, dgan_loss
+from training.losses import anchor_pool, decode_torch, dgan_loss, soft_class_loss
 from training.modules.dgan import DGAN
 
 
@@ -44,6 +44,28 @@ class Teacher:
         modes, _ = decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, self.temperature)
         return modes[:, 0]
 
+    @torch.no_grad()
+    def mode_targets(
+        self, b: dict[str, torch.Tensor], anchors: torch.Tensor, class_of: torch.Tensor, pool: str
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The teacher's most probable mode of each target ``(targets, T_f, 2)`` (a residual from the prior, as
+        :meth:`top_residual`) and its whole mode distribution carried onto the student's ``anchors``
+        ``(targets, K)``: each teacher mode's probability (with the teacher's temperature) goes to the student anchor
+        closest to it among those ``pool`` allows (``training.losses.anchor_pool``). That is the class the data's
+        loss would teach if the future were drawn from the teacher's modes (``train.distill_soft``)."""
+        cl, al, off = self.model(*forward_inputs(b))
+        t = b["target"]
+        modes, p = decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, self.temperature)
+        n, k_t = p.shape
+        flat = modes.reshape(n, k_t, -1).double()
+        ref = anchors.reshape(len(anchors), -1).double()
+        # Squared distances of every teacher mode to every student anchor, (n, K_t, K), without a (.., T, 2) copy.
+        d = (flat**2).sum(-1, keepdim=True) + (ref**2).sum(-1) - 2.0 * flat @ ref.T
+        allowed = anchor_pool(pool, class_of, b["class_index"][t])
+        nearest = d.masked_fill(~allowed.unsqueeze(1), float("inf")).argmin(dim=2)  # (n, K_t)
+        soft = torch.zeros(n, len(anchors), dtype=p.dtype).scatter_add_(1, nearest, p)
+        return modes[:, 0], soft / soft.sum(dim=1, keepdim=True).clamp_min(1e-12)
+
 
 def forward_loss(
     net: torch.nn.Module,
@@ -56,7 +78,9 @@ def forward_loss(
 ) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
     """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior),
     each weighted by its class's ``weight_of_class`` if given (``train.class_balance``); also the targets' outputs.
-    With a ``teacher``, the same loss towards its most probable mode is added, weighing ``train.distill_weight``."""
+    With a ``teacher``, the same loss towards its most probable mode is added, weighing ``train.distill_weight``,
+    and the cross-entropy of the student's mode probabilities against the teacher's (:meth:`Teacher.mode_targets`),
+    weighing ``train.distill_soft``."""
     cl, al, off = net(*forward_inputs(b))
     t = b["target"]
     outs = (cl[t], al[t], off[t])
@@ -72,8 +96,13 @@ def forward_loss(
 
     loss, parts = loss_to(residual)
     if teacher is not None:
-        distilled, _ = loss_to(teacher.top_residual(b))
+        top, soft = teacher.mode_targets(b, anchors, class_of, tr.anchor_pool)
+        distilled, _ = loss_to(top)
         loss = loss + tr.distill_weight * distilled
+        if tr.distill_soft > 0:
+            ce = soft_class_loss(outs[0], outs[1], class_of, soft)
+            parts["soft"] = float(ce.mean().detach())
+            loss = loss + tr.distill_soft * (ce.mean() if weights is None else (weights * ce).sum() / weights.sum())
     return loss, parts, outs
 
 

@@ -81,6 +81,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Confi
     if cfg.train.select not in SELECT:
         raise ValueError(f"train.select must be 'val_loss', 'val_ade' or 'last', got {cfg.train.select!r}")
     check_cls_target(cfg.train.cls_target)
+    if cfg.train.distill_soft < 0 or (cfg.train.distill_soft > 0 and not cfg.train.distill):
+        raise ValueError(f"train.distill_soft must be >= 0 and needs train.distill, got {cfg.train.distill_soft}")
     check_anchor_pool(cfg.train.anchor_pool)
     return args, cfg
 
@@ -138,8 +140,9 @@ def train_epoch(
     teacher: Teacher | None = None,
 ) -> dict[str, float]:
     """One pass over the batches of training windows that the tqdm ``bar`` iterates (mirrored at random, maps dropped
-    at the configured rate); the summed loss and its classification and regression parts."""
-    totals = {"loss": 0.0, "cls": 0.0, "reg": 0.0}
+    at the configured rate); the summed loss and its classification and regression parts (and the soft
+    distillation term's, ``train.distill_soft``)."""
+    totals = {"loss": 0.0, "cls": 0.0, "reg": 0.0, **({"soft": 0.0} if cfg.train.distill_soft > 0 else {})}
     for idx in bar:
         flip = rng.random(len(idx)) < 0.5 if cfg.train.mirror else None
         b = prepared_batch(train, idx, spec, flip, cfg.train.map_dropout, rng)
@@ -151,6 +154,8 @@ def train_epoch(
         totals["loss"] += float(loss.detach())
         totals["cls"] += parts["cls"]
         totals["reg"] += parts["reg"]
+        if "soft" in totals:
+            totals["soft"] += parts["soft"]
         bar.set_postfix(loss=f"{float(loss.detach()):.3f}")
     return totals
 

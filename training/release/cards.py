@@ -286,8 +286,10 @@ def distill_words(name: str, cfg: dict[str, Any]) -> str:
     teacher = "a consensus of runs"
     if cfg.get("model", {}).get("map_res_blocks", 2) < 2:
         teacher = "a larger network (the same configuration with the map CNN's two residual blocks)"
+    soft = float(cfg["train"].get("distill_soft", 0.0))
+    also = f" and its mode probabilities (weight {soft:g})" if soft > 0 else ""
     return (
-        f"\n  **Distilled**: one network that also learned the most probable mode of {teacher} "
+        f"\n  **Distilled**: one network that also learned the most probable mode{also} of {teacher} "
         f"(`training/checkpoints/teachers/{name}.pt`, weight {cfg['train']['distill_weight']:g}), "
         "at one network's cost."
     )

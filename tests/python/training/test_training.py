@@ -406,28 +406,34 @@ def test_bad_training_inputs_are_clear_errors(tmp_path: Path) -> None:
         )
 
 
-def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None:
+def _teacher_batch(cfg: Config, k_c: int) -> tuple[dgan.InputSpec, dict[str, torch.Tensor], torch.Tensor, torch.Tensor]:
+    """The bundled apolloscape scene as a batch whose every agent is a target (its future 0.3 m off the prior), and
+    ``k_c`` random anchors per class with the class of each."""
     from dgan.demo import scene_for
-    from training.data.batches import INPUTS, to_tensors
+    from training.data.batches import to_tensors
+
+    spec = input_spec(cfg)
+    frame = scene_for(spec).frame
+    x = dgan.preprocess(frame, spec)
+    b = to_tensors({k: x[k] for k in (*INPUTS, "prior") if k in x})
+    b["target"] = torch.ones(len(frame), dtype=torch.bool)
+    b["class_index"] = torch.tensor([spec.classes.index(c) for c in frame.classes])
+    b["future"] = b["prior"] + 0.3
+    torch.manual_seed(0)
+    anchors = torch.randn(k_c * len(spec.classes), spec.t_f, 2)
+    return spec, b, anchors, torch.arange(len(spec.classes)).repeat_interleave(k_c)
+
+
+def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None:
     from training.losses import dgan_loss
     from training.step import Teacher, forward_loss
 
     cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", {"train.distill_weight": 2.5})
-    spec = input_spec(cfg)
+    spec, b, anchors, class_of = _teacher_batch(cfg, 4)
+    n = len(b["target"])
     with pytest.raises(ValueError, match="takes other inputs"):
         Teacher.load(str(ROOT / "training" / "checkpoints" / "hdmap.pt"), spec)
     teacher = Teacher.load(str(ROOT / "training" / "checkpoints" / "apolloscape.pt"), spec)
-    frame = scene_for(spec).frame
-    x = dgan.preprocess(frame, spec)
-    b = to_tensors({k: x[k] for k in (*INPUTS, "prior") if k in x})
-    n = len(frame)
-    b["target"] = torch.ones(n, dtype=torch.bool)
-    b["class_index"] = torch.tensor([spec.classes.index(c) for c in frame.classes])
-    b["future"] = b["prior"] + 0.3
-    torch.manual_seed(0)
-    k_c = 4
-    anchors = torch.randn(k_c * len(spec.classes), spec.t_f, 2)
-    class_of = torch.arange(len(spec.classes)).repeat_interleave(k_c)
     student = build_model(cfg, spec, len(anchors)).eval()
     top = teacher.top_residual(b)
     assert top.shape == (n, spec.t_f, 2)
@@ -440,6 +446,53 @@ def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None
         *outs, top, classes, anchors, class_of, tr.alpha, tr.beta, None, tr.cls_target, tr.anchor_pool
     )
     torch.testing.assert_close(taught, alone + 2.5 * second)
+
+
+def test_a_teacher_s_mode_distribution_is_a_soft_target_of_the_classifier(tmp_path: Path) -> None:
+    from training.data.batches import forward_inputs
+    from training.losses import soft_class_loss
+    from training.step import Teacher, forward_loss
+    from training.train import main
+
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", {"train.distill_soft": 0.7})
+    spec, b, anchors, class_of = _teacher_batch(cfg, 5)
+    n = len(b["target"])
+    teacher = Teacher.load(str(ROOT / "training" / "checkpoints" / "apolloscape.pt"), spec)
+    top, soft = teacher.mode_targets(b, anchors, class_of, "own_class")
+    torch.testing.assert_close(top, teacher.top_residual(b))
+    # A distribution over the student's anchors, only on the agent's class's ...
+    assert soft.shape == (n, len(anchors))
+    torch.testing.assert_close(soft.sum(1), torch.ones(n, dtype=soft.dtype))
+    assert (soft[class_of.unsqueeze(0) != b["class_index"].unsqueeze(1)] == 0).all()
+    # ... where each teacher mode's probability sits at the anchor closest to that mode.
+    with torch.no_grad():
+        cl, al, off = teacher.model(*forward_inputs(b))
+        modes, p = decode_torch(cl, al, off, teacher.anchors, teacher.class_of, None, teacher.temperature)
+    for i in range(n):
+        pool = (class_of == b["class_index"][i]).repeat(modes.shape[1], 1)
+        nearest = closest_anchor(modes[i], anchors, pool)
+        want = torch.zeros(len(anchors), dtype=p.dtype).index_add_(0, nearest, p[i])
+        torch.testing.assert_close(soft[i], want / want.sum(), atol=1e-6, rtol=0)
+    # A one-hot target is the paper's classification term for that anchor.
+    student = build_model(cfg, spec, len(anchors)).eval()
+    _, _, outs = forward_loss(student, b, anchors, class_of, cfg)
+    k_star = closest_anchor(b["future"] - b["prior"], anchors, class_of.unsqueeze(0) == b["class_index"].unsqueeze(1))
+    hot = torch.nn.functional.one_hot(k_star, len(anchors)).float()
+    _, parts = dgan_loss(*outs, b["future"] - b["prior"], b["class_index"], anchors, class_of, 1.0)
+    assert float(soft_class_loss(outs[0], outs[1], class_of, hot).mean().detach()) == pytest.approx(
+        parts["cls"], rel=1e-5
+    )
+    # The term joins the loss with its weight, beside the top mode's.
+    hard = replace(cfg, train=replace(cfg.train, distill_soft=0.0))
+    taught_hard, _, _ = forward_loss(student, b, anchors, class_of, hard, teacher=teacher)
+    taught, parts, _ = forward_loss(student, b, anchors, class_of, cfg, teacher=teacher)
+    torch.testing.assert_close(taught, taught_hard + 0.7 * soft_class_loss(outs[0], outs[1], class_of, soft).mean())
+    assert parts["soft"] > 0
+    # It needs a teacher, and a weight of at least 0.
+    config = str(ROOT / "training" / "configs" / "apolloscape.toml")
+    for bad in (["--set", "train.distill_soft=0.5"], ["--set", "train.distill_soft=-1", "--set", "train.distill=x"]):
+        with pytest.raises(ValueError, match=r"train\.distill_soft must be >= 0 and needs train\.distill"):
+            main(["--config", config, "--out", str(tmp_path), *bad])
 
 
 def test_a_teacher_runs_on_the_student_s_crops_whichever_way_its_own_were_drawn() -> None:
