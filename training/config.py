@@ -102,6 +102,10 @@ class TrainConfig:
     # the data's (its inputs must be the student's: the same data and prior settings). "" = no teacher.
     distill: str = ""
     distill_weight: float = 1.0
+    # Whether the teacher's most probable mode also teaches the classifier (its closest anchor or mode as a second
+    # class target). False: it only teaches the offsets; the mode probabilities learn from the data alone, so that a
+    # hard window, where the teacher's top mode and the truth disagree, does not push probability onto the top mode.
+    distill_classifier: bool = True
     # The weight of a second distillation term: the cross-entropy of the student's mode probabilities against the
     # teacher's whole mode distribution (its temperature applied; each teacher mode counted at the student anchor
     # closest to it), so that the student learns how sure the teacher is, not only its top mode. 0 = off.

@@ -57,6 +57,7 @@ def dgan_loss(
     weights: Tensor | None = None,
     cls_target: str = "closest_anchor",
     pool: str = "own_class",
+    classify: bool = True,
 ) -> tuple[Tensor, dict[str, float]]:
     """Mean loss over the given (target) agents, and its parts.
 
@@ -65,7 +66,8 @@ def dgan_loss(
     ``weights`` ``(N,)`` makes the mean a weighted one (:func:`class_weights`). ``cls_target`` "best_mode" teaches
     the classifier the decoded mode closest to its future (by ADE; no gradient through the choice) instead of the
     closest anchor. ``pool`` (:func:`anchor_pool`) says whether both are sought among the agent's class's anchors
-    or among all; the class taught to p(c) is the chosen anchor's.
+    or among all; the class taught to p(c) is the chosen anchor's. ``classify`` False leaves the classification
+    term out (the regression terms only: a teacher's mode that should not teach the mode probabilities).
     """
     allowed = anchor_pool(pool, class_of_anchor, class_index)
     k_star = closest_anchor(future, anchors, allowed)
@@ -83,7 +85,7 @@ def dgan_loss(
     cls = -(log_pc + log_pk)
     pred = anchors[k_star] + offsets[rows, k_star]
     reg = torch.linalg.norm(pred - future, dim=-1).mean(dim=-1)
-    per_agent = cls + alpha * reg
+    per_agent = (cls if classify else torch.zeros_like(cls)) + alpha * reg
     parts = {"cls": float(cls.mean().detach()), "reg": float(reg.mean().detach())}
     if beta > 0:
         with torch.no_grad():

@@ -78,7 +78,8 @@ def forward_loss(
 ) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
     """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior),
     each weighted by its class's ``weight_of_class`` if given (``train.class_balance``); also the targets' outputs.
-    With a ``teacher``, the same loss towards its most probable mode is added, weighing ``train.distill_weight``,
+    With a ``teacher``, the same loss towards its most probable mode is added, weighing ``train.distill_weight``
+    (without its classification term if ``train.distill_classifier`` is false),
     and the cross-entropy of the student's mode probabilities against the teacher's (:meth:`Teacher.mode_targets`),
     weighing ``train.distill_soft``."""
     cl, al, off = net(*forward_inputs(b))
@@ -89,15 +90,25 @@ def forward_loss(
     weights = None if weight_of_class is None else weight_of_class[classes]
     tr = cfg.train
 
-    def loss_to(target: torch.Tensor) -> tuple[torch.Tensor, dict[str, float]]:
+    def loss_to(target: torch.Tensor, classify: bool = True) -> tuple[torch.Tensor, dict[str, float]]:
         return dgan_loss(
-            *outs, target, classes, anchors, class_of, tr.alpha, tr.beta, weights, tr.cls_target, tr.anchor_pool
+            *outs,
+            target,
+            classes,
+            anchors,
+            class_of,
+            tr.alpha,
+            tr.beta,
+            weights,
+            tr.cls_target,
+            tr.anchor_pool,
+            classify,
         )
 
     loss, parts = loss_to(residual)
     if teacher is not None:
         top, soft = teacher.mode_targets(b, anchors, class_of, tr.anchor_pool)
-        distilled, _ = loss_to(top)
+        distilled, _ = loss_to(top, tr.distill_classifier)
         loss = loss + tr.distill_weight * distilled
         if tr.distill_soft > 0:
             ce = soft_class_loss(outs[0], outs[1], class_of, soft)

@@ -11,7 +11,13 @@ import pytest
 pytest.importorskip("torch")
 
 from training.release.bundle import check_folds
-from training.release.cards import classification_words, extra_data_line, extra_licence_line, fitted_where
+from training.release.cards import (
+    classification_words,
+    distill_words,
+    extra_data_line,
+    extra_licence_line,
+    fitted_where,
+)
 
 
 def cfg(**data: Any) -> dict[str, Any]:
@@ -32,6 +38,19 @@ def test_the_classification_target_is_named() -> None:
     assert classification_words(cfg()) == "the paper's hierarchical classification"
     best = {"data": {}, "train": {"cls_target": "best_mode"}}
     assert "decoded mode closest to the future" in classification_words(best)
+
+
+def test_what_a_student_learned_from_its_teacher_is_named() -> None:
+    assert distill_words("eth", cfg()) == ""
+    student = {"data": {}, "train": {"distill": "x.pt", "distill_weight": 1.0}}
+    words = distill_words("eth", student)
+    assert "most probable mode of a consensus of runs" in words
+    assert "teachers/eth.pt" in words
+    assert "offsets only" not in words
+    soft = {"data": {}, "train": {**student["train"], "distill_soft": 0.5}}
+    assert "its mode probabilities (weight 0.5)" in distill_words("eth", soft)
+    offsets = {"data": {}, "train": {**student["train"], "distill_classifier": False}}
+    assert "its offsets only: the mode probabilities learned from the data alone" in distill_words("eth", offsets)
 
 
 def test_a_cross_fitted_temperature_is_named() -> None:

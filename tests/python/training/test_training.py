@@ -442,10 +442,20 @@ def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None
     taught, _, _ = forward_loss(student, b, anchors, class_of, cfg, teacher=teacher)
     tr = cfg.train
     classes = b["class_index"]
-    second, _ = dgan_loss(
+    second, second_parts = dgan_loss(
         *outs, top, classes, anchors, class_of, tr.alpha, tr.beta, None, tr.cls_target, tr.anchor_pool
     )
     torch.testing.assert_close(taught, alone + 2.5 * second)
+    # train.distill_classifier false: the teacher's mode teaches the offsets only, its classification term left out.
+    assert second_parts["cls"] > 0
+    offsets_only = replace(cfg, train=replace(cfg.train, distill_classifier=False))
+    taught_offsets, _, _ = forward_loss(student, b, anchors, class_of, offsets_only, teacher=teacher)
+    torch.testing.assert_close(taught_offsets, alone + 2.5 * (second - second_parts["cls"]))
+    no_cls, no_cls_parts = dgan_loss(
+        *outs, top, classes, anchors, class_of, tr.alpha, tr.beta, None, tr.cls_target, tr.anchor_pool, False
+    )
+    torch.testing.assert_close(no_cls, second - second_parts["cls"])
+    assert no_cls_parts == second_parts
 
 
 def test_a_teacher_s_mode_distribution_is_a_soft_target_of_the_classifier(tmp_path: Path) -> None:
