@@ -85,7 +85,7 @@ def dgan_loss(
     cls = -(log_pc + log_pk)
     pred = anchors[k_star] + offsets[rows, k_star]
     reg = torch.linalg.norm(pred - future, dim=-1).mean(dim=-1)
-    per_agent = (cls if classify else torch.zeros_like(cls)) + alpha * reg
+    per_agent = alpha * reg + cls if classify else alpha * reg
     parts = {"cls": float(cls.mean().detach()), "reg": float(reg.mean().detach())}
     if beta > 0:
         with torch.no_grad():

@@ -289,7 +289,8 @@ def distill_words(name: str, cfg: dict[str, Any]) -> str:
     soft = float(cfg["train"].get("distill_soft", 0.0))
     also = f" and its mode probabilities (weight {soft:g})" if soft > 0 else ""
     if not cfg["train"].get("distill_classifier", True):
-        also += " (its offsets only: the mode probabilities learned from the data alone)"
+        alone = "" if soft > 0 else ": the mode probabilities learned from the data alone"
+        also = f" (its offsets only{alone}){also}"
     return (
         f"\n  **Distilled**: one network that also learned the most probable mode{also} of {teacher} "
         f"(`training/checkpoints/teachers/{name}.pt`, weight {cfg['train']['distill_weight']:g}), "

@@ -51,6 +51,8 @@ def test_what_a_student_learned_from_its_teacher_is_named() -> None:
     assert "its mode probabilities (weight 0.5)" in distill_words("eth", soft)
     offsets = {"data": {}, "train": {**student["train"], "distill_classifier": False}}
     assert "its offsets only: the mode probabilities learned from the data alone" in distill_words("eth", offsets)
+    both = {"data": {}, "train": {**offsets["train"], "distill_soft": 0.5}}
+    assert "mode (its offsets only) and its mode probabilities (weight 0.5) of" in distill_words("eth", both)
 
 
 def test_a_cross_fitted_temperature_is_named() -> None:
