@@ -43,9 +43,14 @@ class DataConfig:
     # without maps), at windows ending at every extra_stride-th step.
     extra_pedestrians: str = ""
     extra_stride: int = 3
-    # Whether those pedestrians' futures join the k-means of the anchors; false fits the anchors on the dataset's own
-    # training windows alone (the network still trains on all of them).
+    # Whether those pedestrians' (or sources') futures join the k-means of the anchors; false fits the anchors on the
+    # dataset's own training windows alone (the network still trains on all of them).
     extra_in_anchors: bool = True
+    # Other sources at this dataset's protocol whose every agent joins training (their train splits) and validation
+    # (their val splits), both at windows ending every n-th step ("name:n", else extra_stride): comma-separated names
+    # of datasets with the same time base and steps (e.g. "ethucy_5hz:2,sdd_5hz:8,apolloscape_5hz" beside hdmap,
+    # training.data.datasets.AT_HDMAP; their maps are not read: a model whose map is optional sees its crop absent).
+    extra_sources: str = ""
     # ApolloScape only: the recordings that form the validation split instead of training.data.apolloscape.APOLLO_VAL
     # (comma-separated numbers; never a test recording), for the folds of a cross-fitted temperature
     # (train.calibration_folds, training.release.bundle --calibration-fold).

@@ -25,6 +25,7 @@ from training.reports.ethucy import SCENES, ablation_runs, ablation_table, main_
 from training.reports.held_out import calibrations, noise_table, noisy_results, test_sets
 from training.studies import calibration as calibration_study
 from training.studies import seed as seed_study
+from training.studies import sources as sources_study
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The page's Markdown, with a ``{field}`` for each section (``str.format``).
@@ -106,6 +107,7 @@ def page(r: dict[str, Any]) -> str:
         calibration_study=calibration_study.section(),
         calibration_diagnostics=calibration_study.diagnostics_section(),
         seed_study=seed_study.section(),
+        sources_study=sources_study.section(),
         table=main_table(r["res"]),
         ablations=ablation_table("zara1", ablation_runs("zara1")),
         multiclass=multiclass.sections(r["multi"]),

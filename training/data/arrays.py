@@ -37,6 +37,8 @@ class Windows:
     window_file: Arr  # (W,) index into files
     window_frame: Arr  # (W,) t_obs frame id
     files: list[str]
+    # (A,) bool: the agent's frame had no map (a dataset without one, for a model whose map is optional); None: none
+    map_absent: Arr | None = None
 
     @property
     def num_windows(self) -> int:
@@ -67,6 +69,8 @@ class Windows:
         }
         if self.map is not None:
             out["map"] = self.map[a_idx].astype(np.float32) / 255.0
+        if self.map_absent is not None:
+            out["map_absent"] = self.map_absent[a_idx]
         if flip is not None and flip.any():
             mirror(out, np.repeat(flip, n_agents), np.repeat(flip, n_edges))
         return out
@@ -112,8 +116,14 @@ def concat_windows(parts: Sequence[Windows]) -> Windows:
         agents, edges, files = agents + int(p.agent_ptr[-1]), edges + int(p.edge_ptr[-1]), files + len(p.files)
     rows = [*("trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "future", "target")]
     rows += ["class_index", "origin", "heading", "window_frame"]
+    absent = None
+    if any(p.map_absent is not None for p in parts):
+        absent = np.concatenate(
+            [np.zeros(int(p.agent_ptr[-1]), bool) if p.map_absent is None else p.map_absent for p in parts]
+        )
     return Windows(
         map=None if parts[0].map is None else np.concatenate([p.map for p in parts if p.map is not None]),
+        map_absent=absent,
         agent_ptr=np.concatenate(agent_ptr),
         edge_ptr=np.concatenate(edge_ptr),
         window_file=np.concatenate(window_file),

@@ -43,11 +43,13 @@ def prepared_batch(
 ) -> dict[str, torch.Tensor]:
     """Windows ``idx`` as one graph with the engine's kinematic prior (``prior``, after mirroring) and, for a model
     whose map is optional, ``map_present``: 1, or 0 for the share ``drop`` of agents whose crop is blanked (drawn
-    from ``rng``, the trainer's seeded generator)."""
+    from ``rng``, the trainer's seeded generator) and for the agents of windows without a map (``map_absent``)."""
     b = w.batch(idx, flip)
     b["prior"] = dgan.kinematic_prior(b["trajectory"], b["trajectory_mask"], b["state"], spec)
     if spec.map is not None and spec.map.optional:
         present = np.ones(len(b["state"]), dtype=np.float32)
+        if "map_absent" in b:  # windows of a dataset without maps: a blank crop, flagged absent as the engine does
+            present[b.pop("map_absent")] = 0.0
         if drop > 0:
             if rng is None:
                 raise ValueError("map dropout needs the trainer's random generator (rng)")

@@ -44,6 +44,7 @@ def read_windows(path: Path) -> Windows:
         d = {k: z[k] for k in z.files}
     d["files"] = [str(f) for f in d["files"]]
     d.setdefault("map", None)
+    d.setdefault("map_absent", None)
     return Windows(**d)
 
 

@@ -18,6 +18,10 @@
   (FDE) are real annotations and the points between are linear interpolations of real ones.
 - ``argoverse2``: the three Argoverse 2 scenes (one motion-forecasting scenario, two sensor logs), never trained on:
   a test of the ``hdmap`` protocol on a source the model has not seen.
+- ``nuscenes``, ``waymo``: ``hdmap``'s two sources apart, with its splits.
+- ``ethucy_5hz``, ``sdd_5hz``, ``apolloscape_5hz``: those sources at the ``hdmap`` protocol (:data:`AT_HDMAP`), for a
+  model trained on every source (``data.extra_sources``) and the leave-one-source-out tests
+  (:mod:`training.studies.sources`).
 
 Each dataset's labels map onto the engine's three classes as in the paper: pedestrian; cyclist (Biker, Skater;
 bicyclist/motorcyclist); vehicle (Cart, Car, Bus; small and big vehicles).
@@ -28,6 +32,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -72,6 +77,20 @@ DATASETS: dict[str, DatasetInfo] = {
     ),
 }
 DATASETS["argoverse2"] = replace(DATASETS["hdmap"], name="argoverse2")
+# The two sources of ``hdmap`` apart (leave-one-source-out): the same protocol and split by scene, one source each.
+DATASETS["nuscenes"] = replace(DATASETS["hdmap"], name="nuscenes")
+DATASETS["waymo"] = replace(DATASETS["hdmap"], name="waymo")
+
+#: The sources read at the ``hdmap`` protocol (5 Hz, 10 observed and 15 predicted steps) besides its own, by the name of
+#: that dataset: each recording of the source resampled to 0.2 s (:func:`resampled`), in metres, without its map, its
+#: labels and which of them are scored as in the source. A joint model trains on them beside ``hdmap``'s scenes
+#: (``data.extra_sources``) and a model that never saw one is tested on it (leave-one-source-out).
+AT_HDMAP = {"ethucy_5hz": "ethucy", "sdd_5hz": "sdd", "apolloscape_5hz": "apolloscape"}
+for _name, _source in AT_HDMAP.items():
+    _p = DATASETS["hdmap"]
+    DATASETS[_name] = replace(
+        DATASETS[_source], name=_name, dt_s=_p.dt_s, t_obs=_p.t_obs, t_f=_p.t_f, unit="m", min_targets=1, has_map=False
+    )
 
 
 @dataclass(frozen=True)
@@ -97,7 +116,42 @@ SOURCES: dict[str, Source] = {
         lambda root, split, _: argoverse2_files(root, split),
         lambda p, _, split, __: hdmap_recordings(p, split == "test"),
     ),
+    "nuscenes": Source(
+        lambda root, split, _: hdmap_files(root, split, "nuscenes"),
+        lambda p, _, split, __: hdmap_recordings(p, split == "test"),
+    ),
+    "waymo": Source(
+        lambda root, split, _: hdmap_files(root, split, "waymo"),
+        lambda p, _, split, __: hdmap_recordings(p, split == "test"),
+    ),
 }
+
+
+def ethucy_all_files(root: Path, split: str) -> list[Path]:
+    """ETH/UCY as one source, every scene: ``train`` and ``val`` the Social-GAN ``raw`` files (each scene's first
+    and second part in time), ``test`` the five scenes' whole test files (which overlap them: a model tested on these
+    must not have trained on ETH/UCY at all)."""
+    if split == "test":
+        return [f for scene in ("eth", "hotel", "univ", "zara1", "zara2") for f in split_files(root, scene, "test")]
+    folder = root / "eth_ucy" / "datasets" / "raw" / split
+    files = sorted(folder.glob("*.txt"))
+    if not files:
+        raise FileNotFoundError(f"no ETH/UCY files in {folder}; set data.root to the folder holding eth_ucy/")
+    return files
+
+
+def _at_hdmap(source: str) -> Source:
+    """``source``'s recordings at the ``hdmap`` protocol's time base (:data:`AT_HDMAP`)."""
+    files = SOURCES[source].files if source != "ethucy" else (lambda root, split, _: ethucy_all_files(root, split))
+    dt_from, dt_to = DATASETS[source].dt_s, DATASETS["hdmap"].dt_s
+
+    def read(path: Path, root: Path, split: str, _with_map: bool) -> list[Recording]:
+        out = []
+        for rec in SOURCES[source].read(path, root, split, False):
+            out.append(replace(resampled(rec, dt_from, dt_to), unit_m=1.0))  # errors in metres
+        return out
+
+    return Source(files, read)
 
 
 def register(info: DatasetInfo, source: Source) -> None:
@@ -143,9 +197,11 @@ PEDESTRIAN_SOURCES = ("sdd",)
 def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
     """``rec`` (steps ``dt_from_s`` apart) on a grid of steps ``dt_to_s`` apart: each agent's position at a new step
     is interpolated linearly between its rows at the two old steps around it, and the new step is left out where the
-    agent lacks either of them (no interpolation across gaps). Per-row headings and sizes are not carried."""
+    agent lacks either of them (no interpolation across gaps). Sizes are carried from the earlier of the two rows;
+    headings are not (a model at the new rate takes them from the motion)."""
     ratio = dt_to_s / dt_from_s
     steps, agents, xys, labels = [], [], [], []
+    sizes: dict[str, list[Any]] = {k: [] for k in ("length", "width") if getattr(rec, k) is not None}
     for agent in np.unique(rec.agent):
         sel = np.flatnonzero(rec.agent == agent)
         old, xy = rec.step[sel], rec.xy[sel]
@@ -161,6 +217,8 @@ def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
         agents.append(np.full(int(ok.sum()), agent))
         xys.append(((1 - w) * xy[lo] + w * xy[hi])[ok])
         labels.append(np.full(int(ok.sum()), rec.label[sel[0]]))
+        for k, v in sizes.items():
+            v.append(getattr(rec, k)[sel][lo][ok])
     if not steps:
         return replace(rec, heading=None, length=None, width=None, now_steps=None)
     return Recording.sorted(
@@ -171,6 +229,7 @@ def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
         label=np.concatenate(labels),
         unit_m=rec.unit_m,
         map=rec.map,
+        **{k: np.concatenate(v) for k, v in sizes.items()},
     )
 
 
@@ -201,3 +260,7 @@ def pedestrian_recordings(source: str, root: Path, dt_s: float) -> list[Recordin
 
 
 # ---- Driving scenes with vector HD maps (nuScenes, Waymo, Argoverse 2) -----------------------------------------------
+
+
+for _name, _source in AT_HDMAP.items():
+    SOURCES[_name] = _at_hdmap(_source)

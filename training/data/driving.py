@@ -42,10 +42,15 @@ def _stem(path: Path) -> str:
     return path.name.split(".")[0] if path.name.endswith(".json.gz") else path.stem
 
 
-def hdmap_files(root: Path, split: str) -> list[Path]:
-    files = sorted((root / "nuscenes_mini_scenarionet").glob("*.pkl"))
+def hdmap_files(root: Path, split: str, source: str = "") -> list[Path]:
+    """The scenarios of a split: nuScenes' and Waymo's, or with ``source`` ("nuscenes", "waymo") one source's."""
+    if source not in ("", "nuscenes", "waymo"):
+        raise ValueError(f"unknown hdmap source {source!r}; known: nuscenes, waymo")
+    files = [] if source == "waymo" else sorted((root / "nuscenes_mini_scenarionet").glob("*.pkl"))
     waymo = root / "waymo_motion_samples"
-    files += sorted((waymo / "gpudrive_json").glob("*.json.gz")) + sorted((waymo / "scenarionet_pkl").glob("*.pkl"))
+    if source != "nuscenes":
+        files += sorted((waymo / "gpudrive_json").glob("*.json.gz"))
+        files += sorted((waymo / "scenarionet_pkl").glob("*.pkl"))
     if not files:
         raise FileNotFoundError(
             f"no nuScenes or Waymo scenarios under {root}; set data.root to the folder holding "

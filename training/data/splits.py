@@ -17,7 +17,7 @@ import dgan
 from training.config import Config, DataConfig
 from training.data.arrays import Windows, concat_windows
 from training.data.cache import cached
-from training.data.datasets import PEDESTRIAN_SOURCES, locate
+from training.data.datasets import DATASETS, PEDESTRIAN_SOURCES, locate
 from training.data.recording import Located, WindowSet
 
 
@@ -63,7 +63,8 @@ def window_set(part: WindowSet, root: Path, spec: dgan.InputSpec, cache_dir: Pat
 
 def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
     """The parts of ``split`` that ``d`` asks for: the dataset's own windows; for training, then one noisy copy per
-    level of ``data.augment_noise`` and the pedestrians of each ``data.extra_pedestrians`` source."""
+    level of ``data.augment_noise`` and the pedestrians of each ``data.extra_pedestrians`` source; then the split of
+    each ``data.extra_sources`` dataset."""
     fold = {"ethucy": d.scene, "apolloscape": d.val_recordings}.get(d.dataset, "")
     if d.val_recordings and d.dataset != "apolloscape":
         raise ValueError(f"data.val_recordings is for ApolloScape, not {d.dataset!r}")
@@ -71,11 +72,45 @@ def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
     if sources and d.dataset != "ethucy":
         raise ValueError(f"data.extra_pedestrians is for the ETH/UCY models, not {d.dataset!r}")
     own = WindowSet(d.dataset, split, fold, d.window_stride)
+    joint = [WindowSet(s, split, stride=k) for s, k in extra_sources(d.extra_sources, d.dataset, d.extra_stride)]
     if split != "train":
-        return [own]
+        return [own, *joint]
     noisy = [replace(own, noise=(sigma, d.augment_drop)) for sigma in augment_sigmas(d.augment_noise)]
     extra = [WindowSet(s, "train", stride=d.extra_stride, pedestrians=True) for s in sources]
-    return [own, *noisy, *extra]
+    return [own, *noisy, *extra, *joint]
+
+
+def extra_sources(names: str, dataset: str, stride: int = 1) -> list[tuple[str, int]]:
+    """The datasets named by ``data.extra_sources`` (comma-separated ``name`` or ``name:stride``, the stride of its
+    windows, else ``stride``; empty for none) with their strides, each registered, other than ``dataset`` and at its
+    protocol (time base, observed and predicted steps)."""
+    items = [s.strip() for s in names.split(",") if s.strip()]
+    sources, strides = [], []
+    for item in items:
+        name, _, every = item.partition(":")
+        try:
+            k = int(every) if every else stride
+        except ValueError:
+            k = 0
+        if k < 1:
+            raise ValueError(f"data.extra_sources: {item!r} needs a whole stride of at least 1 after its colon")
+        sources.append(name.strip())
+        strides.append(k)
+    if unknown := [s for s in sources if s not in DATASETS]:
+        raise ValueError(f"unknown data.extra_sources {unknown}; known: {', '.join(DATASETS)}")
+    if dataset in sources or len(set(sources)) < len(sources):
+        raise ValueError(f"data.extra_sources {names!r} repeats a source or names the dataset {dataset!r} itself")
+    own = DATASETS[dataset]
+    for s in sources:
+        info = DATASETS[s]
+        if (info.dt_s, info.t_obs, info.t_f) != (own.dt_s, own.t_obs, own.t_f):
+            raise ValueError(
+                f"data.extra_sources: {s!r} has steps of {info.dt_s:g} s, {info.t_obs} observed and {info.t_f} "
+                f"predicted, {dataset!r} {own.dt_s:g} s, {own.t_obs} and {own.t_f}: not one protocol"
+            )
+        if missing := set(info.classes) - set(own.classes):
+            raise ValueError(f"data.extra_sources: {s!r} has classes {sorted(missing)} that {dataset!r} does not")
+    return list(zip(sources, strides, strict=True))
 
 
 def augment_sigmas(declared: str) -> list[float]:

@@ -127,6 +127,9 @@ def build_windows(
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
     agent_ptr, edge_ptr = [0], [0]
     class_of_label = np.array([list(spec.classes).index(c) for c in info.label_class])
+    # A dataset without maps, for a model whose map is optional: its agents' crops are flagged absent, as the engine
+    # flags a frame without a map (another source's pedestrians for an ETH/UCY model keep the flag present).
+    flag_absent = spec.map is not None and spec.map.optional and not info.has_map
     for fi, rec in enumerate(recs):
         windows = list(iter_windows(rec, info, spec.t_obs, spec.t_f, stride))
         rng = np.random.default_rng(fi)
@@ -141,6 +144,8 @@ def build_windows(
                 parts[key].append(x[key])
             if "map" in x:
                 parts["map"].append(np.round(x["map"] * 255).astype(np.uint8))
+            if flag_absent:
+                parts["map_absent"].append(np.ones(n, bool))
             parts["future"].append(future.astype(np.float32))
             parts["target"].append(w.target)
             parts["class_index"].append(class_of_label[w.label])

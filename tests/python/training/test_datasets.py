@@ -302,3 +302,126 @@ def test_extra_pedestrian_sources_are_parsed_and_checked() -> None:
     assert pedestrian_sources(" sdd , ") == ["sdd"]
     with pytest.raises(ValueError, match=r"unknown pedestrian source\(s\) \['kitti'\]"):
         pedestrian_sources("sdd,kitti")
+
+
+def test_resampling_carries_sizes_and_leaves_headings_out() -> None:
+    from training.data.datasets import resampled
+
+    steps = np.arange(5)
+    rec = Recording.sorted(
+        name="r",
+        step=steps,
+        agent=np.zeros(5, np.int64),
+        xy=np.c_[steps * 1.0, np.zeros(5)],
+        label=np.zeros(5, np.int64),
+        heading=np.zeros(5),
+        length=np.array([4.0, 4.0, 4.2, 4.2, 4.4]),
+        width=np.full(5, 1.8),
+    )
+    out = resampled(rec, 0.5, 0.2)  # 2 Hz onto 5 Hz: new steps at old steps 0, 0.4, 0.8 ... 4.0
+    np.testing.assert_allclose(out.xy[:, 0], 0.4 * np.arange(11))
+    np.testing.assert_allclose(out.length, [4.0] * 5 + [4.2] * 5 + [4.4])  # the earlier row's
+    np.testing.assert_allclose(out.width, 1.8)
+    assert out.heading is None
+
+
+def test_hdmap_sources_apart_split_its_scenes() -> None:
+    root = shared_data("nuscenes_mini_scenarionet")
+    for split in ("train", "val", "test"):
+        both = source_files("hdmap", root, split)
+        nu, waymo = source_files("nuscenes", root, split), source_files("waymo", root, split)
+        assert sorted(nu + waymo) == sorted(both)
+        assert nu
+        assert waymo
+        assert all("nuscenes" in p.parent.name for p in nu)
+        assert all("waymo" in str(p.parent) for p in waymo)
+
+
+@pytest.mark.parametrize("source", ["ethucy_5hz", "sdd_5hz", "apolloscape_5hz"])
+def test_other_sources_join_the_hdmap_protocol(source: str) -> None:
+    """Each source's recordings on the hdmap time base: 0.2 s steps in metres (a walker moves under 1 m a step),
+    without a map, its own labels and scoring; windows at the hdmap protocol."""
+    root = shared_data("sdd")
+    info = DATASETS[source]
+    assert (info.dt_s, info.t_obs, info.t_f, info.unit, info.has_map) == (0.2, 10, 15, "m", False)
+    files = source_files(source, root, "val")
+    rec = recordings(source, root, "val")[0]
+    assert files
+    assert rec.map is None
+    assert rec.unit_m == 1.0
+    assert rec.heading is None
+    one = rec.agent == rec.agent[len(rec.agent) // 2]
+    steps = np.diff(rec.step[one]) == 1
+    assert (np.linalg.norm(np.diff(rec.xy[one], axis=0), axis=1)[steps] < 8.0).all()  # 40 m/s at most
+    windows = list(iter_windows(rec, info, info.t_obs, info.t_f, stride=5))
+    assert windows
+    assert all(w.positions.shape[1] == 25 for w in windows)
+
+
+def test_ethucy_as_one_source_tests_every_scene() -> None:
+    root = shared_data("eth_ucy")
+    test = source_files("ethucy_5hz", root, "test")
+    assert {p.parent.parent.name for p in test} == {"eth", "hotel", "univ", "zara1", "zara2"}
+    assert len(test) == 6  # univ is students001 and students003
+    train = source_files("ethucy_5hz", root, "train")
+    assert len(train) == 8
+    assert all(p.parent.name == "train" for p in train)
+
+
+def test_extra_sources_are_checked_against_the_protocol() -> None:
+    from training.config import DataConfig
+    from training.data.splits import extra_sources, window_sets
+
+    assert extra_sources("", "hdmap") == []
+    assert extra_sources(" ethucy_5hz, sdd_5hz:6 ", "hdmap", 2) == [("ethucy_5hz", 2), ("sdd_5hz", 6)]
+    for bad in ("sdd_5hz:0", "sdd_5hz:x", "sdd_5hz:"):
+        if bad.endswith(":"):
+            assert extra_sources(bad, "hdmap", 3) == [("sdd_5hz", 3)]
+            continue
+        with pytest.raises(ValueError, match="needs a whole stride"):
+            extra_sources(bad, "hdmap")
+    with pytest.raises(ValueError, match=r"unknown data.extra_sources \['kitti'\]"):
+        extra_sources("kitti", "hdmap")
+    with pytest.raises(ValueError, match="not one protocol"):
+        extra_sources("ethucy", "hdmap")  # 0.4 s steps, 8 + 12
+    with pytest.raises(ValueError, match="repeats a source or names the dataset"):
+        extra_sources("waymo,ethucy_5hz", "waymo")
+    with pytest.raises(ValueError, match="classes"):
+        extra_sources("sdd_5hz", "ethucy_5hz")  # cyclists and vehicles for a pedestrian dataset
+    d = DataConfig(dataset="hdmap", extra_sources="ethucy_5hz:4", augment_noise="0.1")
+    train, val = window_sets(d, "train"), window_sets(d, "val")
+    want = [("hdmap", 1, 0), ("hdmap", 1, 0.1), ("ethucy_5hz", 4, 0)]
+    assert [(p.dataset, p.stride, p.noise[0]) for p in train] == want
+    assert [(p.dataset, p.split, p.stride) for p in val] == [("hdmap", "val", 1), ("ethucy_5hz", "val", 4)]
+
+
+def test_a_source_without_maps_is_flagged_absent_for_a_map_model(tmp_path: Path) -> None:
+    """Windows of a dataset without maps carry ``map_absent``, which the batch turns into ``map_present`` 0 (as the
+    engine does for a frame without a map); the model's own windows stay present."""
+    from training.data.arrays import concat_windows
+    from training.data.batches import prepared_batch
+    from training.data.windows import build_windows
+
+    spec = dgan.Predictor("hdmap").spec
+    rec = toy([(s, a, 2) for s in range(30) for a in (0, 1)])
+    info = DATASETS["ethucy_5hz"]
+    own = build_windows([rec], replace_info(DATASETS["hdmap"]), spec, stride=10, progress=False)
+    other = build_windows([rec], replace_info(info), spec, stride=10, progress=False)
+    assert own.map_absent is None
+    assert other.map_absent is not None
+    assert other.map_absent.all()
+    both = concat_windows([own, other])
+    assert both.map_absent is not None
+    b = prepared_batch(both, np.arange(both.num_windows), spec)
+    present = b["map_present"].numpy()
+    n_own = int(own.agent_ptr[-1])
+    assert (present[:n_own] == 1).all()
+    assert (present[n_own:] == 0).all()
+
+
+def replace_info(info: Any) -> Any:
+    """``info`` with toy-sized windows' rule: every agent of label 0 (pedestrian) a target."""
+    from dataclasses import replace
+
+    labels = ("pedestrian", "cyclist", "vehicle")
+    return replace(info, labels=labels, label_class=labels, scored=(True,) * 3, min_targets=1)
