@@ -32,9 +32,32 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
         classes=info.classes,
         attention_lambda=0.5,
         map=map_spec,
-        prior=dgan.PriorSpec(d.prior, d.prior_window_s, d.prior_fit, d.prior_standing_mps),
+        prior=dgan.PriorSpec(
+            d.prior, d.prior_window_s, d.prior_fit, d.prior_standing_mps, class_priors(d.prior_by_class)
+        ),
         heading=d.heading,
     )
+
+
+def class_priors(declared: str) -> dict[str, dgan.ClassPrior]:
+    """``data.prior_by_class`` (comma-separated ``class=fit:window_s:standing_mps``) as the prior's ``by_class``."""
+    out: dict[str, dgan.ClassPrior] = {}
+    for item in (s.strip() for s in declared.split(",")):
+        if not item:
+            continue
+        name, _, how = item.partition("=")
+        parts = how.split(":")
+        try:
+            fit, window, standing = parts[0].strip(), float(parts[1]), float(parts[2])
+        except (IndexError, ValueError):
+            raise ValueError(
+                f"data.prior_by_class: {item!r} is not class=fit:window_s:standing_mps "
+                "(e.g. pedestrian=least_squares:2:0.3)"
+            ) from None
+        if len(parts) != 3 or name.strip() in out:
+            raise ValueError(f"data.prior_by_class: {item!r} has extra fields or repeats its class")
+        out[name.strip()] = dgan.ClassPrior(window, fit, standing)
+    return out
 
 
 def run_name(cfg: Config) -> str:

@@ -36,6 +36,9 @@ class DataConfig:
     # agents slower than prior_standing_mps (m/s, 0 = never) get a standing prior (dgan.PriorSpec).
     prior_fit: str = "endpoints"
     prior_standing_mps: float = 0.0
+    # Classes with their own velocity estimate (dgan.ClassPrior, contract 8), comma-separated
+    # "class=fit:window_s:standing_mps", e.g. "pedestrian=least_squares:2:0.3"; the others keep the three above.
+    prior_by_class: str = ""
     # Where agents' headings come from (dgan.InputSpec.heading): "measured", "motion_when_moving" or "motion".
     heading: str = "measured"
     # ETH/UCY only: pedestrians of other sources added to the training windows

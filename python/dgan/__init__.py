@@ -17,6 +17,7 @@ from dgan.prediction import Prediction
 from dgan.predictor import Predictor, available_execution_providers
 from dgan.scenes import scene_map
 from dgan.spec import (
+    ClassPrior,
     InputSpec,
     MapSpec,
     PriorSpec,
@@ -32,6 +33,7 @@ from dgan.viz import plot
 __all__ = [
     "CLASSES",
     "MAP_ELEMENT_KINDS",
+    "ClassPrior",
     "DganError",
     "Frame",
     "InputSpec",

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -41,6 +41,16 @@ class MapSpec:
 
 
 @dataclass(frozen=True)
+class ClassPrior:
+    """One class's own velocity estimate in a :class:`PriorSpec` (contract 8): its ``window_s``, ``fit`` and
+    ``standing_mps``, with the meanings they have there."""
+
+    window_s: float = 0.0
+    fit: str = "endpoints"
+    standing_mps: float = 0.0
+
+
+@dataclass(frozen=True)
 class PriorSpec:
     """The kinematic prior the network's outputs are relative to (``docs/model-contract.md``).
 
@@ -50,13 +60,34 @@ class PriorSpec:
     of the window), ``"least_squares"`` (a line through every valid position against its time, robust to tracker
     noise and dropped steps) or ``"quadratic"`` (a parabola's slope at the current step: as robust, without the
     line's lag behind an accelerating agent). An agent whose estimated speed is below ``standing_mps`` (m/s; 0
-    never) stands: its prior stays at its last position.
+    never) stands: its prior stays at its last position. ``by_class`` (contract 8) gives the agents of a class
+    their own estimate, e.g. ``{"pedestrian": ClassPrior(2.0, "least_squares", 0.3)}``; the other classes keep
+    the model-wide one.
     """
 
     kind: str = "none"
     window_s: float = 0.0
     fit: str = "endpoints"
     standing_mps: float = 0.0
+    by_class: Mapping[str, ClassPrior] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.by_class, Mapping):
+            raise InvalidSpecError(f"prior.by_class must map class names to ClassPrior, got {self.by_class!r}")
+        own = {}
+        for name, c in self.by_class.items():
+            own[name] = ClassPrior(**c) if isinstance(c, Mapping) else c
+            if not isinstance(own[name], ClassPrior):
+                raise InvalidSpecError(f"prior.by_class[{name!r}] must be a ClassPrior, got {c!r}")
+        object.__setattr__(self, "by_class", own)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The prior as the model contract writes it (``by_class`` left out when empty)."""
+        d: dict[str, Any] = {"kind": self.kind, "window_s": self.window_s, "fit": self.fit}
+        d["standing_mps"] = self.standing_mps
+        if self.by_class:
+            d["by_class"] = {name: asdict(c) for name, c in self.by_class.items()}
+        return d
 
 
 @dataclass(frozen=True)
@@ -88,6 +119,9 @@ class InputSpec:
             numbers["map.resolution_m"] = self.map.resolution_m
         numbers["prior.window_s"] = self.prior.window_s
         numbers["prior.standing_mps"] = self.prior.standing_mps
+        for name, c in self.prior.by_class.items():
+            numbers[f"prior.by_class.{name}.window_s"] = c.window_s
+            numbers[f"prior.by_class.{name}.standing_mps"] = c.standing_mps
         for key, value in numbers.items():
             if isinstance(value, float) and not math.isfinite(value):
                 raise InvalidSpecError(f"invalid specification: {key} must be a finite number, got {value}")
@@ -96,6 +130,7 @@ class InputSpec:
     def to_json(self) -> str:
         d = asdict(self)
         d["classes"] = list(self.classes)
+        d["prior"] = self.prior.to_dict()
         return json.dumps(d)
 
     @classmethod

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import dgan
+from training.build import class_priors
 from training.data.splits import pedestrian_sources
 
 
@@ -47,23 +48,29 @@ def nomap_row(metrics: dict[str, Any]) -> str:
     return "| DGAN without the map | " + " | ".join(f"{n[k]:.3f}" for k in keys) + " |\n"
 
 
+def estimate(fit: str, window: float, standing: float) -> str:
+    """How a prior's velocity is estimated, in words."""
+    how = "the velocity of the last two steps"
+    if window:
+        how = {
+            "least_squares": f"the slope of a least-squares line through the last {window:g} s",
+            "quadratic": f"the slope at t_obs of a least-squares parabola through the last {window:g} s",
+        }.get(fit, f"the mean velocity over the last {window:g} s")
+    if standing:
+        how += f", standing below {standing:g} m/s"
+    return how
+
+
 def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
     """What the model declares under contract 2: its prior, its optional map and its temperature."""
     d, t = cfg["data"], cfg["train"]
     prior = d.get("prior", "none")
     parts = []
     if prior != "none":
-        window = d.get("prior_window_s", 0.0)
-        fit = d.get("prior_fit", "endpoints")
-        how = "the velocity of the last two steps"
-        if window:
-            how = {
-                "least_squares": f"the slope of a least-squares line through the last {window:g} s",
-                "quadratic": f"the slope at t_obs of a least-squares parabola through the last {window:g} s",
-            }.get(fit, f"the mean velocity over the last {window:g} s")
-        standing = d.get("prior_standing_mps", 0.0)
-        if standing:
-            how += f", standing below {standing:g} m/s"
+        how = estimate(d.get("prior_fit", "endpoints"), d.get("prior_window_s", 0.0), d.get("prior_standing_mps", 0.0))
+        own = class_priors(d.get("prior_by_class", ""))
+        for name, c in own.items():
+            how += f"; for {name}s {estimate(c.fit, c.window_s, c.standing_mps)}"
         parts.append(f"The network refines a constant-velocity rollout ({how}) computed by the engine.")
     if d.get("augment_noise"):
         parts.append(

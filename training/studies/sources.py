@@ -37,6 +37,8 @@ BASE_CONFIG = ROOT / "training" / "configs" / "hdmap.toml"
 STUDY = ROOT / "docs" / "sources_study.json"
 #: A class is in the verdict from this many targets on a source.
 MIN_TARGETS = 50
+#: The study's name for its models (a variant's add its name).
+TRAINED = "trained without it"
 
 _ALL = tuple(AT_HDMAP)
 #: Each held-out source (a dataset at the hdmap protocol) → the model's own dataset and its other sources.
@@ -70,7 +72,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="passed to every run")
     ap.add_argument("--json", type=Path, default=STUDY, help="the study's figures (merged by held-out source)")
     ap.add_argument("--no-bundled", action="store_true", help="skip the bundled hdmap's rows")
+    ap.add_argument(
+        "--variant",
+        default="",
+        metavar="NAME",
+        help="a variant of the recipe (its --set): its models in OUT/NAME, its rows 'trained without it (NAME)'",
+    )
+    ap.add_argument("--no-val", action="store_true", help="skip each model's validation rows")
     return ap.parse_args(argv)
+
+
+def model_name(variant: str = "") -> str:
+    """The study's name for the models of ``variant`` (the recipe itself for ``""``)."""
+    return f"{TRAINED} ({variant})" if variant else TRAINED
 
 
 def train_without(source: str, out: Path, root: Path, extra_sets: list[str]) -> Path:
@@ -108,13 +122,26 @@ def ratios(r: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def measure(model: Path, source: str, root: Path) -> dict[str, Any]:
-    """The model run by the engine on ``source``'s test split (its map kept where it has one)."""
+def measure(model: Path, source: str, root: Path, split: str = "test") -> dict[str, Any]:
+    """The model run by the engine on ``source``'s ``split`` (its map kept where it has one)."""
     started = time.perf_counter()
-    r = evaluate(dgan.Predictor(str(model)), source, root, with_map=source in WITH_MAP)
+    with_map = source in WITH_MAP or source == "hdmap"
+    r = evaluate(dgan.Predictor(str(model)), source, root, with_map=with_map, split=split)
     out = ratios(r)
     out["windows"], out["seconds"] = r["windows"], round(time.perf_counter() - started, 1)
     return out
+
+
+def trained_on(source: str) -> tuple[str, ...]:
+    """The sources the model that leaves ``source`` out trains on (its own dataset first)."""
+    dataset, others = HELD_OUT[source]
+    return (dataset, *others)
+
+
+def validation(model: Path, source: str, root: Path) -> dict[str, Any]:
+    """The model that leaves ``source`` out on the validation split of each source it trained on (the split its
+    epoch and temperature were chosen on): whether it beats constant velocity even where it learned."""
+    return {s: measure(model, s, root, "val") for s in trained_on(source)}
 
 
 def verdict(row: dict[str, Any]) -> bool:
@@ -139,7 +166,7 @@ def table(study: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def mean_ratios(study: dict[str, Any], model: str = "trained without it") -> tuple[float, float] | None:
+def mean_ratios(study: dict[str, Any], model: str = TRAINED) -> tuple[float, float] | None:
     """The mean over held-out sources of ``model``'s all-agent top-1 ADE and FDE as multiples of constant velocity's
     (None if no source has it)."""
     rows = [m[model]["all"] for m in study.values() if model in m]
@@ -148,27 +175,63 @@ def mean_ratios(study: dict[str, Any], model: str = "trained without it") -> tup
     return sum(r["ade_ratio"] for r in rows) / len(rows), sum(r["fde_ratio"] for r in rows) / len(rows)
 
 
+def trained_models(study: dict[str, Any]) -> list[str]:
+    """The names of the study's own models (the recipe and each variant), in the order first met."""
+    names: list[str] = []
+    for models in study.values():
+        names += [n for n in models if n.startswith(TRAINED) and n not in names]
+    return names
+
+
 def summary(study: dict[str, Any]) -> str:
-    """One line per held-out source (within issue 25's 0.9 or not, and where not) and the mean over sources."""
+    """For each of the study's models, one line per held-out source (within issue 25's 0.9 or not, and where not)
+    and the mean over sources."""
     lines = []
+    names = trained_models(study)
+    for name in names:
+        if len(names) > 1:
+            lines.append(f"*{name}*{'' if name == TRAINED else ' (' + ', '.join(sets_of(study, name)) + ')'}:\n")
+        for source, models in study.items():
+            row = models.get(name)
+            if row is None:
+                continue
+            worst = [
+                f"{c} {v['ade_ratio']:.2f}/{v['fde_ratio']:.2f}"
+                for c, v in [("all", row["all"]), *row["by_class"].items()]
+                if v["n"] >= MIN_TARGETS and max(v["ade_ratio"], v["fde_ratio"]) > 0.9
+            ]
+            verdict_words = "within 0.9 × constant velocity" if verdict(row) else f"over 0.9: {', '.join(worst)}"
+            lines.append(f"- {source} ({row['all']['n']:,} targets): {verdict_words}.")
+        means = mean_ratios(study, name)
+        if means is not None:
+            n = sum(name in m for m in study.values())
+            lines.append(
+                f"- Mean over the {n} held-out sources: {means[0]:.3f}/{means[1]:.3f} × constant velocity "
+                "(bound 0.85).\n"
+            )
+    return "\n".join(lines).rstrip("\n")
+
+
+def sets_of(study: dict[str, Any], name: str) -> list[str]:
+    """The settings a model of the study was trained with beyond the recipe's (:data:`STUDY_SETS`)."""
+    for models in study.values():
+        if name in models:
+            return [f"`{x}`" for x in models[name].get("sets", []) if x not in STUDY_SETS]
+    return []
+
+
+def validation_table(study: dict[str, Any]) -> str:
+    """Each model on the validation splits of the sources it trained on: top-1 ADE/FDE as multiples of constant
+    velocity's, over all agents and per class ("" where no model has them)."""
+    head = f"| model | held out | validation of | all | {' | '.join(dgan.CLASSES)} |"
+    lines = [head, "|---" * (4 + len(dgan.CLASSES)) + "|"]
     for source, models in study.items():
-        row = models.get("trained without it")
-        if row is None:
-            continue
-        worst = [
-            f"{c} {v['ade_ratio']:.2f}/{v['fde_ratio']:.2f}"
-            for c, v in [("all", row["all"]), *row["by_class"].items()]
-            if v["n"] >= MIN_TARGETS and max(v["ade_ratio"], v["fde_ratio"]) > 0.9
-        ]
-        verdict_words = "within 0.9 × constant velocity" if verdict(row) else f"over 0.9: {', '.join(worst)}"
-        lines.append(f"- {source} ({row['all']['n']:,} targets): {verdict_words}.")
-    means = mean_ratios(study)
-    if means is not None:
-        n = sum("trained without it" in m for m in study.values())
-        lines.append(
-            f"- Mean over the {n} held-out sources: {means[0]:.3f}/{means[1]:.3f} × constant velocity (bound 0.85)."
-        )
-    return "\n".join(lines)
+        for name, row in models.items():
+            for trained, v in row.get("validation", {}).items():
+                cells = [v["all"], *(v["by_class"].get(c) for c in dgan.CLASSES)]
+                text = ["–" if c is None else f"{c['ade_ratio']:.2f}/{c['fde_ratio']:.2f} ({c['n']:,})" for c in cells]
+                lines.append(f"| {name} | {source} | {trained} | {' | '.join(text)} |")
+    return "\n".join(lines) if len(lines) > 2 else ""
 
 
 def section(path: Path = STUDY) -> str:
@@ -176,20 +239,30 @@ def section(path: Path = STUDY) -> str:
     if not path.is_file():
         return "*(not run: `python -m training.studies.sources --out runs/sources`)*"
     study = json.loads(path.read_text())
-    return f"{summary(study)}\n\n{table(study)}"
+    val = validation_table(study)
+    val_part = (
+        "\n\nOn the validation splits of the sources each model trained on (× constant velocity, top-1 ADE/FDE, "
+        f"targets):\n\n{val}"
+        if val
+        else ""
+    )
+    return f"{summary(study)}\n\n{table(study)}{val_part}"
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     a = parse_args(argv)
     study: dict[str, Any] = json.loads(a.json.read_text()) if a.json.is_file() else {}
+    name = model_name(a.variant)
     for source in a.only:
         rows = study.setdefault(source, {})
-        model = train_without(source, a.out, a.data_root, a.set)
-        rows["trained without it"] = measure(model, source, a.data_root)
-        rows["trained without it"]["sets"] = [*STUDY_SETS, *a.set]
+        model = train_without(source, a.out / a.variant if a.variant else a.out, a.data_root, a.set)
+        rows[name] = measure(model, source, a.data_root)
+        rows[name]["sets"] = [*STUDY_SETS, *a.set]
+        if not a.no_val:
+            rows[name]["validation"] = validation(model, source, a.data_root)
         if source in BUNDLED_UNSEEN and not a.no_bundled:
             rows["bundled hdmap"] = measure(dgan.models.path("hdmap"), source, a.data_root)
-        ok = verdict(rows["trained without it"])
+        ok = verdict(rows[name])
         print(f"[sources] {source}: {'within' if ok else 'not within'} 0.9 × constant velocity", flush=True)
         a.json.parent.mkdir(parents=True, exist_ok=True)
         a.json.write_text(json.dumps(study, indent=1) + "\n")

@@ -13,11 +13,12 @@ use std::collections::BTreeMap;
 /// The contract version the exporter writes. Version 2 adds the kinematic prior, optional maps (`map_present`)
 /// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph; version 4 the
 /// sealed weights (`weights_sha256`); version 5 where headings come from (`heading`); version 6 how the prior's
-/// velocity is fitted (`prior.fit`) and its standing threshold (`prior.standing_mps`).
-pub const CONTRACT_VERSION: u32 = 7;
+/// velocity is fitted (`prior.fit`) and its standing threshold (`prior.standing_mps`); version 7 the tiled map
+/// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`).
+pub const CONTRACT_VERSION: u32 = 8;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 7] = [1, 2, 3, 4, 5, 6, 7];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 8] = [1, 2, 3, 4, 5, 6, 7, 8];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -226,6 +227,11 @@ impl ModelContract {
                 "prior.fit and prior.standing_mps are contract-6 keys; versions 1 to 5 fit endpoints and never \
                  clamp standing agents"
                     .into(),
+            ));
+        }
+        if self.contract_version < 8 && !prior.by_class.is_empty() {
+            return Err(DganError::Contract(
+                "prior.by_class is a contract-8 key; versions 1 to 7 take one velocity estimate for every class".into(),
             ));
         }
         let render = self.input.map.as_ref().map_or(MapRender::Agent, |m| m.render);
@@ -479,7 +485,16 @@ mod tests {
         let err = ModelContract::from_json(&v6.replace("\"optional\": true", tiles)).unwrap_err().to_string();
         assert!(err.contains("map.render is a contract-7 key"), "{err}");
         let err = ModelContract::from_json(&v7.replace("\"tiles\"", "\"tile\"")).unwrap_err().to_string();
-        assert!(err.contains("tile"), "{err}");
+        assert!(err.contains("tile"), "{err}"); // Version 8 gives a class its own velocity estimate; version 7 cannot, and the class must be the model's.
+        let own =
+            "\"standing_mps\": 0.3, \"by_class\": {\"pedestrian\": {\"window_s\": 2.0, \"fit\": \"least_squares\"}}";
+        let v8 = v7.replace("\"contract_version\": 7", "\"contract_version\": 8").replace("\"standing_mps\": 0.3", own);
+        let prior = ModelContract::from_json(&v8).unwrap().input.prior;
+        assert_eq!(prior.by_class.get(AgentClass::Pedestrian).map(|c| c.fit), Some(VelocityFit::LeastSquares));
+        let err = ModelContract::from_json(&v7.replace("\"standing_mps\": 0.3", own)).unwrap_err().to_string();
+        assert!(err.contains("prior.by_class is a contract-8 key"), "{err}");
+        let err = ModelContract::from_json(&v8.replace("\"pedestrian\": {", "\"cyclist\": {")).unwrap_err().to_string();
+        assert!(err.contains("not among the model's classes"), "{err}");
     }
 
     #[test]

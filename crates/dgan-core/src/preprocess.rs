@@ -224,7 +224,14 @@ pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: 
         }
     }
 
-    let prior = spec.prior.rollout(trajectory.view(), trajectory_mask.view(), state.view(), spec.dt_s, spec.t_f)?;
+    let prior = spec.prior.rollout(
+        trajectory.view(),
+        trajectory_mask.view(),
+        state.view(),
+        spec.dt_s,
+        spec.t_f,
+        &spec.classes,
+    )?;
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
         (Some(m), Some(_)) => (Some(rasterize_on(frame, &states, m, threads)?), m.optional.then(|| Array1::ones(n))),

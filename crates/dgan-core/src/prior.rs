@@ -5,7 +5,9 @@
 //! rather than to a k-means anchor. The rollout is computed here from the network's own input tensors
 //! (`trajectory`, `trajectory_mask`, `state`), once, and training calls this same function through the bindings.
 
+use crate::class::AgentClass;
 use crate::error::{DganError, Result};
+use crate::spec::STATE_FEATURES;
 use ndarray::{Array3, ArrayView2, ArrayView3};
 use serde::{Deserialize, Serialize};
 
@@ -75,42 +77,129 @@ pub struct PriorSpec {
     /// velocity), else the estimated velocity's. 0 (the default) never clamps.
     #[serde(default)]
     pub standing_mps: f64,
+    /// Per-class velocity estimates (contract 8) in place of `window_s`, `fit` and `standing_mps` for the agents
+    /// of those classes; every other class keeps the model-wide ones.
+    #[serde(default, skip_serializing_if = "ByClass::is_empty")]
+    pub by_class: ByClass,
+}
+
+/// One class's velocity estimate: its window, fit and standing threshold, as in [`PriorSpec`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClassPrior {
+    /// As [`PriorSpec::window_s`].
+    #[serde(default)]
+    pub window_s: f64,
+    /// As [`PriorSpec::fit`].
+    #[serde(default)]
+    pub fit: VelocityFit,
+    /// As [`PriorSpec::standing_mps`].
+    #[serde(default)]
+    pub standing_mps: f64,
+}
+
+/// The classes whose agents take their own velocity estimate (none by default); in the metadata an object keyed by
+/// class name, e.g. `{"pedestrian": {"window_s": 2.0, "fit": "least_squares", "standing_mps": 0.3}}`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ByClass {
+    /// Vehicles' estimate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<ClassPrior>,
+    /// Cyclists' estimate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cyclist: Option<ClassPrior>,
+    /// Pedestrians' estimate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pedestrian: Option<ClassPrior>,
+}
+
+impl ByClass {
+    /// No class with its own estimate.
+    pub const NONE: Self = Self { vehicle: None, cyclist: None, pedestrian: None };
+
+    /// Whether no class has its own estimate.
+    pub fn is_empty(&self) -> bool {
+        *self == Self::NONE
+    }
+
+    /// The estimate of `class`, if it has its own.
+    pub fn get(&self, class: AgentClass) -> Option<ClassPrior> {
+        match class {
+            AgentClass::Vehicle => self.vehicle,
+            AgentClass::Cyclist => self.cyclist,
+            AgentClass::Pedestrian => self.pedestrian,
+        }
+    }
+
+    /// The classes with their own estimate, in canonical order.
+    pub fn iter(&self) -> impl Iterator<Item = (AgentClass, ClassPrior)> + '_ {
+        AgentClass::ALL.into_iter().filter_map(|c| self.get(c).map(|p| (c, p)))
+    }
 }
 
 impl PriorSpec {
     /// No prior.
-    pub const NONE: Self =
-        Self { kind: PriorKind::None, window_s: 0.0, fit: VelocityFit::Endpoints, standing_mps: 0.0 };
+    pub const NONE: Self = Self {
+        kind: PriorKind::None,
+        window_s: 0.0,
+        fit: VelocityFit::Endpoints,
+        standing_mps: 0.0,
+        by_class: ByClass::NONE,
+    };
 
     /// Constant velocity with the given velocity window and the other settings at their defaults.
     pub fn constant_velocity(window_s: f64) -> Self {
         Self { kind: PriorKind::ConstantVelocity, window_s, ..Self::NONE }
     }
 
-    /// Checks the velocity window and the standing threshold.
+    /// The prior of an agent of `class`: its class's own estimate where it has one, else this one.
+    pub fn for_class(&self, class: Option<AgentClass>) -> Self {
+        match class.and_then(|c| self.by_class.get(c)) {
+            Some(c) => Self {
+                kind: self.kind,
+                window_s: c.window_s,
+                fit: c.fit,
+                standing_mps: c.standing_mps,
+                by_class: ByClass::NONE,
+            },
+            None => Self { by_class: ByClass::NONE, ..*self },
+        }
+    }
+
+    /// Checks the velocity window and the standing threshold, the model-wide ones and each class's.
     pub fn validate(&self) -> Result<()> {
-        if !(self.window_s.is_finite() && (0.0..=60.0).contains(&self.window_s)) {
-            return Err(DganError::InvalidSpec(format!(
-                "prior.window_s must be between 0 and 60 seconds, got {}",
-                self.window_s
-            )));
+        Self::check_estimate("prior", self.window_s, self.fit, self.standing_mps)?;
+        for (class, c) in self.by_class.iter() {
+            Self::check_estimate(&format!("prior.by_class.{class}"), c.window_s, c.fit, c.standing_mps)?;
         }
-        if !(self.standing_mps.is_finite() && (0.0..=5.0).contains(&self.standing_mps)) {
-            return Err(DganError::InvalidSpec(format!(
-                "prior.standing_mps must be between 0 and 5 metres per second, got {}",
-                self.standing_mps
-            )));
-        }
-        if self.fit != VelocityFit::Endpoints && self.window_s == 0.0 {
-            return Err(DganError::InvalidSpec(format!(
-                "prior.fit {:?} needs a velocity window (prior.window_s > 0)",
-                self.fit.name()
-            )));
-        }
-        if self.kind == PriorKind::None && (self.window_s != 0.0 || self.standing_mps != 0.0) {
+        if self.kind == PriorKind::None
+            && (self.window_s != 0.0 || self.standing_mps != 0.0 || !self.by_class.is_empty())
+        {
             return Err(DganError::InvalidSpec(
-                "prior.window_s and prior.standing_mps need a prior (prior.kind \"constant_velocity\")".into(),
+                "prior.window_s, prior.standing_mps and prior.by_class need a prior (prior.kind \"constant_velocity\")"
+                    .into(),
             ));
+        }
+        Ok(())
+    }
+
+    fn check_estimate(key: &str, window_s: f64, fit: VelocityFit, standing_mps: f64) -> Result<()> {
+        if !(window_s.is_finite() && (0.0..=60.0).contains(&window_s)) {
+            return Err(DganError::InvalidSpec(format!(
+                "{key}.window_s must be between 0 and 60 seconds, got {window_s}"
+            )));
+        }
+        if !(standing_mps.is_finite() && (0.0..=5.0).contains(&standing_mps)) {
+            return Err(DganError::InvalidSpec(format!(
+                "{key}.standing_mps must be between 0 and 5 metres per second, got {standing_mps}"
+            )));
+        }
+        if fit != VelocityFit::Endpoints && window_s == 0.0 {
+            return Err(DganError::InvalidSpec(format!(
+                "{key}.fit {:?} needs a velocity window ({key}.window_s > 0)",
+                fit.name()
+            )));
         }
         Ok(())
     }
@@ -153,7 +242,8 @@ impl PriorSpec {
 
     /// The rollout of every agent, `(N, T_f, 2)` metres in each agent's frame, from the network inputs
     /// `trajectory (N, T_obs, 2)`, `trajectory_mask (N, T_obs)` and `state (N, S)` (columns as in
-    /// [`crate::spec::STATE_FEATURES`]). Zero for [`PriorKind::None`].
+    /// [`crate::spec::STATE_FEATURES`], then the one-hot class in the order of `classes`, the model's). Zero for
+    /// [`PriorKind::None`].
     pub fn rollout(
         &self,
         trajectory: ArrayView3<'_, f32>,
@@ -161,6 +251,7 @@ impl PriorSpec {
         state: ArrayView2<'_, f32>,
         dt_s: f64,
         t_f: usize,
+        classes: &[AgentClass],
     ) -> Result<Array3<f32>> {
         self.validate()?;
         let (n, t_obs, d) = trajectory.dim();
@@ -180,9 +271,25 @@ impl PriorSpec {
         if self.kind == PriorKind::None {
             return Ok(out);
         }
-        let window = (self.window_s > 0.0).then(|| ((self.window_s / dt_s).round() as usize).max(1));
+        let one_hot = STATE_FEATURES.len();
+        if !self.by_class.is_empty() && state.ncols() < one_hot + classes.len() {
+            return Err(DganError::InvalidSpec(format!(
+                "a prior with per-class estimates needs the one-hot class in state: {} columns, expected {}",
+                state.ncols(),
+                one_hot + classes.len()
+            )));
+        }
+        // Each agent's class: the hot column of its one-hot (none if no column is set).
+        let class_of = |i: usize| {
+            if self.by_class.is_empty() {
+                return None;
+            }
+            classes.iter().enumerate().find(|&(j, _)| state[[i, one_hot + j]] > 0.5).map(|(_, &c)| c)
+        };
         let mut mask = vec![false; t_obs];
         for i in 0..n {
+            let own = self.for_class(class_of(i));
+            let window = (own.window_s > 0.0).then(|| ((own.window_s / dt_s).round() as usize).max(1));
             let from_state = [
                 f64::from(state[[i, 0]]) * f64::from(state[[i, 3]]),
                 f64::from(state[[i, 0]]) * f64::from(state[[i, 4]]),
@@ -191,18 +298,18 @@ impl PriorSpec {
                 *m = trajectory_mask[[i, t]] > 0.5;
             }
             let traj = trajectory.index_axis(ndarray::Axis(0), i);
-            let mut v = window.and_then(|k| self.window_velocity(traj, &mask, k, dt_s)).unwrap_or(from_state);
+            let mut v = window.and_then(|k| own.window_velocity(traj, &mask, k, dt_s)).unwrap_or(from_state);
             // Standing is judged on the least-squares line over the window, the estimate least moved by noise,
             // whichever fit gives the velocity.
-            let speed = match (self.standing_mps > 0.0, window) {
+            let speed = match (own.standing_mps > 0.0, window) {
                 (false, _) => [f64::INFINITY, 0.0],
-                (true, Some(k)) if self.fit != VelocityFit::LeastSquares => {
-                    let line = Self { fit: VelocityFit::LeastSquares, ..*self };
+                (true, Some(k)) if own.fit != VelocityFit::LeastSquares => {
+                    let line = Self { fit: VelocityFit::LeastSquares, ..own };
                     line.window_velocity(traj, &mask, k, dt_s).unwrap_or(v)
                 }
                 (true, _) => v, // the velocity is the line's already, or there is no window
             };
-            if !(v[0].is_finite() && v[1].is_finite()) || speed[0].hypot(speed[1]) < self.standing_mps {
+            if !(v[0].is_finite() && v[1].is_finite()) || speed[0].hypot(speed[1]) < own.standing_mps {
                 v = [0.0, 0.0];
             }
             for t in 0..t_f {
@@ -246,6 +353,9 @@ mod tests {
     use super::*;
     use ndarray::{array, Array2};
 
+    /// A one-class model's classes (the state's one-hot column is 1).
+    const ONE: &[AgentClass] = &[AgentClass::Vehicle];
+
     fn state(speed: f32, cos: f32, sin: f32) -> Array2<f32> {
         array![[speed, 0.0, 0.0, cos, sin, 0.5, 0.5, 1.0]]
     }
@@ -255,11 +365,11 @@ mod tests {
         let traj = Array3::<f32>::zeros((1, 3, 2));
         let mask = Array2::<f32>::ones((1, 3));
         let p = PriorSpec::constant_velocity(0.0);
-        let r = p.rollout(traj.view(), mask.view(), state(2.0, 0.6, 0.8).view(), 0.5, 3).unwrap();
+        let r = p.rollout(traj.view(), mask.view(), state(2.0, 0.6, 0.8).view(), 0.5, 3, ONE).unwrap();
         // 2 m/s along (0.6, 0.8): 1 m per 0.5 s step.
         let want = array![[0.6f32, 0.8], [1.2, 1.6], [1.8, 2.4]];
         assert!(r.index_axis(ndarray::Axis(0), 0).iter().zip(&want).all(|(a, b)| (a - b).abs() < 1e-6), "{r}");
-        let none = PriorSpec::NONE.rollout(traj.view(), mask.view(), state(2.0, 1.0, 0.0).view(), 0.5, 3).unwrap();
+        let none = PriorSpec::NONE.rollout(traj.view(), mask.view(), state(2.0, 1.0, 0.0).view(), 0.5, 3, ONE).unwrap();
         assert!(none.iter().all(|v| *v == 0.0));
     }
 
@@ -270,12 +380,12 @@ mod tests {
         let traj = array![[[-9.0f32, 0.0], [-3.0, 0.0], [0.0, 0.0], [0.0, 0.0]]];
         let mask = array![[1.0f32, 1.0, 0.0, 1.0]];
         let p = PriorSpec::constant_velocity(1.0);
-        let r = p.rollout(traj.view(), mask.view(), state(10.0, 1.0, 0.0).view(), 0.5, 2).unwrap();
+        let r = p.rollout(traj.view(), mask.view(), state(10.0, 1.0, 0.0).view(), 0.5, 2, ONE).unwrap();
         // Steps 1..=3 lie within the window; step 1 is the earliest valid: 3 m over 1 s.
         assert_eq!(r.index_axis(ndarray::Axis(0), 0), array![[1.5, 0.0], [3.0, 0.0]]);
         // A single valid step falls back to the state's velocity.
         let mask = array![[0.0f32, 0.0, 0.0, 1.0]];
-        let r = p.rollout(traj.view(), mask.view(), state(1.0, 1.0, 0.0).view(), 0.5, 1).unwrap();
+        let r = p.rollout(traj.view(), mask.view(), state(1.0, 1.0, 0.0).view(), 0.5, 1, ONE).unwrap();
         assert_eq!(r[[0, 0, 0]], 0.5);
     }
 
@@ -290,14 +400,14 @@ mod tests {
         }
         let mask = array![[1.0f32, 1.0, 0.0, 1.0, 0.0, 1.0, 1.0]];
         let lsq = PriorSpec { fit: VelocityFit::LeastSquares, ..PriorSpec::constant_velocity(3.0) };
-        let r = lsq.rollout(traj.view(), mask.view(), state(9.0, 1.0, 0.0).view(), 0.5, 2).unwrap();
+        let r = lsq.rollout(traj.view(), mask.view(), state(9.0, 1.0, 0.0).view(), 0.5, 2, ONE).unwrap();
         // Hand-computed slope over t = 0, 1, 3, 5, 6 (mean 3, mean x -1.46): sum(dt dx) / sum(dt^2) = 12.9 / 26 m
         // per 0.5 s step, 0.992 m/s; two steps ahead 0.992 m.
         let v = 12.9 / 26.0 / 0.5;
         assert!((f64::from(r[[0, 1, 0]]) - v).abs() < 1e-5, "{r}");
         // The endpoints fit over the same window: (0.1 - -3.0) / 3 s.
         let ends = PriorSpec::constant_velocity(3.0);
-        let r = ends.rollout(traj.view(), mask.view(), state(9.0, 1.0, 0.0).view(), 0.5, 1).unwrap();
+        let r = ends.rollout(traj.view(), mask.view(), state(9.0, 1.0, 0.0).view(), 0.5, 1, ONE).unwrap();
         assert!((f64::from(r[[0, 0, 0]]) - 3.1 / 3.0 * 0.5).abs() < 1e-6);
     }
 
@@ -311,22 +421,22 @@ mod tests {
         }
         let mask = array![[1.0f32, 1.0, 0.0, 1.0, 1.0]];
         let quad = PriorSpec { fit: VelocityFit::Quadratic, ..PriorSpec::constant_velocity(4.0) };
-        let r = quad.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        let r = quad.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
         assert!((r[[0, 0, 0]] - 4.0).abs() < 1e-4, "{r}");
         let line = PriorSpec { fit: VelocityFit::LeastSquares, ..quad };
-        let r = line.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        let r = line.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
         assert!(r[[0, 0, 0]] < 3.0, "{r}");
         // Standing is judged on the line: a parked car with one jittered last step stays put under the parabola too.
         let jitter = array![[[0.0f32, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.5, 0.0]]];
         let ones = Array2::<f32>::ones((1, 5));
         let held = PriorSpec { standing_mps: 0.3, ..quad };
-        let r = held.rollout(jitter.view(), ones.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        let r = held.rollout(jitter.view(), ones.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
         assert_eq!(r[[0, 0, 0]], 0.0);
-        let r = quad.rollout(jitter.view(), ones.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        let r = quad.rollout(jitter.view(), ones.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
         assert!(r[[0, 0, 0]] > 0.3, "{r}");
         // Two valid steps: the line through them.
         let mask = array![[0.0f32, 0.0, 0.0, 1.0, 1.0]];
-        let r = quad.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1).unwrap();
+        let r = quad.rollout(traj.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
         assert!((r[[0, 0, 0]] - 3.5).abs() < 1e-5, "{r}");
     }
 
@@ -336,11 +446,11 @@ mod tests {
         let traj = array![[[-0.2f32, 0.0], [-0.1, 0.0], [0.0, 0.0]]];
         let mask = Array2::<f32>::ones((1, 3));
         let p = PriorSpec { standing_mps: 0.2, fit: VelocityFit::LeastSquares, ..PriorSpec::constant_velocity(1.0) };
-        let r = p.rollout(traj.view(), mask.view(), state(0.1, 1.0, 0.0).view(), 1.0, 4).unwrap();
+        let r = p.rollout(traj.view(), mask.view(), state(0.1, 1.0, 0.0).view(), 1.0, 4, ONE).unwrap();
         assert!(r.iter().all(|v| *v == 0.0), "{r}");
         // Without the threshold it drifts on.
         let p = PriorSpec { standing_mps: 0.0, ..p };
-        let r = p.rollout(traj.view(), mask.view(), state(0.1, 1.0, 0.0).view(), 1.0, 4).unwrap();
+        let r = p.rollout(traj.view(), mask.view(), state(0.1, 1.0, 0.0).view(), 1.0, 4, ONE).unwrap();
         assert!((r[[0, 3, 0]] - 0.4).abs() < 1e-6);
     }
 
@@ -349,7 +459,7 @@ mod tests {
         let traj = Array3::<f32>::zeros((2, 3, 2));
         let mask = Array2::<f32>::ones((1, 3));
         let p = PriorSpec::constant_velocity(0.0);
-        assert!(p.rollout(traj.view(), mask.view(), state(1.0, 1.0, 0.0).view(), 0.5, 2).is_err());
+        assert!(p.rollout(traj.view(), mask.view(), state(1.0, 1.0, 0.0).view(), 0.5, 2, ONE).is_err());
         let bad = PriorSpec::constant_velocity(f64::NAN);
         assert!(bad.validate().is_err());
         let json = r#"{"kind": "constant_velocity", "window_s": 0.8}"#;
@@ -366,6 +476,72 @@ mod tests {
             PriorSpec { standing_mps: 0.2, ..PriorSpec::NONE },
         ] {
             assert!(bad.validate().is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn each_class_takes_its_own_estimate() {
+        // Two agents on the same jittered track at 1 m/s, a vehicle and a pedestrian. The model-wide estimate is the
+        // last two steps; the pedestrian's own a least-squares line over the window, which averages the jitter.
+        let track = [[-3.0f32, 0.0], [-2.0, 0.2], [-1.0, -0.2], [0.0, 0.2]];
+        let traj = Array3::from_shape_fn((2, 4, 2), |(_, t, c)| track[t][c]);
+        let mask = Array2::<f32>::ones((2, 4));
+        // Columns: 7 features, then one-hot over [vehicle, pedestrian].
+        let mut st = Array2::<f32>::zeros((2, 9));
+        st[[0, 7]] = 1.0;
+        st[[1, 8]] = 1.0;
+        let classes = [AgentClass::Vehicle, AgentClass::Pedestrian];
+        let line = ClassPrior { window_s: 3.0, fit: VelocityFit::LeastSquares, standing_mps: 0.0 };
+        let p = PriorSpec {
+            by_class: ByClass { pedestrian: Some(line), ..ByClass::NONE },
+            ..PriorSpec::constant_velocity(1.0)
+        };
+        let r = p.rollout(traj.view(), mask.view(), st.view(), 1.0, 1, &classes).unwrap();
+        // The vehicle: (0, 0.2) - (-1, -0.2) = (1, 0.4) per step. The pedestrian: the line's slope, (1, 0.02).
+        assert!((r[[0, 0, 0]] - 1.0).abs() < 1e-5 && (r[[0, 0, 1]] - 0.4).abs() < 1e-5, "{r}");
+        assert!((r[[1, 0, 0]] - 1.0).abs() < 1e-5 && (r[[1, 0, 1]] - 0.02).abs() < 1e-5, "{r}");
+        // The same prior without the override treats both alike.
+        let r =
+            PriorSpec { by_class: ByClass::NONE, ..p }.rollout(traj.view(), mask.view(), st.view(), 1.0, 1, &classes);
+        let r = r.unwrap();
+        assert_eq!(r.index_axis(ndarray::Axis(0), 0), r.index_axis(ndarray::Axis(0), 1));
+        // A state without the one-hot columns is refused rather than read as no class.
+        let narrow = st.slice(ndarray::s![.., ..8]).to_owned();
+        assert!(p.rollout(traj.view(), mask.view(), narrow.view(), 1.0, 1, &classes).is_err());
+    }
+
+    #[test]
+    fn per_class_estimates_parse_and_validate() {
+        let json = r#"{"kind": "constant_velocity", "window_s": 2.0, "fit": "quadratic", "standing_mps": 0.3,
+            "by_class": {"pedestrian": {"window_s": 2.0, "fit": "least_squares", "standing_mps": 0.3}}}"#;
+        let p: PriorSpec = serde_json::from_str(json).unwrap();
+        p.validate().unwrap();
+        let ped = p.by_class.get(AgentClass::Pedestrian).unwrap();
+        assert_eq!((ped.fit, ped.window_s), (VelocityFit::LeastSquares, 2.0));
+        assert_eq!(p.by_class.get(AgentClass::Vehicle), None);
+        assert_eq!(p.for_class(Some(AgentClass::Pedestrian)).fit, VelocityFit::LeastSquares);
+        assert_eq!(p.for_class(Some(AgentClass::Vehicle)).fit, VelocityFit::Quadratic);
+        // Written back only when set, so a model without per-class estimates keeps its metadata.
+        let back = serde_json::to_string(&p).unwrap();
+        assert_eq!(serde_json::from_str::<PriorSpec>(&back).unwrap(), p);
+        assert!(!serde_json::to_string(&PriorSpec::constant_velocity(1.0)).unwrap().contains("by_class"));
+        // A misspelt class or key is an error, not a silently ignored estimate.
+        for bad in [
+            r#"{"kind": "constant_velocity", "by_class": {"pedestrians": {}}}"#,
+            r#"{"kind": "constant_velocity", "by_class": {"cyclist": {"window": 1.0}}}"#,
+        ] {
+            assert!(serde_json::from_str::<PriorSpec>(bad).is_err(), "{bad}");
+        }
+        let bad_window = ClassPrior { window_s: -1.0, fit: VelocityFit::Endpoints, standing_mps: 0.0 };
+        let no_window = ClassPrior { window_s: 0.0, fit: VelocityFit::LeastSquares, standing_mps: 0.0 };
+        for (by_class, kind) in [
+            (ByClass { cyclist: Some(bad_window), ..ByClass::NONE }, PriorKind::ConstantVelocity),
+            (ByClass { cyclist: Some(no_window), ..ByClass::NONE }, PriorKind::ConstantVelocity),
+            (ByClass { cyclist: Some(ClassPrior { window_s: 1.0, ..no_window }), ..ByClass::NONE }, PriorKind::None),
+        ] {
+            let p = PriorSpec { kind, by_class, ..PriorSpec::NONE };
+            let e = p.validate().unwrap_err().to_string();
+            assert!(e.contains("by_class"), "{e}");
         }
     }
 }

@@ -175,7 +175,11 @@ impl InputSpec {
         if let Some(m) = &self.map {
             m.validate()?;
         }
-        self.prior.validate()
+        self.prior.validate()?;
+        if let Some((c, _)) = self.prior.by_class.iter().find(|(c, _)| !self.classes.contains(c)) {
+            return bad(format!("prior.by_class names {c}, which is not among the model's classes {:?}", self.classes));
+        }
+        Ok(())
     }
 
     /// The prediction horizon T_f · dt in seconds.

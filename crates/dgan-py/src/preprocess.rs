@@ -88,6 +88,6 @@ pub fn kinematic_prior<'py>(
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let spec = parse_spec(spec_json).py()?;
     let (t, m, s) = (trajectory.as_array(), trajectory_mask.as_array(), state.as_array());
-    let prior = py.detach(|| spec.prior.rollout(t, m, s, spec.dt_s, spec.t_f)).py()?;
+    let prior = py.detach(|| spec.prior.rollout(t, m, s, spec.dt_s, spec.t_f, &spec.classes)).py()?;
     Ok(prior.into_pyarray(py))
 }

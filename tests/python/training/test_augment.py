@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,38 @@ def test_the_robust_prior_through_the_engine() -> None:
         dgan.InputSpec(0.5, 5, 4, prior=dgan.PriorSpec("constant_velocity", 1.0, "spline", 0.0))
     with pytest.raises(dgan.exceptions.InvalidSpecError, match="window"):
         dgan.InputSpec(0.5, 5, 4, prior=dgan.PriorSpec("constant_velocity", 0.0, "quadratic", 0.0))
+
+
+def test_each_class_takes_its_own_prior_through_the_engine() -> None:
+    """``PriorSpec.by_class``: pedestrians on a least-squares line, vehicles on the last two steps, in one frame."""
+    from training.build import class_priors
+
+    rng = np.random.default_rng(2)
+    t = np.arange(8) * 0.5
+    track = np.stack([1.0 * t, 0 * t], axis=1) + rng.normal(0, 0.1, (8, 2))
+    traj = np.stack([track, track + np.array([0.0, 30.0])])  # far apart: no edges, the same history
+    by_class = class_priors("pedestrian=least_squares:4:0")
+    assert by_class == {"pedestrian": dgan.ClassPrior(4.0, "least_squares", 0.0)}
+    prior = dgan.PriorSpec("constant_velocity", 0.5, "endpoints", 0.0, by_class)
+    spec = dgan.InputSpec(0.5, 8, 4, classes=("vehicle", "pedestrian"), prior=prior)
+    frame = dgan.Frame(traj, classes=["vehicle", "pedestrian"])
+    x = dgan.preprocess(frame, spec)
+    line = dgan.InputSpec(
+        0.5, 8, 4, classes=("vehicle", "pedestrian"), prior=dgan.PriorSpec("constant_velocity", 4.0, "least_squares")
+    )
+    two = dgan.InputSpec(0.5, 8, 4, classes=("vehicle", "pedestrian"), prior=dgan.PriorSpec("constant_velocity", 0.5))
+    want_line, want_two = (dgan.preprocess(frame, s)["prior"] for s in (line, two))
+    np.testing.assert_allclose(x["prior"][1], want_line[1], atol=1e-6)
+    np.testing.assert_allclose(x["prior"][0], want_two[0], atol=1e-6)
+    # The spec's JSON round trip keeps it, and the engine refuses a class the model does not predict.
+    assert dgan.InputSpec.from_dict(json.loads(spec.to_json())) == spec
+    with pytest.raises(dgan.exceptions.InvalidSpecError, match="not among the model's classes"):
+        dgan.InputSpec(0.5, 8, 4, classes=("vehicle",), prior=prior)
+    with pytest.raises(dgan.exceptions.InvalidSpecError, match="by_class"):
+        dgan.PriorSpec("constant_velocity", by_class={"pedestrian": "fast"})  # type: ignore[dict-item]
+    for bad in ("pedestrian=least_squares:4", "pedestrian=least_squares:x:0", "a=b:1:0,a=b:1:0"):
+        with pytest.raises(ValueError, match="prior_by_class"):
+            class_priors(bad)
 
 
 def test_augment_levels_are_checked() -> None:

@@ -320,8 +320,10 @@ def test_resampling_carries_sizes_and_leaves_headings_out() -> None:
     )
     out = resampled(rec, 0.5, 0.2)  # 2 Hz onto 5 Hz: new steps at old steps 0, 0.4, 0.8 ... 4.0
     np.testing.assert_allclose(out.xy[:, 0], 0.4 * np.arange(11))
-    np.testing.assert_allclose(out.length, [4.0] * 5 + [4.2] * 5 + [4.4])  # the earlier row's
-    np.testing.assert_allclose(out.width, 1.8)
+    assert out.length is not None
+    assert out.width is not None
+    np.testing.assert_allclose(out.length, np.array([4.0] * 5 + [4.2] * 5 + [4.4]))  # the earlier row's
+    np.testing.assert_allclose(out.width, np.full(11, 1.8))
     assert out.heading is None
 
 
@@ -420,8 +422,8 @@ def test_a_source_without_maps_is_flagged_absent_for_a_map_model(tmp_path: Path)
 
 
 def replace_info(info: Any) -> Any:
-    """``info`` with toy-sized windows' rule: every agent of label 0 (pedestrian) a target."""
+    """``info`` with toy-sized windows' rule: every agent a target, one label per engine class."""
     from dataclasses import replace
 
-    labels = ("pedestrian", "cyclist", "vehicle")
+    labels = tuple(dgan.CLASSES)
     return replace(info, labels=labels, label_class=labels, scored=(True,) * 3, min_targets=1)
