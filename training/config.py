@@ -31,8 +31,9 @@ class DataConfig:
     # "constant_velocity"; prior_window_s > 0 estimates its velocity over that many seconds of observed positions.
     prior: str = "none"
     prior_window_s: float = 0.0
-    # How that window's velocity is estimated: "endpoints", "least_squares" (a line through every valid position) or
-    # "quadratic" (a least-squares parabola's slope at t_obs);
+    # How that window's velocity is estimated: "endpoints", "least_squares" (a line through every valid position),
+    # "quadratic" (a least-squares parabola's slope at t_obs) or "adaptive" (a line through as many recent positions as
+    # the track's noise calls for);
     # agents slower than prior_standing_mps (m/s, 0 = never) get a standing prior (dgan.PriorSpec).
     prior_fit: str = "endpoints"
     prior_standing_mps: float = 0.0

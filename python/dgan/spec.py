@@ -58,8 +58,10 @@ class PriorSpec:
     direction of motion). ``window_s`` = 0 takes the traffic state's velocity; > 0 a velocity estimated from the last
     ``window_s`` seconds of the observed positions: by ``fit`` ``"endpoints"`` (the first and last valid positions
     of the window), ``"least_squares"`` (a line through every valid position against its time, robust to tracker
-    noise and dropped steps) or ``"quadratic"`` (a parabola's slope at the current step: as robust, without the
-    line's lag behind an accelerating agent). An agent whose estimated speed is below ``standing_mps`` (m/s; 0
+    noise and dropped steps), ``"quadratic"`` (a parabola's slope at the current step: as robust, without the
+    line's lag behind an accelerating agent) or ``"adaptive"`` (contract 8: a line through as many of the most recent
+    positions as the track's own noise calls for, from the last two steps of a clean track to the whole window of a
+    noisy one). An agent whose estimated speed is below ``standing_mps`` (m/s; 0
     never) stands: its prior stays at its last position. ``by_class`` (contract 8) gives the agents of a class
     their own estimate, e.g. ``{"pedestrian": ClassPrior(2.0, "least_squares", 0.3)}``; the other classes keep
     the model-wide one.

@@ -55,6 +55,7 @@ def estimate(fit: str, window: float, standing: float) -> str:
         how = {
             "least_squares": f"the slope of a least-squares line through the last {window:g} s",
             "quadratic": f"the slope at t_obs of a least-squares parabola through the last {window:g} s",
+            "adaptive": f"a least-squares line through as much of the last {window:g} s as the track's noise calls for",
         }.get(fit, f"the mean velocity over the last {window:g} s")
     if standing:
         how += f", standing below {standing:g} m/s"

@@ -120,25 +120,30 @@ VELOCITY_DATASETS = ("hdmap", "apolloscape", "sdd")
 
 
 def velocity_candidates() -> dict[str, dgan.PriorSpec]:
-    """The velocity estimates compared: the last two steps, then endpoints, a least-squares line and a least-squares
-    parabola over 0.4-2 s, each also with a standing threshold of 0.3 m/s."""
+    """The velocity estimates compared: the last two steps, then endpoints, a least-squares line, a least-squares
+    parabola and the adaptive line over 0.4-2 s, each also with a standing threshold of 0.3 m/s."""
     out = {"last two steps": dgan.PriorSpec("constant_velocity")}
     for window in (0.4, 0.8, 1.2, 2.0):
-        for fit in ("endpoints", "least_squares", "quadratic"):
+        for fit in ("endpoints", "least_squares", "quadratic", "adaptive"):
             for standing in (0.0, 0.3):
                 name = f"{fit} {window:g} s" + (f", standing < {standing:g} m/s" if standing else "")
                 out[name] = dgan.PriorSpec("constant_velocity", window, fit, standing)
     return out
 
 
-def velocity_study(root: Path, seed: int = 0) -> dict[str, dict[str, dict[str, dict[str, list[float]]]]]:
+def velocity_study(
+    root: Path, seed: int = 0, datasets: tuple[str, ...] = VELOCITY_DATASETS, only: tuple[str, ...] = ()
+) -> dict[str, dict[str, dict[str, dict[str, list[float]]]]]:
     """Per dataset, condition, candidate and group (``all``, ``moving``, ``standing`` and each class): the number of
-    targets and the prior's ADE and FDE (metres) on the validation split."""
+    targets and the prior's ADE and FDE (metres) on the validation split. ``only`` keeps the candidates named."""
     from tqdm import tqdm
 
     cands = velocity_candidates()
+    if unknown := set(only) - set(cands):
+        raise ValueError(f"unknown velocity candidates {sorted(unknown)}; known: {', '.join(cands)}")
+    cands = {k: v for k, v in cands.items() if not only or k in only}
     out: dict[str, dict[str, dict[str, dict[str, list[float]]]]] = {}
-    for dataset in VELOCITY_DATASETS:
+    for dataset in datasets:
         info = DATASETS[dataset]
         spec = dgan.InputSpec(info.dt_s, info.t_obs, info.t_f, classes=info.classes)
         specs = {name: replace(spec, prior=prior) for name, prior in cands.items()}
@@ -190,9 +195,11 @@ def main() -> None:
     ap.add_argument("--residual-scale", action="store_true", help="measure the residual scale study instead")
     ap.add_argument("--velocity", action="store_true", help="measure the velocity-estimate study instead")
     ap.add_argument("--json", type=Path, help="with --velocity: also write the study here")
+    ap.add_argument("--datasets", nargs="+", default=list(VELOCITY_DATASETS), help="with --velocity: the datasets")
+    ap.add_argument("--only", nargs="+", default=[], metavar="CANDIDATE", help="with --velocity: these candidates")
     a = ap.parse_args()
     if a.velocity:
-        res = velocity_study(a.data_root.expanduser())
+        res = velocity_study(a.data_root.expanduser(), datasets=tuple(a.datasets), only=tuple(a.only))
         if a.json:
             a.json.write_text(json.dumps(res, indent=1) + "\n")
         for dataset, by_cond in res.items():

@@ -1,7 +1,8 @@
 """Leave one source out: how a multi-class model at the ``hdmap`` protocol does on a source it never trained on.
 
     python -m training.studies.sources --out runs/sources [--only ethucy_5hz sdd_5hz] [--data-root ../shared/data]
-                                       [--set train.epochs=4 ...] [--json docs/sources_study.json]
+                                       [--set train.epochs=4 ...] [--variant NAME] [--no-val] [--no-bundled]
+                                       [--json docs/sources_study.json]
 
 For each held-out source (:data:`HELD_OUT`: nuScenes, Waymo, ETH/UCY, Stanford Drone, ApolloScape, and Argoverse 2,
 which no model here trains on) one model is trained with ``training/configs/hdmap.toml`` on every other source
@@ -10,6 +11,10 @@ epoch and temperature chosen on the validation splits of the sources it trains o
 the held-out source's test split: every fully observed agent a target, standing ones too, against constant velocity
 (the better of the last two steps and the mean over the last second, per error) on the same targets. The bundled
 ``hdmap`` (nuScenes and Waymo only) is measured beside it on the same targets where it, too, never saw the source.
+
+Each model is also run on the validation splits of the sources it trained on (``--no-val`` skips it): a model
+behind constant velocity there lacks more than generalisation. ``--variant NAME`` with its ``--set`` trains the
+models of another recipe into ``OUT/NAME`` and keeps their rows beside the recipe's.
 
 The table gives top-1 ADE and FDE as a multiple of constant velocity's per class (classes with at least
 :data:`MIN_TARGETS` targets) and over all agents, with the moving / standing split; issue 25 asks for ≤ 0.9 on every

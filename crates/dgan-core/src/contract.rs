@@ -234,6 +234,11 @@ impl ModelContract {
                 "prior.by_class is a contract-8 key; versions 1 to 7 take one velocity estimate for every class".into(),
             ));
         }
+        if self.contract_version < 8 && prior.fit == VelocityFit::Adaptive {
+            return Err(DganError::Contract(
+                "prior.fit \"adaptive\" is contract 8; versions 6 and 7 fit endpoints, a line or a parabola".into(),
+            ));
+        }
         let render = self.input.map.as_ref().map_or(MapRender::Agent, |m| m.render);
         if self.contract_version < 7 && render != MapRender::Agent {
             return Err(DganError::Contract(
@@ -495,6 +500,11 @@ mod tests {
         assert!(err.contains("prior.by_class is a contract-8 key"), "{err}");
         let err = ModelContract::from_json(&v8.replace("\"pedestrian\": {", "\"cyclist\": {")).unwrap_err().to_string();
         assert!(err.contains("not among the model's classes"), "{err}");
+        let adaptive = v7.replace("\"least_squares\"", "\"adaptive\"");
+        let err = ModelContract::from_json(&adaptive).unwrap_err().to_string();
+        assert!(err.contains("\"adaptive\" is contract 8"), "{err}");
+        let v8 = adaptive.replace("\"contract_version\": 7", "\"contract_version\": 8");
+        assert_eq!(ModelContract::from_json(&v8).unwrap().input.prior.fit, VelocityFit::Adaptive);
     }
 
     #[test]

@@ -46,6 +46,11 @@ pub enum VelocityFit {
     /// Savitzky-Golay-style fit): averages noise like `LeastSquares` without its lag behind an accelerating agent.
     /// Needs three valid steps; with two it is the least-squares line.
     Quadratic,
+    /// The least-squares line through the most recent valid positions of the window whose expected error at the
+    /// last step is smallest (contract 8): the track's position noise σ² (the residuals of the window's
+    /// least-squares parabola) against the lag of a longer line behind the parabola's acceleration. A clean track
+    /// gets the last two steps, a noisy one the whole window. Needs four valid steps; with fewer, the last two.
+    Adaptive,
 }
 
 impl VelocityFit {
@@ -55,6 +60,7 @@ impl VelocityFit {
             Self::Endpoints => "endpoints",
             Self::LeastSquares => "least_squares",
             Self::Quadratic => "quadratic",
+            Self::Adaptive => "adaptive",
         }
     }
 }
@@ -216,7 +222,7 @@ impl PriorSpec {
                 let span = (last - first) as f64 * dt_s;
                 Some([(p(last, 0) - p(first, 0)) / span, (p(last, 1) - p(first, 1)) / span])
             }
-            VelocityFit::LeastSquares | VelocityFit::Quadratic => {
+            VelocityFit::LeastSquares | VelocityFit::Quadratic | VelocityFit::Adaptive => {
                 let valid: Vec<usize> = (from..=last).filter(|&t| mask[t]).collect();
                 if valid.len() < 2 {
                     return None;
@@ -224,18 +230,12 @@ impl PriorSpec {
                 if self.fit == VelocityFit::Quadratic && valid.len() >= 3 {
                     return Some(quadratic_slope(&valid, last, p).map(|b| b / dt_s));
                 }
-                let n = valid.len() as f64;
-                let mean_t = valid.iter().map(|&t| t as f64).sum::<f64>() / n;
-                let mean = |c: usize| valid.iter().map(|&t| p(t, c)).sum::<f64>() / n;
-                let (mx, my) = (mean(0), mean(1));
-                let (mut sxx, mut sx, mut sy) = (0.0, 0.0, 0.0);
-                for &t in &valid {
-                    let dt = t as f64 - mean_t;
-                    sxx += dt * dt;
-                    sx += dt * (p(t, 0) - mx);
-                    sy += dt * (p(t, 1) - my);
-                }
-                Some([sx / sxx / dt_s, sy / sxx / dt_s])
+                let used = match self.fit {
+                    VelocityFit::Adaptive => &valid[valid.len() - adaptive_span(&valid, last, p)..],
+                    _ => &valid[..],
+                };
+                let (slope, _, _) = line_fit(used, p);
+                Some(slope.map(|b| b / dt_s))
             }
         }
     }
@@ -322,6 +322,84 @@ impl PriorSpec {
     }
 }
 
+/// The least-squares line through the positions `p(t, c)` at the steps `valid` (at least two distinct): its slope
+/// per step (both coordinates), the mean step and Σ (t - mean)².
+fn line_fit(valid: &[usize], p: impl Fn(usize, usize) -> f64) -> ([f64; 2], f64, f64) {
+    let n = valid.len() as f64;
+    let mean_t = valid.iter().map(|&t| t as f64).sum::<f64>() / n;
+    let mean = |c: usize| valid.iter().map(|&t| p(t, c)).sum::<f64>() / n;
+    let (mx, my) = (mean(0), mean(1));
+    let (mut sxx, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    for &t in valid {
+        let dt = t as f64 - mean_t;
+        sxx += dt * dt;
+        sx += dt * (p(t, 0) - mx);
+        sy += dt * (p(t, 1) - my);
+    }
+    ([sx / sxx, sy / sxx], mean_t, sxx)
+}
+
+/// How many of the most recent `valid` steps (at least two) the adaptive line takes: the span whose expected
+/// squared velocity error at `last`, the noise's 2σ² / Σ (t - mean)² plus the lag's |a|² (last - mean)², is least.
+/// σ² and the acceleration a come from the least-squares parabola through every valid step (the acceleration's own
+/// sampling variance taken off its square, so noise alone does not read as acceleration). Fewer than four valid
+/// steps leave no residual to estimate σ² from: the last two.
+fn adaptive_span(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> usize {
+    let n = valid.len();
+    if n < 4 {
+        return 2;
+    }
+    let Some((coef, rss, inv_cc)) = quadratic_fit(valid, last, &p) else { return 2 };
+    let sigma2 = rss / (2.0 * (n as f64 - 3.0)); // per coordinate
+                                                 // p'' = 2c per step², E[ĉ²] = c² + σ² [(XᵀX)⁻¹]₂₂ per coordinate.
+    let acc2 = (4.0 * (coef[0] * coef[0] + coef[1] * coef[1] - 2.0 * sigma2 * inv_cc)).max(0.0);
+    let mut best = (f64::INFINITY, 2);
+    for m in 2..=n {
+        let (_, mean_t, sxx) = line_fit(&valid[n - m..], &p);
+        let lag = last as f64 - mean_t;
+        let cost = 2.0 * sigma2 / sxx + acc2 * lag * lag;
+        if cost < best.0 {
+            best = (cost, m);
+        }
+    }
+    best.1
+}
+
+/// The least-squares parabola `a + b τ + c τ²`, τ = t - last, through the positions at the steps `valid` (at least
+/// three distinct): `c` of both coordinates, the residual sum of squares over both and `[(XᵀX)⁻¹]₂₂` (`None` if the
+/// normal equations are singular).
+fn quadratic_fit(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> Option<([f64; 2], f64, f64)> {
+    let tau = |t: usize| t as f64 - last as f64;
+    let s = |k: i32| valid.iter().map(|&t| tau(t).powi(k)).sum::<f64>();
+    let (s0, s1, s2, s3, s4) = (s(0), s(1), s(2), s(3), s(4));
+    let normal = [[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]];
+    let det = det3(normal);
+    if det.abs().partial_cmp(&1e-12) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let (mut coef, mut rss) = ([0.0; 2], 0.0);
+    for (c, out) in coef.iter_mut().enumerate() {
+        let r = |k: i32| valid.iter().map(|&t| tau(t).powi(k) * p(t, c)).sum::<f64>();
+        let rhs = [r(0), r(1), r(2)];
+        let solve = |col: usize| {
+            let mut m = normal;
+            for (row, v) in m.iter_mut().zip(rhs) {
+                row[col] = v;
+            }
+            det3(m) / det
+        };
+        let (a, b, cc) = (solve(0), solve(1), solve(2));
+        rss += valid.iter().map(|&t| (p(t, c) - a - b * tau(t) - cc * tau(t).powi(2)).powi(2)).sum::<f64>();
+        *out = cc;
+    }
+    Some((coef, rss, (s0 * s2 - s1 * s1) / det))
+}
+
+fn det3(m: [[f64; 3]; 3]) -> f64 {
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+}
+
 /// The slope at `last` (per step, both coordinates) of the least-squares parabola `a + b τ + c τ²`, τ = t - last,
 /// through the positions `p(t, c)` at the steps `valid` (at least three distinct): `b` from the 3 × 3 normal
 /// equations, solved by Cramer's rule.
@@ -329,10 +407,6 @@ fn quadratic_slope(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64
     let tau = |t: usize| t as f64 - last as f64;
     let s = |k: i32| valid.iter().map(|&t| tau(t).powi(k)).sum::<f64>();
     let (s0, s1, s2, s3, s4) = (s(0), s(1), s(2), s(3), s(4));
-    let det3 = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
     let normal = [[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]];
     let det = det3(normal);
     let mut out = [0.0; 2];
@@ -543,5 +617,30 @@ mod tests {
             let e = p.validate().unwrap_err().to_string();
             assert!(e.contains("by_class"), "{e}");
         }
+    }
+
+    #[test]
+    fn adaptive_fit_takes_the_last_steps_of_a_clean_track_and_the_window_of_a_noisy_one() {
+        let adaptive = PriorSpec { fit: VelocityFit::Adaptive, ..PriorSpec::constant_velocity(9.0) };
+        let mask = Array2::<f32>::ones((1, 10));
+        // Clean, accelerating: x = t² / 2 (velocity 9 at t = 9). The last two steps give 8.5, every longer line less.
+        let clean = Array3::from_shape_fn((1, 10, 2), |(_, t, c)| if c == 0 { (t * t) as f32 / 2.0 } else { 0.0 });
+        let r = adaptive.rollout(clean.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
+        assert!((r[[0, 0, 0]] - 8.5).abs() < 1e-4, "{r}");
+        // Steady at 1 m/s with ±0.3 m of jitter: the whole window's line, far closer to 1 than the last two steps.
+        let jitter = [0.3f32, -0.3, 0.3, -0.3, 0.3, -0.3, 0.3, -0.3, 0.3, -0.3];
+        let noisy = Array3::from_shape_fn((1, 10, 2), |(_, t, c)| if c == 0 { t as f32 + jitter[t] } else { 0.0 });
+        let r = adaptive.rollout(noisy.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
+        let line = PriorSpec { fit: VelocityFit::LeastSquares, ..adaptive };
+        let want = line.rollout(noisy.view(), mask.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
+        assert!((r[[0, 0, 0]] - want[[0, 0, 0]]).abs() < 1e-6 && (r[[0, 0, 0]] - 1.0).abs() < 0.15, "{r} {want}");
+        // Three valid steps: the last two.
+        let few = Array2::from_shape_fn((1, 10), |(_, t)| if t >= 7 { 1.0f32 } else { 0.0 });
+        let r = adaptive.rollout(clean.view(), few.view(), state(0.0, 1.0, 0.0).view(), 1.0, 1, ONE).unwrap();
+        assert!((r[[0, 0, 0]] - 8.5).abs() < 1e-4, "{r}");
+        assert_eq!(VelocityFit::Adaptive.name(), "adaptive");
+        let parsed: PriorSpec =
+            serde_json::from_str(r#"{"kind": "constant_velocity", "window_s": 2, "fit": "adaptive"}"#).unwrap();
+        assert_eq!(parsed.fit, VelocityFit::Adaptive);
     }
 }

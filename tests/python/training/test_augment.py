@@ -40,11 +40,12 @@ def test_tracker_noise_keeps_the_current_step_and_the_inputs() -> None:
             tracker_noise(pos, mask, sigma, drop, rng)
 
 
-def _prior(fit: str, standing: float, traj: np.ndarray, mask: np.ndarray, dt: float = 0.5) -> np.ndarray:
+def _prior(
+    fit: str, standing: float, traj: np.ndarray, mask: np.ndarray, dt: float = 0.5, window_s: float = 2.0
+) -> np.ndarray:
     spec = dgan.InputSpec(dt, traj.shape[1], 4, classes=("vehicle",))
-    spec_p = dgan.InputSpec(
-        dt, traj.shape[1], 4, classes=("vehicle",), prior=dgan.PriorSpec("constant_velocity", 2.0, fit, standing)
-    )
+    prior = dgan.PriorSpec("constant_velocity", window_s, fit, standing)
+    spec_p = dgan.InputSpec(dt, traj.shape[1], 4, classes=("vehicle",), prior=prior)
     frame = dgan.Frame(traj, mask=mask, classes=["vehicle"] * len(traj))
     x = dgan.preprocess(frame, spec)
     return np.asarray(dgan.kinematic_prior(x["trajectory"], x["trajectory_mask"], x["state"], spec_p))
@@ -65,6 +66,16 @@ def test_the_robust_prior_through_the_engine() -> None:
     moving = np.stack([2 * t + t**2 / 2, 0 * t], axis=1)[None]
     quad = _prior("quadratic", 0.3, moving, np.ones((1, 5), bool))
     assert np.linalg.norm(quad[0, 0]) == pytest.approx(4.0 * 0.5, abs=1e-4)
+    # The adaptive line: the last two steps of that clean accelerating track, the whole window of a noisy parked car.
+    long_t = np.arange(10) * 0.5
+    accelerating = np.stack([long_t**2 / 2, 0 * long_t], axis=1)[None]
+    ones = np.ones((1, 10), bool)
+    adaptive = _prior("adaptive", 0.0, accelerating, ones, window_s=4.5)
+    np.testing.assert_allclose(adaptive, _prior("endpoints", 0.0, accelerating, ones, window_s=0.5), atol=1e-5)
+    parked = np.zeros((1, 10, 2))
+    parked[0, :, 0] = 0.3 * (-1.0) ** np.arange(10)  # ±0.3 m of jitter, no motion
+    lsq = _prior("least_squares", 0.0, parked, ones, window_s=4.5)
+    np.testing.assert_allclose(_prior("adaptive", 0.0, parked, ones, window_s=4.5), lsq, atol=1e-5)
     with pytest.raises(dgan.exceptions.InvalidSpecError, match="standing_mps"):
         dgan.InputSpec(0.5, 5, 4, prior=dgan.PriorSpec("constant_velocity", 1.0, "least_squares", -1.0))
     with pytest.raises(dgan.exceptions.InvalidSpecError, match="fit"):

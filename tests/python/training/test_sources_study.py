@@ -68,3 +68,24 @@ def test_the_section_names_each_source_and_the_mean(tmp_path: Path) -> None:
     assert "Mean over the 2 held-out sources: 0.800/0.800" in text
     assert "| sdd_5hz | bundled hdmap | vehicle | 150 | 0.900/1.900 | 1.000/2.000 | 0.900/0.950 |" in text
     assert sources.mean_ratios(study) == (0.8, 0.8)
+
+
+def test_variants_are_summarised_apart_with_their_settings_and_validation(tmp_path: Path) -> None:
+    base = row(cell(150, 0.85, 1.7), cell(60, 1.0, 1.0))
+    variant = {**row(cell(150, 0.5, 1.0), cell(60, 0.5, 1.0)), "sets": [*sources.STUDY_SETS, "data.x=1"]}
+    variant["validation"] = {"hdmap": row(cell(150, 0.45, 0.9), cell(60, 0.95, 1.9))}
+    name = sources.model_name("x")
+    assert name == "trained without it (x)"
+    assert sources.model_name() == sources.TRAINED
+    study = {"waymo": {sources.TRAINED: base, name: variant}}
+    assert sources.trained_models(study) == [sources.TRAINED, name]
+    assert sources.sets_of(study, name) == ["`data.x=1`"]
+    path = tmp_path / "study.json"
+    path.write_text(json.dumps(study))
+    text = sources.section(path)
+    assert "*trained without it (x)* (`data.x=1`):" in text
+    assert text.count("Mean over the 1 held-out sources") == 2
+    assert "| trained without it (x) | waymo | hdmap | 0.80/0.80 (200) | 0.45/0.45 (150) | 0.95/0.95 (60) | – |" in text
+    assert sources.mean_ratios(study, name) == (0.8, 0.8)
+    assert sources.trained_on("argoverse2")[0] == "hdmap"
+    assert "argoverse2" not in sources.trained_on("argoverse2")
