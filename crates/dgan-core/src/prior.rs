@@ -7,7 +7,6 @@
 
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
-use crate::spec::STATE_FEATURES;
 use ndarray::{Array3, ArrayView2, ArrayView3};
 use serde::{Deserialize, Serialize};
 
@@ -242,7 +241,7 @@ impl PriorSpec {
 
     /// The rollout of every agent, `(N, T_f, 2)` metres in each agent's frame, from the network inputs
     /// `trajectory (N, T_obs, 2)`, `trajectory_mask (N, T_obs)` and `state (N, S)` (columns as in
-    /// [`crate::spec::STATE_FEATURES`], then the one-hot class in the order of `classes`, the model's). Zero for
+    /// `crate::spec::STATE_FEATURES`, then the one-hot class in the order of `classes`, the model's). Zero for
     /// [`PriorKind::None`].
     pub fn rollout(
         &self,
@@ -271,14 +270,15 @@ impl PriorSpec {
         if self.kind == PriorKind::None {
             return Ok(out);
         }
-        let one_hot = STATE_FEATURES.len();
-        if !self.by_class.is_empty() && state.ncols() < one_hot + classes.len() {
+        // The one-hot class is the last `classes.len()` columns of the state, after its 5 kinematic and 2 size ones.
+        if !self.by_class.is_empty() && state.ncols() < 7 + classes.len() {
             return Err(DganError::InvalidSpec(format!(
                 "a prior with per-class estimates needs the one-hot class in state: {} columns, expected {}",
                 state.ncols(),
-                one_hot + classes.len()
+                7 + classes.len()
             )));
         }
+        let one_hot = state.ncols() - classes.len().min(state.ncols());
         // Each agent's class: the hot column of its one-hot (none if no column is set).
         let class_of = |i: usize| {
             if self.by_class.is_empty() {
