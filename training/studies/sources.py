@@ -195,7 +195,8 @@ def summary(study: dict[str, Any]) -> str:
     names = trained_models(study)
     for name in names:
         if len(names) > 1:
-            lines.append(f"*{name}*{'' if name == TRAINED else ' (' + ', '.join(sets_of(study, name)) + ')'}:\n")
+            sets = sets_of(study, name)
+            lines.append(f"*{name}*{' (' + ', '.join(sets) + ')' if sets else ''}:\n")
         for source, models in study.items():
             row = models.get(name)
             if row is None:
