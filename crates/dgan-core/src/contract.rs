@@ -490,7 +490,8 @@ mod tests {
         let err = ModelContract::from_json(&v6.replace("\"optional\": true", tiles)).unwrap_err().to_string();
         assert!(err.contains("map.render is a contract-7 key"), "{err}");
         let err = ModelContract::from_json(&v7.replace("\"tiles\"", "\"tile\"")).unwrap_err().to_string();
-        assert!(err.contains("tile"), "{err}"); // Version 8 gives a class its own velocity estimate; version 7 cannot, and the class must be the model's.
+        assert!(err.contains("tile"), "{err}");
+        // Version 8 gives a class its own velocity estimate; version 7 cannot, and the class must be the model's.
         let own =
             "\"standing_mps\": 0.3, \"by_class\": {\"pedestrian\": {\"window_s\": 2.0, \"fit\": \"least_squares\"}}";
         let v8 = v7.replace("\"contract_version\": 7", "\"contract_version\": 8").replace("\"standing_mps\": 0.3", own);

@@ -365,34 +365,51 @@ fn adaptive_span(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) 
     best.1
 }
 
-/// The least-squares parabola `a + b τ + c τ²`, τ = t - last, through the positions at the steps `valid` (at least
-/// three distinct): `c` of both coordinates, the residual sum of squares over both and `[(XᵀX)⁻¹]₂₂` (`None` if the
-/// normal equations are singular).
-fn quadratic_fit(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> Option<([f64; 2], f64, f64)> {
+/// The least-squares parabola `a + b τ + c τ²`, τ = t - last, through the positions `p(t, c)` at the steps `valid`
+/// (at least three distinct): `[a, b, c]` of both coordinates from the 3 × 3 normal equations, solved by Cramer's rule,
+/// with the determinant of those equations and `[(XᵀX)⁻¹]₂₂`.
+struct Parabola {
+    coef: [[f64; 3]; 2],
+    det: f64,
+    inv_cc: f64,
+}
+
+fn parabola(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> Parabola {
     let tau = |t: usize| t as f64 - last as f64;
     let s = |k: i32| valid.iter().map(|&t| tau(t).powi(k)).sum::<f64>();
     let (s0, s1, s2, s3, s4) = (s(0), s(1), s(2), s(3), s(4));
     let normal = [[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]];
     let det = det3(normal);
-    if det.abs().partial_cmp(&1e-12) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
-    let (mut coef, mut rss) = ([0.0; 2], 0.0);
+    let mut coef = [[0.0; 3]; 2];
     for (c, out) in coef.iter_mut().enumerate() {
         let r = |k: i32| valid.iter().map(|&t| tau(t).powi(k) * p(t, c)).sum::<f64>();
         let rhs = [r(0), r(1), r(2)];
-        let solve = |col: usize| {
+        for (col, o) in out.iter_mut().enumerate() {
             let mut m = normal;
             for (row, v) in m.iter_mut().zip(rhs) {
                 row[col] = v;
             }
-            det3(m) / det
-        };
-        let (a, b, cc) = (solve(0), solve(1), solve(2));
-        rss += valid.iter().map(|&t| (p(t, c) - a - b * tau(t) - cc * tau(t).powi(2)).powi(2)).sum::<f64>();
-        *out = cc;
+            *o = det3(m) / det;
+        }
     }
-    Some((coef, rss, (s0 * s2 - s1 * s1) / det))
+    Parabola { coef, det, inv_cc: (s0 * s2 - s1 * s1) / det }
+}
+
+/// The parabola through `valid` ([`parabola`]): `c` of both coordinates, the residual sum of squares over both and
+/// `[(XᵀX)⁻¹]₂₂` (`None` if the normal equations are singular).
+fn quadratic_fit(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> Option<([f64; 2], f64, f64)> {
+    let fit = parabola(valid, last, &p);
+    if fit.det.abs().partial_cmp(&1e-12) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let tau = |t: usize| t as f64 - last as f64;
+    let rss = (0..2)
+        .map(|c| {
+            let [a, b, cc] = fit.coef[c];
+            valid.iter().map(|&t| (p(t, c) - a - b * tau(t) - cc * tau(t).powi(2)).powi(2)).sum::<f64>()
+        })
+        .sum::<f64>();
+    Some(([fit.coef[0][2], fit.coef[1][2]], rss, fit.inv_cc))
 }
 
 fn det3(m: [[f64; 3]; 3]) -> f64 {
@@ -400,26 +417,11 @@ fn det3(m: [[f64; 3]; 3]) -> f64 {
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 
-/// The slope at `last` (per step, both coordinates) of the least-squares parabola `a + b τ + c τ²`, τ = t - last,
-/// through the positions `p(t, c)` at the steps `valid` (at least three distinct): `b` from the 3 × 3 normal
-/// equations, solved by Cramer's rule.
+/// The slope at `last` (per step, both coordinates) of the least-squares parabola through the positions at the steps
+/// `valid` (at least three distinct): its `b` ([`parabola`]).
 fn quadratic_slope(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> [f64; 2] {
-    let tau = |t: usize| t as f64 - last as f64;
-    let s = |k: i32| valid.iter().map(|&t| tau(t).powi(k)).sum::<f64>();
-    let (s0, s1, s2, s3, s4) = (s(0), s(1), s(2), s(3), s(4));
-    let normal = [[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]];
-    let det = det3(normal);
-    let mut out = [0.0; 2];
-    for (c, o) in out.iter_mut().enumerate() {
-        let r = |k: i32| valid.iter().map(|&t| tau(t).powi(k) * p(t, c)).sum::<f64>();
-        let rhs = [r(0), r(1), r(2)];
-        let mut m = normal;
-        for (row, v) in m.iter_mut().zip(rhs) {
-            row[1] = v;
-        }
-        *o = det3(m) / det;
-    }
-    out
+    let fit = parabola(valid, last, p);
+    [fit.coef[0][1], fit.coef[1][1]]
 }
 
 #[cfg(test)]
