@@ -22,8 +22,9 @@ median over ``--repeat`` runs after warm-up:
 ``--session-options``: the bare session under other ONNX Runtime options (no memory arena, no memory pattern, fewer
 graph optimisations) as multiples of the engine's options' time.
 
-Then one `predict` on 1 and 2 intra-op threads (also as multiples of the run's single-thread 512³ matmul), the
-throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of `predict`.
+Then one `predict` on 1 and 2 threads (also as multiples of the run's single-thread 512³ matmul), the
+throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of `predict`
+(on one thread, and with ``threads=2`` against the loop on one and on two threads).
 The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark, not a test;
 no figure here is asserted anywhere.
 """
@@ -197,9 +198,26 @@ def throughput(name: str, n: int, calls: int, rounds: int = 5) -> None:
     print(f"| {name} | {n} | {one:.0f} | {two:.0f} | {two / one:.2f}× |", flush=True)
 
 
+def largest_component(n: int, edges: np.ndarray) -> int:
+    """The most agents in one component of a frame's attention graph (a frame splits across threads by them)."""
+    parent = list(range(n))
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for a, b in edges.tolist():
+        parent[root(a)] = root(b)
+    roots = [root(i) for i in range(n)]
+    return max((roots.count(r) for r in set(roots)), default=0)
+
+
 def latency(name: str, agents: list[int], repeat: int, matmul_ms: float) -> None:
-    """One `predict` on 1 and on 2 intra-op threads (``Predictor(threads=...)``), and each as a multiple of the same
-    run's single-thread 512³ float32 matrix product, so that the figure travels between machines."""
+    """One `predict` on 1 and on 2 threads (``Predictor(threads=...)``: a frame whose graph's components share out
+    evenly as two concurrent single-threaded calls, any other on two intra-op threads), and each as a multiple of the
+    same run's single-thread 512³ float32 matrix product, so that the figure travels between machines."""
     by_threads = {t: dgan.Predictor(name, threads=t, sessions=1) for t in (1, 2) if t <= (os.cpu_count() or 1)}
     frame = scene_for(by_threads[1].spec).frame
     for n in agents:
@@ -207,6 +225,7 @@ def latency(name: str, agents: list[int], repeat: int, matmul_ms: float) -> None
         ms = {t: median_ms(partial(p.predict, f), repeat) for t, p in by_threads.items()}
         two = ms.get(2, float("nan"))
         cells = [
+            str(largest_component(n, by_threads[1].predict(f).edges)),
             f"{ms[1]:.2f}",
             f"{two:.2f}",
             f"{two / ms[1]:.2f}",
@@ -217,8 +236,11 @@ def latency(name: str, agents: list[int], repeat: int, matmul_ms: float) -> None
 
 
 def latency_table(models: list[str], repeat: int, matmul_ms: float) -> None:
-    print("\n| model | N | predict ms, 1 thread | 2 threads | 2 / 1 | 1 thread / 512³ matmul | 2 threads / matmul |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "\n| model | N | largest component | predict ms, 1 thread | 2 threads | 2 / 1 | 1 thread / 512³ matmul "
+        "| 2 threads / matmul |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     for name in models:
         latency(name, [32, 256], repeat, matmul_ms)
 
@@ -236,13 +258,22 @@ def real_frames(predictor: dgan.Predictor, count: int) -> list[dgan.Frame]:
 
 
 def batch_throughput(name: str, count: int, repeat: int) -> None:
-    """`predict_batch` of ``count`` real frames against a loop of `predict` over them."""
-    predictor = dgan.Predictor(name)
-    frames = real_frames(predictor, count)
+    """`predict_batch` of ``count`` real frames against a loop of `predict` over them, with one thread and, where the
+    machine has two cores, with ``threads=2`` (the batch's network calls concurrently on two lanes) against the loop
+    on one thread and on two."""
+    by_threads = {t: dgan.Predictor(name, threads=t) for t in (1, 2) if t <= (os.cpu_count() or 1)}
+    frames = real_frames(by_threads[1], count)
     agents = sum(len(f) for f in frames) / len(frames)
-    loop = median_ms(lambda: [predictor.predict(f) for f in frames], repeat)
-    batch = median_ms(partial(predictor.predict_batch, frames), repeat)
-    print(f"| {name} | {count} | {agents:.1f} | {loop:.2f} | {batch:.2f} | {loop / batch:.2f}× |", flush=True)
+
+    def loop_of(p: dgan.Predictor) -> list[dgan.Prediction]:
+        return [p.predict(f) for f in frames]
+
+    loop = {t: median_ms(partial(loop_of, p), repeat) for t, p in by_threads.items()}
+    batch = {t: median_ms(partial(p.predict_batch, frames), repeat) for t, p in by_threads.items()}
+    row = f"| {name} | {count} | {agents:.1f} | {loop[1]:.2f} | {batch[1]:.2f} | {loop[1] / batch[1]:.2f}×"
+    if 2 in by_threads:
+        row += f" | {loop[2]:.2f} | {batch[2]:.2f} | {loop[1] / batch[2]:.2f}× | {loop[2] / batch[2]:.2f}×"
+    print(row + " |", flush=True)
 
 
 def flops_table(models: list[str], agents: list[int]) -> None:
@@ -325,8 +356,11 @@ def main() -> None:
     print("|---|---|---|---|---|")
     for name in a.models:
         throughput(name, 32, a.calls)
-    print("\n| model | frames | agents per frame | loop of predict ms | predict_batch ms | batch vs loop |")
-    print("|---|---|---|---|---|---|")
+    print(
+        "\n| model | frames | agents per frame | loop of predict ms | predict_batch ms | batch vs loop "
+        "| loop, 2 threads | predict_batch, 2 threads | vs the 1-thread loop | vs the 2-thread loop |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name in a.models:
         batch_throughput(name, 64, max(3, a.repeat // 5))
     print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")

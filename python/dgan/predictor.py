@@ -34,10 +34,13 @@ class Predictor:
     Args:
         model: path of the ``.onnx`` file, or the name of a bundled model (:func:`dgan.models.list`).
         modes: how many modes :meth:`predict` returns by default (all K = Σ K_c if None).
-        threads: cores one call may use: ONNX Runtime's threads inside one operator, and the threads that draw
-            the map crops (and preprocess the frames of :meth:`predict_batch`). The default, 1, keeps each call on
-            its own thread, so that predictors sharing a machine do not compete; ``os.cpu_count()`` gives one call
-            the lowest latency.
+        threads: cores one call may use: the threads that draw the map crops (and preprocess the frames of
+            :meth:`predict_batch`) and run the network. With 2 or more, a frame whose attention graph falls into
+            components that share out evenly runs as one single-threaded network call per thread, concurrently
+            (:attr:`lanes`), any other frame on ``threads`` intra-op threads (a frame under 16 agents on one), and
+            :meth:`predict_batch` runs its network calls concurrently; each agent's result is the one a single call
+            gives. The default, 1, keeps each call on its own thread, so that predictors sharing a machine do not
+            compete; ``os.cpu_count()`` gives one call the lowest latency.
         sessions: ONNX Runtime sessions of the model: threads sharing this predictor run concurrently, up to this
             many at a time (default: 2, or 1 on a one-core machine).
         onnxruntime_library: absolute path of ``libonnxruntime``; found in the ``onnxruntime`` wheel if None.
@@ -128,6 +131,13 @@ class Predictor:
         return n
 
     @property
+    def lanes(self) -> int:
+        """Single-threaded sessions (one per thread, with ``threads`` ≥ 2 on the CPU, else 0) on which the parts of
+        a split frame and :meth:`predict_batch`'s network calls run concurrently."""
+        n: int = self._predictor.lanes
+        return n
+
+    @property
     def spec(self) -> InputSpec:
         """The model's input specification."""
         return self._spec
@@ -214,9 +224,10 @@ class Predictor:
     ) -> list[Prediction]:
         """Predicts several frames: each preprocessed in parallel, consecutive frames' graphs joined (disjoint) into
         network calls of up to 256 agents (``dgan_core::runtime::BATCH_AGENTS_PER_CALL``) and ``max_input_bytes``
-        of inputs. Equal to :meth:`predict`
-        on each frame, up to float rounding; 0.96–1.54× the throughput of a loop of :meth:`predict` for 64 real
-        frames of the bundled models. Releases the GIL while the engine runs.
+        of inputs; with ``threads`` ≥ 2 the calls run concurrently, one per thread (:attr:`lanes`). Equal to
+        :meth:`predict` on each frame, up to float rounding. For 64 real frames of the bundled models: about a loop
+        of :meth:`predict`'s throughput on one thread, and 1.6–2.0× it with ``threads=2`` on two cores
+        (docs/speed.md). Releases the GIL while the engine runs.
 
         ``unknown_classes`` as :meth:`predict`.
 

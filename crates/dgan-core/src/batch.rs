@@ -87,6 +87,109 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
     Ok(Joined { inputs, agent_ptr })
 }
 
+/// The inputs of the agents `rows` (in that order) of one frame, their edges re-indexed: `rows` must be closed under
+/// the frame's edges (a union of the graph's components), so that every agent keeps all its neighbours and the
+/// network gives it the outputs it would give it in the whole frame. The neighbour lists keep their padded width.
+pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
+    let n = inputs.trajectory.dim().0;
+    let mut new_index = vec![-1i64; n];
+    for (k, &r) in rows.iter().enumerate() {
+        let slot = new_index.get_mut(r).ok_or_else(|| DganError::InvalidSpec(format!("agent {r} of {n} taken")))?;
+        if *slot >= 0 {
+            return Err(DganError::InvalidSpec(format!("agent {r} taken twice")));
+        }
+        *slot = k as i64;
+    }
+    let remap = |v: i64| -> Result<i64> {
+        usize::try_from(v)
+            .ok()
+            .and_then(|v| new_index.get(v).copied())
+            .filter(|k| *k >= 0)
+            .ok_or_else(|| DganError::InvalidSpec(format!("agent {v} is a neighbour outside the part taken")))
+    };
+    let mut kept = vec![];
+    for (e, row) in inputs.edge_index.rows().into_iter().enumerate() {
+        let inside = usize::try_from(row[0]).ok().and_then(|v| new_index.get(v)).is_some_and(|k| *k >= 0);
+        if inside {
+            kept.push(e);
+        }
+    }
+    let edge_index = inputs.edge_index.select(Axis(0), &kept);
+    let edge_index = edge_index.mapv(|v| remap(v).unwrap_or(-1));
+    if edge_index.iter().any(|v| *v < 0) {
+        return Err(DganError::InvalidSpec("an edge leaves the part taken".into()));
+    }
+    let neighbors = match &inputs.neighbors {
+        Some(nb) => {
+            let index = nb.index.select(Axis(0), rows);
+            let mut out = Array2::<i64>::zeros(index.dim());
+            for (o, v) in out.iter_mut().zip(index.iter()) {
+                *o = remap(*v)?;
+            }
+            Some(Neighbors {
+                index: out,
+                mask: nb.mask.select(Axis(0), rows),
+                features: nb.features.select(Axis(0), rows),
+            })
+        }
+        None => None,
+    };
+    Ok(NetworkInputs {
+        trajectory: inputs.trajectory.select(Axis(0), rows),
+        trajectory_mask: inputs.trajectory_mask.select(Axis(0), rows),
+        state: inputs.state.select(Axis(0), rows),
+        edge_features: inputs.edge_features.select(Axis(0), &kept),
+        edge_index,
+        map: inputs.map.as_ref().map(|m| m.select(Axis(0), rows)),
+        map_present: inputs.map_present.as_ref().map(|m| m.select(Axis(0), rows)),
+        neighbors,
+    })
+}
+
+/// The attention graph's components as parts for `parts` concurrent calls: each component whole, the largest first
+/// to the part with the fewest agents; each part's rows ascending. Parts may be empty.
+pub fn balanced_parts(n: usize, edges: &[[u32; 2]], parts: usize) -> Vec<Vec<usize>> {
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    for &[a, b] in edges {
+        let (a, b) = (a as usize, b as usize);
+        if a < n && b < n {
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            if ra != rb {
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    let mut components: Vec<Vec<usize>> = vec![];
+    let mut slot = vec![usize::MAX; n];
+    for i in 0..n {
+        let r = root(&mut parent, i);
+        if slot[r] == usize::MAX {
+            slot[r] = components.len();
+            components.push(vec![]);
+        }
+        components[slot[r]].push(i);
+    }
+    // Largest first; ties in order of their first agent (the sort is stable), so the parts are deterministic.
+    components.sort_by_key(|c| std::cmp::Reverse(c.len()));
+    let mut out = vec![vec![]; parts.max(1)];
+    for c in components {
+        if let Some(lightest) = out.iter_mut().min_by_key(|p| p.len()) {
+            lightest.extend(c);
+        }
+    }
+    for p in &mut out {
+        p.sort_unstable();
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -132,6 +235,40 @@ mod tests {
         assert_eq!(nb.index.row(2).to_vec(), vec![2, 2]);
         assert_eq!(nb.mask.row(2).to_vec(), vec![1.0, 0.0]);
         assert_eq!(nb.index.row(1).to_vec(), vec![0, 1]);
+    }
+
+    #[test]
+    fn takes_a_part_closed_under_its_edges() {
+        let edges = array![[0, 0], [0, 2], [1, 1], [2, 0], [2, 2]];
+        let mut x = inputs(3, edges.clone(), true);
+        x.trajectory = Array3::from_shape_fn((3, 2, 2), |(i, _, _)| i as f32);
+        x.edge_features = Array2::from_shape_fn((5, 6), |(e, _)| e as f32);
+        x.neighbors = Some(Neighbors::from_edges(3, &edges, &x.edge_features).unwrap());
+        let part = take(&x, &[0, 2]).unwrap();
+        assert_eq!(part.trajectory.dim().0, 2);
+        assert_eq!(part.trajectory[[1, 0, 0]], 2.0);
+        assert_eq!(part.edge_index, array![[0, 0], [0, 1], [1, 0], [1, 1]]);
+        assert_eq!(part.edge_features.column(0).to_vec(), vec![0.0, 1.0, 3.0, 4.0]);
+        let nb = part.neighbors.unwrap();
+        assert_eq!(nb.index, array![[0, 1], [0, 1]]);
+        assert_eq!(nb.mask, array![[1.0, 1.0], [1.0, 1.0]]);
+        assert_eq!(part.map.unwrap().dim().0, 2);
+        let lone = take(&x, &[1]).unwrap();
+        assert_eq!(lone.neighbors.unwrap().index, array![[0, 0]]);
+        // A part that cuts an edge, an agent twice or out of range: refused.
+        assert!(take(&x, &[0]).is_err());
+        assert!(take(&x, &[1, 1]).is_err());
+        assert!(take(&x, &[5]).is_err());
+    }
+
+    #[test]
+    fn parts_keep_components_whole_and_balance_them() {
+        // Components {0, 1, 2}, {3, 4}, {5}, {6}.
+        let parts = balanced_parts(7, &[[0, 1], [1, 2], [3, 4]], 2);
+        assert_eq!(parts, vec![vec![0, 1, 2, 6], vec![3, 4, 5]]);
+        assert_eq!(balanced_parts(3, &[[0, 1], [1, 2]], 2), vec![vec![0, 1, 2], vec![]]);
+        assert_eq!(balanced_parts(0, &[], 2), vec![Vec::<usize>::new(), vec![]]);
+        assert_eq!(balanced_parts(2, &[], 1), vec![vec![0, 1]]);
     }
 
     #[test]

@@ -4,7 +4,7 @@
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
 use crate::transform::AgentPose;
-use ndarray::{Array2, Array3, Array4, ArrayView2, ArrayView3, ArrayView4};
+use ndarray::{s, Array2, Array3, Array4, ArrayView2, ArrayView3, ArrayView4};
 
 /// Per-class anchor trajectories in the agent-centric frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -91,6 +91,43 @@ pub struct Decoded {
     pub mode_anchors: Array2<i64>,
 }
 
+impl Decoded {
+    /// N agents of M modes over T_f steps and C classes, all zero.
+    pub fn zeros(n: usize, m: usize, t_f: usize, c: usize) -> Self {
+        Self {
+            trajectories: Array4::zeros((n, m, t_f, 2)),
+            probabilities: Array2::zeros((n, m)),
+            class_probabilities: Array2::zeros((n, c)),
+            mode_classes: Array2::zeros((n, m)),
+            mode_anchors: Array2::zeros((n, m)),
+        }
+    }
+
+    /// Parts decoded apart as one: part `p`'s row `r` becomes row `rows[p][r]` of `n` (rows absent from every part
+    /// stay zero). Every part has the same modes, steps and classes.
+    pub fn gather(n: usize, parts: &[(&[usize], Decoded)]) -> Result<Self> {
+        let Some((_, first)) = parts.first() else { return Err(DganError::Inference("no part decoded".into())) };
+        let (_, m, t_f, _) = first.trajectories.dim();
+        let mut out = Self::zeros(n, m, t_f, first.class_probabilities.ncols());
+        for (rows, d) in parts {
+            if d.trajectories.dim().0 != rows.len() || d.probabilities.ncols() != m {
+                return Err(DganError::Inference("a decoded part does not match its rows".into()));
+            }
+            for (r, &i) in rows.iter().enumerate() {
+                if i >= n {
+                    return Err(DganError::Inference(format!("row {i} of {n} agents")));
+                }
+                out.trajectories.slice_mut(s![i, .., .., ..]).assign(&d.trajectories.slice(s![r, .., .., ..]));
+                out.probabilities.row_mut(i).assign(&d.probabilities.row(r));
+                out.class_probabilities.row_mut(i).assign(&d.class_probabilities.row(r));
+                out.mode_classes.row_mut(i).assign(&d.mode_classes.row(r));
+                out.mode_anchors.row_mut(i).assign(&d.mode_anchors.row(r));
+            }
+        }
+        Ok(out)
+    }
+}
+
 fn softmax(logits: impl Iterator<Item = f64>) -> Vec<f64> {
     let v: Vec<f64> = logits.collect();
     let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
@@ -155,13 +192,7 @@ pub fn decode(out: NetworkOutputs<'_>, params: DecodeParams<'_>, poses: &[AgentP
     let m = modes.clamp(1, k_total);
     let per_class = anchors.per_class();
     let class_of = anchors.class_of_anchor();
-    let mut out = Decoded {
-        trajectories: Array4::zeros((n, m, t_f, 2)),
-        probabilities: Array2::zeros((n, m)),
-        class_probabilities: Array2::zeros((n, c)),
-        mode_classes: Array2::zeros((n, m)),
-        mode_anchors: Array2::zeros((n, m)),
-    };
+    let mut out = Decoded::zeros(n, m, t_f, c);
     for (i, pose) in poses.iter().enumerate() {
         let pc = softmax(class_logits.row(i).iter().map(|&v| f64::from(v)));
         let mut p = Vec::with_capacity(k_total);
@@ -241,6 +272,26 @@ mod tests {
         let bad = array![[[0.5f32, -1.0], [0.0, 0.0]]];
         assert!(run(&array![[0.0f32]], &logits, &offsets, &anchors, Some(&bad), 1.0, pose, 2).is_err());
         assert!(run(&array![[0.0f32]], &logits, &offsets, &anchors, None, 0.0, pose, 2).is_err());
+    }
+
+    #[test]
+    fn parts_gather_into_their_rows() {
+        let part = |v: f64, n: usize| {
+            let mut d = Decoded::zeros(n, 2, 3, 4);
+            d.trajectories.fill(v);
+            d.probabilities.fill(v);
+            d.mode_anchors.fill(v as i64);
+            d
+        };
+        let (a, b) = ([0usize, 2], [1usize]);
+        let out = Decoded::gather(3, &[(&a[..], part(1.0, 2)), (&b[..], part(2.0, 1))]).unwrap();
+        assert_eq!(out.trajectories.dim(), (3, 2, 3, 2));
+        assert_eq!(out.probabilities.column(0).to_vec(), vec![1.0, 2.0, 1.0]);
+        assert_eq!(out.mode_anchors.column(1).to_vec(), vec![1, 2, 1]);
+        assert_eq!(out.class_probabilities.dim(), (3, 4));
+        assert!(Decoded::gather(3, &[]).is_err());
+        assert!(Decoded::gather(3, &[(&a[..], part(1.0, 1))]).is_err(), "rows and part disagree");
+        assert!(Decoded::gather(1, &[(&a[..], part(1.0, 2))]).is_err(), "a row beyond the agents");
     }
 
     #[test]

@@ -12,3 +12,35 @@ pub const TIME_TOLERANCE: f64 = 1e-6;
 pub fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
+
+/// `work` on each item concurrently: the first item on the calling thread, each other on a scoped thread of its own
+/// (the threads end with the call, so that no idle pool worker competes with ONNX Runtime for the cores). The results
+/// in the items' order; an item whose thread panicked gets `panicked()` instead, so no panic leaves the call.
+pub fn on_threads<T: Send, R: Send>(items: Vec<T>, work: impl Fn(T) -> R + Sync, panicked: impl Fn() -> R) -> Vec<R> {
+    let mut items = items.into_iter();
+    let Some(first) = items.next() else { return vec![] };
+    let work = &work;
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = items.map(|item| scope.spawn(move || work(item))).collect();
+        let here = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work(first)));
+        let mut out = vec![here.unwrap_or_else(|_| panicked())];
+        out.extend(handles.into_iter().map(|h| h.join().unwrap_or_else(|_| panicked())));
+        out
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn on_threads_keeps_the_order_and_catches_panics() {
+        let out = on_threads(
+            vec![1, 2, 3, 4, 5],
+            |x| if x % 2 == 1 && x != 5 { panic!("odd") } else { Ok(x * 10) },
+            || Err(()),
+        );
+        assert_eq!(out, vec![Err(()), Ok(20), Err(()), Ok(40), Ok(50)]);
+        assert!(on_threads(Vec::<i32>::new(), |x| x, || 0).is_empty());
+    }
+}

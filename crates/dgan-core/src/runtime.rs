@@ -4,18 +4,20 @@
 //! `libonnxruntime.so.*` the `onnxruntime` Python wheel ships in `onnxruntime/capi/`. Pass its absolute path in
 //! [`PredictorOptions::onnxruntime_library`] or set `ORT_DYLIB_PATH`.
 
-use crate::batch::join;
+use crate::batch::{balanced_parts, join, take};
 use crate::contract::{check_tensor, DType, ModelContract, METADATA_KEY};
 use crate::contract::{
     INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_PRESENT, INPUT_NEIGHBOR_FEATURES, INPUT_NEIGHBOR_INDEX,
     INPUT_NEIGHBOR_MASK, INPUT_STATE, INPUT_TRAJECTORY, INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS,
     OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
 };
-use crate::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
+use crate::decode::{decode, Anchors, DecodeParams, Decoded, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
+use crate::limits::on_threads;
 use crate::preprocess::{preprocess_on, Limits, NetworkInputs, Preprocessed};
-use ndarray::{s, Array2, Array4, Axis, Ix2, Ix4};
+use crate::transform::AgentPose;
+use ndarray::{s, Array2, Array4, ArrayView3, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
 use ort::value::{Tensor, TensorElementType, ValueType};
 use std::path::{Path, PathBuf};
@@ -163,6 +165,18 @@ pub fn max_intra_threads() -> usize {
 /// Most sessions one predictor may hold.
 pub const MAX_SESSIONS: usize = 64;
 
+/// A frame of at least [`SPLIT_MIN_AGENTS`] agents runs as several concurrent network calls, one per lane, when its
+/// attention graph's components share out so that no part holds more than `SPLIT_MAX_LOAD / lanes` of its agents
+/// (0.6 on two cores): measured on the bundled scenes tiled to 32 and 256 agents (docs/speed.md), two parts of 21 and
+/// 11 agents took 0.78-0.81 of one thread's time against 0.72 for two intra-op threads, balanced parts 0.45-0.58
+/// against 0.62-0.69.
+pub const SPLIT_MAX_LOAD: f64 = 1.2;
+/// The fewest agents a frame needs to be split across lanes.
+pub const SPLIT_MIN_AGENTS: usize = 8;
+/// With `threads` ≥ 2, a frame of fewer agents that does not split runs on one lane, single-threaded: at 8 agents
+/// two intra-op threads took 1.11-1.40 of one thread's time (`hdmap`, `apolloscape`; docs/speed.md).
+pub const INTRA_MIN_AGENTS: usize = 16;
+
 /// The prediction for every agent of a frame.
 #[derive(Debug, Clone)]
 pub struct Prediction {
@@ -184,6 +198,11 @@ pub struct Prediction {
 #[derive(Debug)]
 pub struct Predictor {
     sessions: Vec<Mutex<Session>>,
+    /// With `threads` ≥ 2 on the CPU, one single-threaded session per thread: the parts of a frame that splits
+    /// ([`SPLIT_MAX_LOAD`]) and the network calls of [`Predictor::predict_batch`] run on them concurrently, where
+    /// two sessions of `threads` intra-op threads each would fight for the cores (two frames in two threads on
+    /// two-thread sessions: 0.68-1.10 of one thread's time, on single-threaded ones 0.51-0.88; docs/speed.md).
+    lanes: Vec<Mutex<Session>>,
     next: AtomicUsize,
     contract: ModelContract,
     anchors: Anchors,
@@ -210,6 +229,9 @@ fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
 fn degree_of(p: &Preprocessed) -> usize {
     p.inputs.neighbors.as_ref().map_or(0, |nb| nb.index.ncols())
 }
+
+/// One network call of `predict_batch`: the index of its first frame and its frames' inputs, to be joined.
+type Call = (usize, Vec<Preprocessed>);
 
 fn check_modes(modes: usize) -> Result<()> {
     if modes == 0 {
@@ -342,8 +364,16 @@ impl Predictor {
         for _ in 1..options.sessions {
             sessions.push(Mutex::new(open_session(&path, &bytes, options)?));
         }
+        let mut lanes = vec![];
+        if options.intra_threads >= 2 && options.execution_provider == ExecutionProvider::Cpu {
+            let single = PredictorOptions { intra_threads: 1, onnxruntime_library: None, ..*options };
+            for _ in 0..options.intra_threads {
+                lanes.push(Mutex::new(open_session(&path, &bytes, &single)?));
+            }
+        }
         Ok(Self {
             sessions,
+            lanes,
             next: AtomicUsize::new(0),
             contract,
             anchors,
@@ -358,20 +388,26 @@ impl Predictor {
         self.sessions.len()
     }
 
-    /// The first free session, else one in turn, waited for. A lone caller keeps the same session, whose buffers stay
-    /// in the caches (taking them in turn made one thread's `apolloscape` predict at N = 256 16% slower with two
-    /// sessions than with one: docs/speed.md).
-    fn session(&self) -> Result<MutexGuard<'_, Session>> {
+    /// How many single-threaded sessions run the parts of a split frame and `predict_batch`'s calls concurrently
+    /// (0 with one thread or on a GPU).
+    pub fn lanes(&self) -> usize {
+        self.lanes.len()
+    }
+
+    /// The first free session of `pool`, else one in turn, waited for. A lone caller keeps the same session, whose
+    /// buffers stay in the caches (taking them in turn made one thread's `apolloscape` predict at N = 256 16% slower
+    /// with two sessions than with one: docs/speed.md).
+    fn session<'a>(&self, pool: &'a [Mutex<Session>]) -> Result<MutexGuard<'a, Session>> {
         let poisoned = || DganError::Inference("session lock poisoned".into());
-        for session in &self.sessions {
+        for session in pool {
             match session.try_lock() {
                 Ok(guard) => return Ok(guard),
                 Err(TryLockError::WouldBlock) => continue,
                 Err(TryLockError::Poisoned(_)) => return Err(poisoned()),
             }
         }
-        let start = self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len();
-        self.sessions[start].lock().map_err(|_| poisoned())
+        let start = self.next.fetch_add(1, Ordering::Relaxed) % pool.len().max(1);
+        pool.get(start).ok_or_else(|| DganError::Inference("no session".into()))?.lock().map_err(|_| poisoned())
     }
 
     /// The model's contract (input specification, anchors, provenance).
@@ -394,18 +430,88 @@ impl Predictor {
         self.predict_modes(frame, self.anchors.total())
     }
 
-    /// Predicts the `modes` most probable modes (at most K) for every agent.
+    /// Predicts the `modes` most probable modes (at most K) for every agent. With `threads` ≥ 2, a frame whose
+    /// attention graph falls into components that share out evenly ([`SPLIT_MAX_LOAD`]) runs as one network call per
+    /// lane, concurrently; any other frame as one call on `threads` intra-op threads. Either way each agent's result
+    /// is the one a single call gives, up to float rounding.
     pub fn predict_modes(&self, frame: &Frame, modes: usize) -> Result<Prediction> {
         check_modes(modes)?;
         let _in_flight = crate::raster::InFlight::enter();
         let pre = preprocess_on(frame, &self.contract.input, &self.limits, self.threads)?;
-        let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes)?;
+        if let Some(parts) = self.split(&pre) {
+            return self.run_split(frame, pre, parts, modes);
+        }
+        // A small frame on a lane: waking intra-op workers costs more than they give there.
+        let pool =
+            if pre.poses.len() < INTRA_MIN_AGENTS && !self.lanes.is_empty() { &self.lanes } else { &self.sessions };
+        let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes, pool)?;
         out.pop().ok_or_else(|| DganError::Inference("no prediction for the frame".into()))
+    }
+
+    /// The parts a frame runs as on the lanes, or None when it does not split well ([`SPLIT_MAX_LOAD`]): then one
+    /// call on `threads` intra-op threads.
+    fn split(&self, pre: &Preprocessed) -> Option<Vec<Vec<usize>>> {
+        let (n, lanes) = (pre.poses.len(), self.lanes.len());
+        if lanes < 2 || n < SPLIT_MIN_AGENTS {
+            return None;
+        }
+        let parts = balanced_parts(n, &pre.edges, lanes);
+        let largest = parts.iter().map(Vec::len).max().unwrap_or(n);
+        (largest as f64 <= SPLIT_MAX_LOAD * n as f64 / lanes as f64).then_some(parts)
+    }
+
+    /// One frame as concurrent network calls, one per part (each closed under the graph's edges, so every agent
+    /// sees the neighbours it would see in one call), each decoded on its thread; the rows put back in frame order.
+    fn run_split(&self, frame: &Frame, pre: Preprocessed, parts: Vec<Vec<usize>>, modes: usize) -> Result<Prediction> {
+        let parts: Vec<Vec<usize>> = parts.into_iter().filter(|p| !p.is_empty()).collect();
+        let pre = &pre;
+        let one = |rows: &Vec<usize>| -> Result<Decoded> {
+            let inputs = take(&pre.inputs, rows)?;
+            let (class_logits, anchor_logits, offsets) = self.run_on(&self.lanes, inputs)?;
+            let prior = pre.prior.select(Axis(0), rows);
+            let poses: Vec<_> = rows.iter().map(|&i| pre.poses[i]).collect();
+            self.decode_outputs(&class_logits, &anchor_logits, &offsets, prior.view(), &poses, modes)
+        };
+        let panicked = || Err(DganError::Inference("a network thread panicked".into()));
+        let decoded: Vec<Decoded> =
+            on_threads(parts.iter().collect(), one, panicked).into_iter().collect::<Result<_>>()?;
+        let parts: Vec<(&[usize], Decoded)> = parts.iter().map(Vec::as_slice).zip(decoded).collect();
+        let out = Decoded::gather(pre.poses.len(), &parts)?;
+        let edges = Array2::from_shape_fn((pre.edges.len(), 2), |(e, k)| i64::from(pre.edges[e][k]));
+        Ok(Prediction {
+            agent_ids: frame.ids().to_vec(),
+            trajectories: out.trajectories,
+            probabilities: out.probabilities,
+            class_probabilities: out.class_probabilities,
+            mode_classes: out.mode_classes,
+            edges,
+        })
+    }
+
+    /// Decodes one network call's outputs.
+    fn decode_outputs(
+        &self,
+        class_logits: &Array2<f32>,
+        anchor_logits: &Array2<f32>,
+        offsets: &Array4<f32>,
+        prior: ArrayView3<'_, f32>,
+        poses: &[AgentPose],
+        modes: usize,
+    ) -> Result<Decoded> {
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let params =
+            DecodeParams { anchors: &self.anchors, prior: Some(prior), temperature: self.contract.temperature };
+        decode(out, params, poses, modes)
     }
 
     /// Predicts several frames: each frame is preprocessed on its own (in parallel), consecutive frames' graphs are
     /// joined (disjoint, so nothing crosses between frames) into network calls of up to [`BATCH_AGENTS_PER_CALL`]
-    /// agents (a larger frame runs alone), and the outputs are split again. Equal to calling
+    /// agents (a larger frame runs alone), and the outputs are split again. With `threads` ≥ 2 the calls are smaller
+    /// (every lane gets work) and run concurrently, one per lane ([`Predictor::lanes`]). Equal to calling
     /// [`Predictor::predict_modes`] on each frame, up to float rounding.
     pub fn predict_batch(&self, frames: &[Frame], modes: usize) -> Result<Vec<Prediction>> {
         check_modes(modes)?;
@@ -416,63 +522,92 @@ impl Predictor {
         let spec = &self.contract.input;
         // The frames in `threads` runs, one thread each (each frame's crops on that thread).
         let per_thread = frames.len().div_ceil(self.threads.max(1));
-        let pres: Vec<Result<Preprocessed>> = if per_thread == frames.len() {
-            frames.iter().map(|f| preprocess_on(f, spec, &self.limits, 1)).collect()
-        } else {
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = frames
-                    .chunks(per_thread)
-                    .map(|part| {
-                        scope.spawn(move || {
-                            part.iter().map(|f| preprocess_on(f, spec, &self.limits, 1)).collect::<Vec<_>>()
-                        })
-                    })
-                    .collect();
-                let mut out = Vec::with_capacity(frames.len());
-                for (handle, part) in handles.into_iter().zip(frames.chunks(per_thread)) {
-                    match handle.join() {
-                        Ok(done) => out.extend(done),
-                        Err(_) => out.extend(
-                            part.iter().map(|_| Err(DganError::Inference("a preprocessing thread panicked".into()))),
-                        ),
-                    }
-                }
-                out
-            })
+        let runs: Vec<&[Frame]> = frames.chunks(per_thread).collect();
+        let preprocess = |part: &[Frame]| -> Vec<Result<Preprocessed>> {
+            part.iter().map(|f| preprocess_on(f, spec, &self.limits, 1)).collect()
         };
+        let panicked = || vec![Err(DganError::Inference("a preprocessing thread panicked".into()))];
+        let done: Vec<Vec<Result<Preprocessed>>> = on_threads(runs.clone(), preprocess, panicked);
         // The first bad frame by index, whichever thread finished first, named in its error.
-        let pres = pres
-            .into_iter()
-            .enumerate()
-            .map(|(i, p)| p.map_err(|e| e.context(&format!("frame {i} of the batch"))))
-            .collect::<Result<Vec<_>>>()?;
-        let mut out = Vec::with_capacity(frames.len());
+        let mut pres = Vec::with_capacity(frames.len());
+        for (part, results) in runs.iter().zip(done) {
+            let (base, count) = (pres.len(), part.len());
+            let mut results = results.into_iter();
+            for i in 0..count {
+                let p = results
+                    .next()
+                    .unwrap_or_else(|| Err(DganError::Inference("a preprocessing thread panicked".into())));
+                pres.push(p.map_err(|e| e.context(&format!("frame {} of the batch", base + i)))?);
+            }
+        }
+        // Consecutive frames joined into calls; with lanes, calls small enough that every lane has work.
+        let total: usize = pres.iter().map(|p| p.poses.len()).sum();
+        let cap = if self.lanes.len() >= 2 {
+            BATCH_AGENTS_PER_CALL.min(total.div_ceil(self.lanes.len()).max(1))
+        } else {
+            BATCH_AGENTS_PER_CALL
+        };
+        let mut groups: Vec<Call> = vec![];
         let mut pres = pres.into_iter().peekable();
         let mut start = 0;
         while start < frames.len() {
             let (mut group, mut agents, mut degree) = (vec![], 0, 0);
             while let Some(p) =
-                pres.next_if(|p| group.is_empty() || self.joins(agents + p.poses.len(), degree.max(degree_of(p))))
+                pres.next_if(|p| group.is_empty() || self.joins(agents + p.poses.len(), degree.max(degree_of(p)), cap))
             {
                 agents += p.poses.len();
                 degree = degree.max(degree_of(&p));
                 group.push(p);
             }
-            let end = start + group.len();
-            out.extend(self.run_and_decode(&frames[start..end], group, modes)?);
-            start = end;
+            let len = group.len();
+            groups.push((start, group));
+            start += len;
         }
-        Ok(out)
+        let call = |(start, group): Call, pool: &[Mutex<Session>]| {
+            let end = start + group.len();
+            self.run_and_decode(&frames[start..end], group, modes, pool)
+        };
+        if self.lanes.len() < 2 || groups.len() < 2 {
+            let mut out = Vec::with_capacity(frames.len());
+            for g in groups {
+                out.extend(call(g, &self.sessions)?);
+            }
+            return Ok(out);
+        }
+        // The calls shared out over the lanes, each lane's in order, the most agents first to the least loaded.
+        let mut per_lane: Vec<(usize, Vec<Call>)> = (0..self.lanes.len()).map(|_| (0, vec![])).collect();
+        for g in groups {
+            let agents: usize = g.1.iter().map(|p| p.poses.len()).sum();
+            let lane = (0..per_lane.len()).min_by_key(|&l| per_lane[l].0).unwrap_or(0);
+            per_lane[lane].0 += agents;
+            per_lane[lane].1.push(g);
+        }
+        let work = |calls: Vec<Call>| -> Result<Vec<(usize, Vec<Prediction>)>> {
+            calls.into_iter().map(|g| Ok((g.0, call(g, &self.lanes)?))).collect()
+        };
+        let panicked = || Err(DganError::Inference("a network thread panicked".into()));
+        let mut by_start: Vec<(usize, Vec<Prediction>)> = vec![];
+        for lane in on_threads(per_lane.into_iter().map(|l| l.1).collect(), work, panicked) {
+            by_start.extend(lane?);
+        }
+        by_start.sort_by_key(|(start, _)| *start);
+        Ok(by_start.into_iter().flat_map(|(_, p)| p).collect())
     }
 
     /// Whether frames of `agents` agents in all, padded to `degree` neighbours, join into one network call: at most
-    /// [`BATCH_AGENTS_PER_CALL`] agents and `max_input_bytes` of inputs (each frame alone is within the limits).
-    fn joins(&self, agents: usize, degree: usize) -> bool {
-        agents <= BATCH_AGENTS_PER_CALL
-            && Limits::input_bytes(&self.contract.input, agents, degree) <= self.limits.max_input_bytes
+    /// `cap` agents ([`BATCH_AGENTS_PER_CALL`] or fewer) and `max_input_bytes` of inputs (each frame alone is within
+    /// the limits).
+    fn joins(&self, agents: usize, degree: usize, cap: usize) -> bool {
+        agents <= cap && Limits::input_bytes(&self.contract.input, agents, degree) <= self.limits.max_input_bytes
     }
 
-    fn run_and_decode(&self, frames: &[Frame], pres: Vec<Preprocessed>, modes: usize) -> Result<Vec<Prediction>> {
+    fn run_and_decode(
+        &self,
+        frames: &[Frame],
+        pres: Vec<Preprocessed>,
+        modes: usize,
+        pool: &[Mutex<Session>],
+    ) -> Result<Vec<Prediction>> {
         let spec = &self.contract.input;
         let (c, k, t_f) = (spec.classes.len(), self.anchors.total(), spec.t_f);
         let m = modes.min(k);
@@ -495,24 +630,14 @@ impl Predictor {
         let decoded = if n == 0 {
             None
         } else {
-            let (class_logits, anchor_logits, offsets) = self.run(inputs)?;
+            let (class_logits, anchor_logits, offsets) = self.run_on(pool, inputs)?;
             let prior = if priors.len() == 1 {
                 priors.pop().ok_or_else(|| DganError::Inference("no prior".into()))?
             } else {
                 let views: Vec<_> = priors.iter().map(|p| p.view()).collect();
                 ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?
             };
-            let out = NetworkOutputs {
-                class_logits: class_logits.view(),
-                anchor_logits: anchor_logits.view(),
-                offsets: offsets.view(),
-            };
-            let params = DecodeParams {
-                anchors: &self.anchors,
-                prior: Some(prior.view()),
-                temperature: self.contract.temperature,
-            };
-            Some(decode(out, params, &poses, modes)?)
+            Some(self.decode_outputs(&class_logits, &anchor_logits, &offsets, prior.view(), &poses, modes)?)
         };
         let decoded = match (frames, decoded) {
             // One frame: its prediction is the whole decode, moved rather than sliced and copied.
@@ -557,6 +682,15 @@ impl Predictor {
 
     /// Runs the network on preprocessed inputs; returns class logits, anchor logits and offsets.
     pub fn run(&self, inputs: NetworkInputs) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
+        self.run_on(&self.sessions, inputs)
+    }
+
+    /// [`Predictor::run`] on the first free session of `pool`.
+    fn run_on(
+        &self,
+        pool: &[Mutex<Session>],
+        inputs: NetworkInputs,
+    ) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
         let infer = |e: ort::Error| DganError::Inference(e.to_string());
         let mut feed: Vec<(&str, SessionInputValue<'_>)> = vec![
             (INPUT_TRAJECTORY, Tensor::from_array(inputs.trajectory).map_err(infer)?.into()),
@@ -580,7 +714,7 @@ impl Predictor {
         if let Some(present) = inputs.map_present {
             feed.push((INPUT_MAP_PRESENT, Tensor::from_array(present).map_err(infer)?.into()));
         }
-        let mut session = self.session()?;
+        let mut session = self.session(pool)?;
         let outputs = session.run(feed).map_err(infer)?;
         let get = |name: &str| {
             outputs

@@ -112,3 +112,77 @@ fn predict_batch_equals_predict_per_frame() {
     assert!(p.predict_batch(&[], 4).unwrap().is_empty());
     assert!(matches!(p.predict_batch(&frames, 0), Err(DganError::InvalidSpec(_))));
 }
+
+/// Two groups of walkers 500 m apart: two components of the attention graph, `n` agents each.
+fn two_groups(n: usize) -> Frame {
+    let p = Array3::from_shape_fn((2 * n, 8, 2), |(i, t, d)| {
+        let far = if i % 2 == 1 && d == 0 { 500.0 } else { 0.0 };
+        let i = i / 2;
+        far + if d == 0 { i as f64 * 1.5 + t as f64 * 0.5 } else { i as f64 * 0.7 - t as f64 * 0.1 }
+    });
+    Frame::new(p, None, (0..2 * n).map(|i| AgentClass::ALL[(i / 2) % 3]).collect()).expect("valid frame")
+}
+
+fn with_threads(name: &str, threads: usize) -> Predictor {
+    let options = PredictorOptions {
+        onnxruntime_library: Some(onnxruntime_library()),
+        intra_threads: threads,
+        ..Default::default()
+    };
+    Predictor::load_with(fixture(name), &options).expect("the fixture loads")
+}
+
+#[test]
+fn a_frame_split_across_lanes_equals_one_call() {
+    if dgan_core::limits::cores() < 2 {
+        return; // threads = 2 is refused on one core (thread_counts_are_bounded_by_the_cores)
+    }
+    let (one, two) = (with_threads("contract_nomap.onnx", 1), with_threads("contract_nomap.onnx", 2));
+    assert_eq!((one.lanes(), two.lanes()), (0, 2));
+    // Interleaved rows, so that each part's rows are scattered through the frame and must be put back in order.
+    let frame = two_groups(6);
+    let want = one.predict_modes(&frame, 4).unwrap();
+    let parts = dgan_core::batch::balanced_parts(
+        12,
+        &want.edges.rows().into_iter().map(|r| [r[0] as u32, r[1] as u32]).collect::<Vec<_>>(),
+        2,
+    );
+    assert_eq!(parts, vec![vec![0, 2, 4, 6, 8, 10], vec![1, 3, 5, 7, 9, 11]], "the frame splits in two");
+    for frame in [frame, walkers(12), walkers(4)] {
+        let want = one.predict_modes(&frame, 4).unwrap();
+        let got = two.predict_modes(&frame, 4).unwrap();
+        assert_eq!(got.agent_ids, want.agent_ids);
+        assert_eq!(got.edges, want.edges);
+        assert_eq!(got.mode_classes, want.mode_classes);
+        let worst = got.trajectories.iter().zip(&want.trajectories).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-5, "split and single predictions differ by {worst}");
+        let worst = got.probabilities.iter().zip(&want.probabilities).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-6, "split and single probabilities differ by {worst}");
+    }
+}
+
+#[test]
+fn predict_batch_on_lanes_equals_predict_per_frame() {
+    if dgan_core::limits::cores() < 2 {
+        return;
+    }
+    let (one, two) = (with_threads("contract_nomap.onnx", 1), with_threads("contract_nomap.onnx", 2));
+    let empty = Frame::new(Array3::zeros((0, 8, 2)), None, vec![]).unwrap();
+    let frames = [walkers(3), empty, walkers(5), two_groups(5), walkers(1), walkers(7)];
+    let batch = two.predict_batch(&frames, 3).unwrap();
+    assert_eq!(batch.len(), frames.len());
+    for (frame, got) in frames.iter().zip(&batch) {
+        let want = one.predict_modes(frame, 3).unwrap();
+        assert_eq!(got.agent_ids, want.agent_ids);
+        assert_eq!(got.edges, want.edges);
+        let worst = got.trajectories.iter().zip(&want.trajectories).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-5, "batch on lanes and single predictions differ by {worst}");
+    }
+    // A bad frame is named by its index, whichever lane it fell to.
+    let short = Frame::new(Array3::zeros((2, 5, 2)), None, vec![AgentClass::Vehicle; 2]).unwrap();
+    let mut frames = frames.to_vec();
+    frames.insert(4, short);
+    let err = two.predict_batch(&frames, 3).unwrap_err();
+    assert!(matches!(err, DganError::InvalidFrame(_)), "{err}");
+    assert!(err.to_string().contains("frame 4 of the batch"), "{err}");
+}

@@ -104,6 +104,12 @@ impl PyPredictor {
         self.inner.sessions()
     }
 
+    /// Single-threaded sessions for the parts of a split frame and predict_batch's concurrent calls.
+    #[getter]
+    fn lanes(&self) -> usize {
+        self.inner.lanes()
+    }
+
     #[getter]
     fn path(&self) -> PathBuf {
         self.inner.path().to_path_buf()

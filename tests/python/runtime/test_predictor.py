@@ -260,6 +260,37 @@ def test_predict_batch_equals_predict_per_frame() -> None:
         dgan.Predictor("zara1").predict_batch([dgan.Frame(np.zeros((2, 3, 2)))])
 
 
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="threads=2 needs two cores")
+def test_two_threads_split_frames_and_batches_with_the_one_thread_results() -> None:
+    from dgan.demo import scene_for
+
+    for name in ("hdmap", "zara1"):
+        one, two = dgan.Predictor(name), dgan.Predictor(name, threads=2)
+        assert (one.lanes, two.lanes) == (0, 2)
+        first = scene_for(one.spec)
+        frames = [scene_for(one.spec, first.default_now + k * first.time_step).frame for k in range(4)]
+        # The real scene twice, 2 km apart: two components that share out evenly, so the frame runs as two calls.
+        base = frames[0]
+        doubled = dgan.Frame(
+            np.concatenate([base.positions, base.positions + 2000.0]),
+            mask=np.concatenate([base.mask, base.mask]),
+            classes=list(base.classes) * 2,
+            headings=None if base.headings is None else np.concatenate([base.headings, base.headings]),
+            lengths=None if base.lengths is None else np.concatenate([base.lengths, base.lengths]),
+            widths=None if base.widths is None else np.concatenate([base.widths, base.widths]),
+            map=base.map,
+        )
+        for frame in [*frames, doubled, doubled.without_map()]:
+            want, got = one.predict(frame), two.predict(frame)
+            np.testing.assert_allclose(got.trajectories, want.trajectories, atol=1e-5)
+            np.testing.assert_allclose(got.probabilities, want.probabilities, atol=1e-6)
+            np.testing.assert_array_equal(got.edges, want.edges)
+            np.testing.assert_array_equal(got.mode_classes, want.mode_classes)
+        batch = two.predict_batch([*frames, doubled] * 3, modes=4)
+        for frame, got in zip([*frames, doubled] * 3, batch, strict=True):
+            np.testing.assert_allclose(got.trajectories, one.predict(frame, modes=4).trajectories, atol=1e-5)
+
+
 def test_execution_providers_and_thread_bounds(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert dgan.available_execution_providers()[0] == "cpu"
     assert dgan.Predictor("zara1", execution_provider="CPU").num_modes > 0
