@@ -7,6 +7,7 @@
 use crate::canvas::{world_bounds, Canvas};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
+use crate::limits::on_threads;
 use crate::map::SceneMap;
 use crate::spec::{MapRender, MapSpec};
 use crate::state::TrafficState;
@@ -109,19 +110,12 @@ pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, thre
         }
     } else {
         let agents_per_thread = states.len().div_ceil(threads);
-        std::thread::scope(|scope| {
-            let draw = &draw;
-            let handles: Vec<_> = flat
-                .chunks_mut(per * agents_per_thread)
-                .zip(states.chunks(agents_per_thread))
-                .map(|(crops, part)| {
-                    scope.spawn(move || crops.chunks_mut(per).zip(part).try_for_each(|(crop, s)| draw(crop, s)))
-                })
-                .collect();
-            handles.into_iter().try_for_each(|handle| {
-                handle.join().map_err(|_| DganError::InvalidSpec("a rasterising thread panicked".into()))?
-            })
-        })?;
+        let parts: Vec<_> = flat.chunks_mut(per * agents_per_thread).zip(states.chunks(agents_per_thread)).collect();
+        let one = |(crops, part): (&mut [f32], &[TrafficState])| {
+            crops.chunks_mut(per).zip(part).try_for_each(|(crop, s)| draw(crop, s))
+        };
+        let panicked = || Err(DganError::InvalidSpec("a rasterising thread panicked".into()));
+        on_threads(parts, one, panicked).into_iter().collect::<Result<()>>()?;
     }
     Ok(out)
 }

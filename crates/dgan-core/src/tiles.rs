@@ -11,6 +11,7 @@
 
 use crate::canvas::Canvas;
 use crate::error::{DganError, Result};
+use crate::limits::on_threads;
 use crate::map::VectorMap;
 use crate::spec::{MapRender, MapSpec};
 use crate::state::TrafficState;
@@ -146,20 +147,15 @@ impl Overlay {
         let tiles = if per_thread >= wanted.len() {
             wanted.iter().map(one).collect()
         } else {
-            std::thread::scope(|scope| {
-                let one = &one;
-                let handles: Vec<_> = wanted
-                    .chunks(per_thread)
-                    .map(|part| scope.spawn(move || part.iter().map(one).collect::<Vec<_>>()))
-                    .collect();
-                let mut tiles = HashMap::with_capacity(wanted.len());
-                for handle in handles {
-                    let part =
-                        handle.join().map_err(|_| DganError::InvalidSpec("a tile-drawing thread panicked".into()))?;
-                    tiles.extend(part);
-                }
-                Ok::<_, DganError>(tiles)
-            })?
+            let panicked = || Err(DganError::InvalidSpec("a tile-drawing thread panicked".into()));
+            let drawn =
+                on_threads(wanted.chunks(per_thread).collect(), |part| Ok(part.iter().map(&one).collect()), panicked);
+            let mut tiles = HashMap::with_capacity(wanted.len());
+            for part in drawn {
+                let part: Vec<_> = part?;
+                tiles.extend(part);
+            }
+            tiles
         };
         Ok(Self { tiles })
     }
