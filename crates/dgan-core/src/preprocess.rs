@@ -142,6 +142,23 @@ pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Re
 /// [`preprocess_within`] with the map crops drawn on at most `threads` threads ([`crate::raster::rasterize_on`]);
 /// the tensors are the same whatever the threads.
 pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: usize) -> Result<Preprocessed> {
+    build(frame, spec, limits, Some(threads)).map(|(pre, _)| pre)
+}
+
+/// [`preprocess_on`] with the map crops of a frame that has a map left for the caller to draw
+/// ([`crate::raster::rasterize_rows`]; `inputs.map` is then `None`), e.g. on the threads of the parts of a frame that
+/// run as separate network calls. The flag says whether the crops were left out.
+pub fn preprocess_without_crops(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Result<(Preprocessed, bool)> {
+    build(frame, spec, limits, None)
+}
+
+/// The inputs, the map crops drawn on `crop_threads` threads, or left out (flag true) when that is None.
+fn build(
+    frame: &Frame,
+    spec: &InputSpec,
+    limits: &Limits,
+    crop_threads: Option<usize>,
+) -> Result<(Preprocessed, bool)> {
     spec.validate()?;
     frame.check_dt(spec.dt_s)?;
     let n = frame.len();
@@ -234,7 +251,10 @@ pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: 
     )?;
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
-        (Some(m), Some(_)) => (Some(rasterize_on(frame, &states, m, threads)?), m.optional.then(|| Array1::ones(n))),
+        (Some(m), Some(_)) => {
+            let crops = crop_threads.map(|threads| rasterize_on(frame, &states, m, threads)).transpose()?;
+            (crops, m.optional.then(|| Array1::ones(n)))
+        }
         (Some(m), None) if m.optional || n == 0 => {
             (Some(Array4::zeros((n, 3, m.height_px, m.width_px))), m.optional.then(|| Array1::zeros(n)))
         }
@@ -251,7 +271,8 @@ pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: 
         GraphLayout::EdgeList => None,
         GraphLayout::Padded => Some(Neighbors::from_edges(n, &edge_index, &edge_features)?),
     };
-    Ok(Preprocessed {
+    let later = spec.map.is_some() && map.is_none();
+    let pre = Preprocessed {
         inputs: NetworkInputs {
             trajectory,
             trajectory_mask,
@@ -267,7 +288,8 @@ pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: 
         states,
         radii,
         edges,
-    })
+    };
+    Ok((pre, later))
 }
 
 #[cfg(test)]

@@ -55,17 +55,35 @@ pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Resu
 /// [`rasterize`] on at most `threads` threads (the calling one included), shared with the other predictions in
 /// flight in this process, and at least 8 crops to a thread. The crops are the same whatever the threads.
 pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, threads: usize) -> Result<Array4<f32>> {
+    let every: Vec<usize> = (0..frame.len()).collect();
+    rasterize_rows(frame, states, spec, &every, threads)
+}
+
+/// The crops of the agents `rows` only (in that order), each as [`rasterize_on`] draws it: the boxes of every agent
+/// of the frame, not of `rows` alone. For the parts of a frame that run as separate network calls.
+pub fn rasterize_rows(
+    frame: &Frame,
+    states: &[TrafficState],
+    spec: &MapSpec,
+    rows: &[usize],
+    threads: usize,
+) -> Result<Array4<f32>> {
     spec.validate()?;
     if states.len() != frame.len() {
         return Err(DganError::InvalidFrame(format!("{} states for {} agents", states.len(), frame.len())));
     }
+    let n = states.len();
+    let mine: Vec<&TrafficState> = rows
+        .iter()
+        .map(|&i| states.get(i).ok_or_else(|| DganError::InvalidSpec(format!("crop of agent {i} of {n}"))))
+        .collect::<Result<_>>()?;
     let (h, w) = (spec.height_px, spec.width_px);
     let agents: RTree<GeomWithData<[f64; 2], usize>> =
         RTree::bulk_load(states.iter().enumerate().map(|(i, s)| GeomWithData::new(s.position, i)).collect());
     let max_half_diag = states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max);
-    let mut out = Array4::<f32>::zeros((frame.len(), 3, h, w));
+    let mut out = Array4::<f32>::zeros((rows.len(), 3, h, w));
     let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("raster buffer is not contiguous".into()))?;
-    let threads = (threads / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(states.len() / 8).max(1);
+    let threads = (threads / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(rows.len() / 8).max(1);
     // Every agent whose box can reach into world bounds `v`.
     let boxes_near = |v: [f64; 4]| -> Vec<&TrafficState> {
         let d = max_half_diag;
@@ -75,7 +93,7 @@ pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, thre
     // From tiles, the boxes are drawn once on the tiles the crops read instead of once on each crop.
     let overlay = match frame.map() {
         Some(SceneMap::Vector(m)) if spec.render == MapRender::Tiles && spec.draw_agents => {
-            let views: Vec<[f64; 4]> = states.iter().map(|s| world_bounds(spec, &s.pose())).collect();
+            let views: Vec<[f64; 4]> = mine.iter().map(|s| world_bounds(spec, &s.pose())).collect();
             Some(Overlay::new(m, spec, &views, boxes_near, threads)?)
         }
         _ => None,
@@ -105,13 +123,13 @@ pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, thre
     // ONNX Runtime runs on next (on two cores that cost as much as the parallel drawing saved).
     let per = 3 * h * w;
     if threads == 1 {
-        for (crop, s) in flat.chunks_mut(per).zip(states) {
+        for (crop, s) in flat.chunks_mut(per).zip(&mine) {
             draw(crop, s)?;
         }
     } else {
-        let agents_per_thread = states.len().div_ceil(threads);
-        let parts: Vec<_> = flat.chunks_mut(per * agents_per_thread).zip(states.chunks(agents_per_thread)).collect();
-        let one = |(crops, part): (&mut [f32], &[TrafficState])| {
+        let agents_per_thread = mine.len().div_ceil(threads);
+        let parts: Vec<_> = flat.chunks_mut(per * agents_per_thread).zip(mine.chunks(agents_per_thread)).collect();
+        let one = |(crops, part): (&mut [f32], &[&TrafficState])| {
             crops.chunks_mut(per).zip(part).try_for_each(|(crop, s)| draw(crop, s))
         };
         let panicked = || Err(DganError::InvalidSpec("a rasterising thread panicked".into()));

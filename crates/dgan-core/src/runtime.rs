@@ -15,7 +15,8 @@ use crate::decode::{decode, Anchors, DecodeParams, Decoded, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
 use crate::limits::on_threads;
-use crate::preprocess::{preprocess_on, Limits, NetworkInputs, Preprocessed};
+use crate::preprocess::{preprocess_on, preprocess_without_crops, Limits, NetworkInputs, Preprocessed};
+use crate::raster::{rasterize_on, rasterize_rows};
 use crate::transform::AgentPose;
 use ndarray::{s, Array2, Array4, ArrayView3, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
@@ -437,10 +438,20 @@ impl Predictor {
     pub fn predict_modes(&self, frame: &Frame, modes: usize) -> Result<Prediction> {
         check_modes(modes)?;
         let _in_flight = crate::raster::InFlight::enter();
-        let pre = preprocess_on(frame, &self.contract.input, &self.limits, self.threads)?;
-        if let Some(parts) = self.split(&pre) {
-            return self.run_split(frame, pre, parts, modes);
-        }
+        let spec = &self.contract.input;
+        let pre = if self.lanes.len() >= 2 {
+            // The crops wait until the frame's parts are known: a split frame's are drawn on its parts' threads.
+            let (mut pre, later) = preprocess_without_crops(frame, spec, &self.limits)?;
+            if let Some(parts) = self.split(&pre) {
+                return self.run_split(frame, pre, parts, later, modes);
+            }
+            if let (true, Some(m)) = (later, &spec.map) {
+                pre.inputs.map = Some(rasterize_on(frame, &pre.states, m, self.threads)?);
+            }
+            pre
+        } else {
+            preprocess_on(frame, spec, &self.limits, self.threads)?
+        };
         // A small frame on a lane: waking intra-op workers costs more than they give there.
         let pool =
             if pre.poses.len() < INTRA_MIN_AGENTS && !self.lanes.is_empty() { &self.lanes } else { &self.sessions };
@@ -461,12 +472,23 @@ impl Predictor {
     }
 
     /// One frame as concurrent network calls, one per part (each closed under the graph's edges, so every agent
-    /// sees the neighbours it would see in one call), each decoded on its thread; the rows put back in frame order.
-    fn run_split(&self, frame: &Frame, pre: Preprocessed, parts: Vec<Vec<usize>>, modes: usize) -> Result<Prediction> {
+    /// sees the neighbours it would see in one call), each part's map crops (`crops_later`) drawn, its network run
+    /// and its outputs decoded on its thread; the rows put back in frame order.
+    fn run_split(
+        &self,
+        frame: &Frame,
+        pre: Preprocessed,
+        parts: Vec<Vec<usize>>,
+        crops_later: bool,
+        modes: usize,
+    ) -> Result<Prediction> {
         let parts: Vec<Vec<usize>> = parts.into_iter().filter(|p| !p.is_empty()).collect();
         let pre = &pre;
         let one = |rows: &Vec<usize>| -> Result<Decoded> {
-            let inputs = take(&pre.inputs, rows)?;
+            let mut inputs = take(&pre.inputs, rows)?;
+            if let (true, Some(m)) = (crops_later, &self.contract.input.map) {
+                inputs.map = Some(rasterize_rows(frame, &pre.states, m, rows, 1)?);
+            }
             let (class_logits, anchor_logits, offsets) = self.run_on(&self.lanes, inputs)?;
             let prior = pre.prior.select(Axis(0), rows);
             let poses: Vec<_> = rows.iter().map(|&i| pre.poses[i]).collect();
