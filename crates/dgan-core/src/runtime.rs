@@ -168,9 +168,9 @@ pub const MAX_SESSIONS: usize = 64;
 
 /// A frame of at least [`SPLIT_MIN_AGENTS`] agents runs as several concurrent network calls, one per lane, when its
 /// attention graph's components share out so that no part holds more than `SPLIT_MAX_LOAD / lanes` of its agents
-/// (0.6 on two cores): measured on the bundled scenes tiled to 32 and 256 agents (docs/speed.md), two parts of 21 and
-/// 11 agents took 0.78-0.81 of one thread's time against 0.72 for two intra-op threads, balanced parts 0.45-0.58
-/// against 0.62-0.69.
+/// (0.6 on two cores): in a probe on the bundled scenes tiled to 32 and 256 agents (docs/speed.md), parts of 21 and 11
+/// agents took 0.78-0.81 of one thread's time against 0.72 on two intra-op threads, of 18 and 14 0.65-0.71 against
+/// 0.69, evenly shared parts 0.45-0.59 against 0.63-0.65.
 pub const SPLIT_MAX_LOAD: f64 = 1.2;
 /// The fewest agents a frame needs to be split across lanes.
 pub const SPLIT_MIN_AGENTS: usize = 8;
