@@ -100,37 +100,23 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
         }
         *slot = k as i64;
     }
-    let remap = |v: i64| -> Result<i64> {
-        usize::try_from(v)
-            .ok()
-            .and_then(|v| new_index.get(v).copied())
-            .filter(|k| *k >= 0)
-            .ok_or_else(|| DganError::InvalidSpec(format!("agent {v} is a neighbour outside the part taken")))
-    };
-    let mut kept = vec![];
-    for (e, row) in inputs.edge_index.rows().into_iter().enumerate() {
-        let inside = usize::try_from(row[0]).ok().and_then(|v| new_index.get(v)).is_some_and(|k| *k >= 0);
-        if inside {
-            kept.push(e);
+    let inside = |v: i64| usize::try_from(v).ok().and_then(|v| new_index.get(v).copied()).filter(|k| *k >= 0);
+    // Agent indices of the taken rows, re-indexed; a neighbour outside the part is refused.
+    let remapped = |a: Array2<i64>| -> Result<Array2<i64>> {
+        let mut out = a;
+        for v in out.iter_mut() {
+            *v = inside(*v)
+                .ok_or_else(|| DganError::InvalidSpec(format!("agent {v} is a neighbour outside the part taken")))?;
         }
-    }
-    let edge_index = inputs.edge_index.select(Axis(0), &kept);
-    let edge_index = edge_index.mapv(|v| remap(v).unwrap_or(-1));
-    if edge_index.iter().any(|v| *v < 0) {
-        return Err(DganError::InvalidSpec("an edge leaves the part taken".into()));
-    }
+        Ok(out)
+    };
+    let kept: Vec<usize> =
+        (0..inputs.edge_index.nrows()).filter(|&e| inside(inputs.edge_index[[e, 0]]).is_some()).collect();
+    let edge_index = remapped(inputs.edge_index.select(Axis(0), &kept))?;
     let neighbors = match &inputs.neighbors {
         Some(nb) => {
-            let index = nb.index.select(Axis(0), rows);
-            let mut out = Array2::<i64>::zeros(index.dim());
-            for (o, v) in out.iter_mut().zip(index.iter()) {
-                *o = remap(*v)?;
-            }
-            Some(Neighbors {
-                index: out,
-                mask: nb.mask.select(Axis(0), rows),
-                features: nb.features.select(Axis(0), rows),
-            })
+            let index = remapped(nb.index.select(Axis(0), rows))?;
+            Some(Neighbors { index, mask: nb.mask.select(Axis(0), rows), features: nb.features.select(Axis(0), rows) })
         }
         None => None,
     };

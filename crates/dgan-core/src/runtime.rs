@@ -195,6 +195,25 @@ pub struct Prediction {
     pub edges: Array2<i64>,
 }
 
+impl Prediction {
+    /// A frame's prediction: its ids, its decoded modes (in frame order) and its graph's edges.
+    fn of(frame: &Frame, d: Decoded, edges: Array2<i64>) -> Self {
+        Self {
+            agent_ids: frame.ids().to_vec(),
+            trajectories: d.trajectories,
+            probabilities: d.probabilities,
+            class_probabilities: d.class_probabilities,
+            mode_classes: d.mode_classes,
+            edges,
+        }
+    }
+}
+
+/// `(E, 2)` the undirected attention-zone edges `[i, j]` as a prediction returns them.
+pub fn edge_array(edges: &[[u32; 2]]) -> Array2<i64> {
+    Array2::from_shape_fn((edges.len(), 2), |(e, k)| i64::from(edges[e][k]))
+}
+
 /// A loaded, contract-checked DGAN model.
 #[derive(Debug)]
 pub struct Predictor {
@@ -498,16 +517,7 @@ impl Predictor {
         let decoded: Vec<Decoded> =
             on_threads(parts.iter().collect(), one, panicked).into_iter().collect::<Result<_>>()?;
         let parts: Vec<(&[usize], Decoded)> = parts.iter().map(Vec::as_slice).zip(decoded).collect();
-        let out = Decoded::gather(pre.poses.len(), &parts)?;
-        let edges = Array2::from_shape_fn((pre.edges.len(), 2), |(e, k)| i64::from(pre.edges[e][k]));
-        Ok(Prediction {
-            agent_ids: frame.ids().to_vec(),
-            trajectories: out.trajectories,
-            probabilities: out.probabilities,
-            class_probabilities: out.class_probabilities,
-            mode_classes: out.mode_classes,
-            edges,
-        })
+        Ok(Prediction::of(frame, Decoded::gather(pre.poses.len(), &parts)?, edge_array(&pre.edges)))
     }
 
     /// Decodes one network call's outputs.
@@ -548,7 +558,8 @@ impl Predictor {
         let preprocess = |part: &[Frame]| -> Vec<Result<Preprocessed>> {
             part.iter().map(|f| preprocess_on(f, spec, &self.limits, 1)).collect()
         };
-        let panicked = || vec![Err(DganError::Inference("a preprocessing thread panicked".into()))];
+        // A panicked thread returns nothing: each of its frames gets the error below.
+        let panicked = Vec::new;
         let done: Vec<Vec<Result<Preprocessed>>> = on_threads(runs.clone(), preprocess, panicked);
         // The first bad frame by index, whichever thread finished first, named in its error.
         let mut pres = Vec::with_capacity(frames.len());
@@ -639,7 +650,7 @@ impl Predictor {
             inputs.push(p.inputs);
             poses.extend(p.poses);
             priors.push(p.prior);
-            edges.push(Array2::from_shape_fn((p.edges.len(), 2), |(e, k)| i64::from(p.edges[e][k])));
+            edges.push(edge_array(&p.edges));
         }
         let (inputs, agent_ptr) = if inputs.len() == 1 {
             let n = poses.len();
@@ -665,14 +676,7 @@ impl Predictor {
             // One frame: its prediction is the whole decode, moved rather than sliced and copied.
             ([frame], Some(d)) => {
                 let edges = edges.pop().ok_or_else(|| DganError::Inference("no edges for the frame".into()))?;
-                return Ok(vec![Prediction {
-                    agent_ids: frame.ids().to_vec(),
-                    trajectories: d.trajectories,
-                    probabilities: d.probabilities,
-                    class_probabilities: d.class_probabilities,
-                    mode_classes: d.mode_classes,
-                    edges,
-                }]);
+                return Ok(vec![Prediction::of(frame, d, edges)]);
             }
             (_, decoded) => decoded,
         };

@@ -71,7 +71,7 @@ pub fn preprocess<'py>(
     d.set_item("heading", pre.poses.iter().map(|p| p.heading()).collect::<Vec<_>>().into_pyarray(py))?;
     d.set_item("speed", pre.states.iter().map(|s| s.speed).collect::<Vec<_>>().into_pyarray(py))?;
     d.set_item("radius", pre.radii.into_pyarray(py))?;
-    let edges = Array2::from_shape_fn((pre.edges.len(), 2), |(e, k)| i64::from(pre.edges[e][k]));
+    let edges = dgan_core::runtime::edge_array(&pre.edges);
     d.set_item("edges", edges.into_pyarray(py))?;
     Ok(d)
 }
