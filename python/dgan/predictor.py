@@ -226,7 +226,7 @@ class Predictor:
         network calls of up to 256 agents (``dgan_core::runtime::BATCH_AGENTS_PER_CALL``) and ``max_input_bytes``
         of inputs; with ``threads`` ≥ 2 the calls run concurrently, one per thread (:attr:`lanes`). Equal to
         :meth:`predict` on each frame, up to float rounding. For 64 real frames of the bundled models: about a loop
-        of :meth:`predict`'s throughput on one thread, and 1.8–2.7× it with ``threads=2`` on two cores
+        of :meth:`predict`'s throughput on one thread, and 1.8–2.3× it with ``threads=2`` on two cores
         (docs/speed.md). Releases the GIL while the engine runs.
 
         ``unknown_classes`` as :meth:`predict`.
