@@ -7,7 +7,8 @@ training code's network in eager PyTorch on its edge-list inputs, and decoding i
 - traffic state (velocity, acceleration, yaw rate, heading by the model's ``heading`` rule), agent-centric
   trajectories and the one-hot state;
 - the attention-zone graph by its O(N²) definition (‖p_i − p_j‖ ≤ r_i + r_j), as an edge list with its features;
-- the kinematic prior (``endpoints``, ``least_squares`` or ``quadratic`` fit over its window, standing agents at 0);
+- the kinematic prior (``endpoints``, ``least_squares``, ``quadratic`` or ``adaptive`` fit over its window, standing
+  agents at 0);
 - the map crops: a raster map resampled bilinearly through its homography; a vector map drawn per agent by a crossing
   test for regions and the distance to each segment for lines (no anti-aliasing, unlike the engine); the agents as
   blue boxes (pixel centres inside the box);
@@ -135,11 +136,40 @@ def window_velocity(traj: Arr, mask: Arr, steps: int, dt: float, fit: str) -> tu
     w = (mask & (t >= (last - steps)[:, None]) & (t <= last[:, None])).astype(np.float64)
     k = w.sum(axis=1)
     tau = (t - last[:, None]).astype(np.float64)
+    if fit == "adaptive":
+        w = adaptive_window(w, tau, traj)
     line = slope(w, tau, traj, 1)
     if fit == "quadratic":
         quad = slope(w, tau, traj, 2)
         line = np.where((k >= 3)[:, None], quad, line)
     return line / dt, k >= 2
+
+
+def adaptive_window(w: Arr, tau: Arr, traj: Arr) -> Arr:
+    """The weights of the most recent m valid steps of each agent's window ``w``, m (at least 2) of least expected
+    squared velocity error: the noise's 2σ² / Σ (t − mean)² plus the lag's |a|² (last − mean)², σ² and a from the
+    least-squares parabola through the whole window (a's sampling variance taken off |a|²); the last two steps where
+    the window holds fewer than four."""
+    n = w.sum(axis=1)
+    powers = np.stack([tau**j for j in range(3)], axis=-1)  # (N, T, 3)
+    normal = np.einsum("nt,nti,ntj->nij", w, powers, powers) + np.eye(3) * 1e-12
+    coef = np.linalg.solve(normal, np.einsum("nt,nti,ntc->nic", w, powers, traj))  # (N, 3, 2)
+    rss = np.einsum("nt,ntc->n", w, (traj - np.einsum("nti,nic->ntc", powers, coef)) ** 2)
+    sigma2 = rss / (2.0 * np.maximum(n - 3, 1))
+    inv_cc = np.linalg.inv(normal)[:, 2, 2]
+    acc2 = np.maximum(4.0 * ((coef[:, 2] ** 2).sum(axis=1) - 2.0 * sigma2 * inv_cc), 0.0)
+    from_end = np.cumsum(w[:, ::-1], axis=1)[:, ::-1]  # valid steps at or after each step
+    cost = np.full((len(w), w.shape[1] + 1), np.inf)
+    for m in range(2, w.shape[1] + 1):
+        wm = w * (from_end <= m)
+        k = wm.sum(axis=1)
+        mean_t = (wm * tau).sum(axis=1) / np.maximum(k, 1)
+        sxx = (wm * (tau - mean_t[:, None]) ** 2).sum(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cost[:, m] = np.where(k == m, 2.0 * sigma2 / sxx + acc2 * mean_t**2, np.inf)
+    m = np.where(n >= 4, np.argmin(cost, axis=1), 2)
+    out: Arr = w * (from_end <= m[:, None])
+    return out
 
 
 def slope(w: Arr, tau: Arr, traj: Arr, degree: int) -> Arr:

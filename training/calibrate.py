@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 import dgan
+from training.config import Config
 from training.data.arrays import Windows
 from training.losses import mode_probabilities
 from training.metrics import worst_gap
@@ -137,18 +138,34 @@ def choose_temperature(
     )
 
 
+#: ``train.calibration_split``: which validation windows the temperature is fitted on (:func:`calibration_config`).
+CALIBRATION_SPLITS = ("all", "own")
+
+
+def calibration_config(cfg: Config) -> Config:
+    """The configuration whose validation split the temperature is fitted on: ``cfg`` itself
+    (``train.calibration_split = "all"``), or ``cfg`` without its ``data.extra_sources`` ("own": the configuration's
+    own dataset's validation windows alone). Raises a ValueError naming the choices for any other value."""
+    split = cfg.train.calibration_split
+    if split not in CALIBRATION_SPLITS:
+        raise ValueError(f"train.calibration_split must be 'all' or 'own', got {split!r}")
+    if split == "own" and cfg.data.extra_sources:
+        return replace(cfg, data=replace(cfg.data, extra_sources=""))
+    return cfg
+
+
 def validation_logits(
     path: Path, data_root: Path | None = None, progress: bool = False
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """:func:`best_mode_logits` of the checkpoint at ``path`` on its configuration's validation split (under
-    ``data_root`` if given), and the class of each of its anchors."""
+    ``data_root`` if given; the windows :func:`calibration_config` names), and the class of each of its anchors."""
     from training.data.splits import split_windows
     from training.export import load_checkpoint
 
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
-    val = split_windows(cfg, spec, "val", progress)
+    val = split_windows(calibration_config(cfg), spec, "val", progress)
     cl, al, best = best_mode_logits(model, val, spec, torch.from_numpy(anchors).float())
     return cl, al, best, torch.from_numpy(class_of).long()
 

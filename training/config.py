@@ -103,6 +103,10 @@ class TrainConfig:
     # further runs of this configuration whose out-of-fold predictions join the temperature's fit beside the
     # validation split's own (training.release.bundle --calibration-fold; training.calibrate.calibrate_checkpoint).
     calibration_folds: str = ""
+    # The validation windows the temperature is fitted on (training.calibrate.calibration_config): "all" (every
+    # window of the validation split, data.extra_sources' included) or "own" (the configuration's own dataset's
+    # alone): a model trained on every source but served for one protocol's scenes calibrated on those scenes.
+    calibration_split: str = "all"
     # One anchor of each class held at a zero residual, the kinematic prior itself, so that "nothing to add" is a mode
     # the classifier can pick (training.anchors.kmeans_anchors); the other anchors are k-means around it.
     zero_anchor: bool = False

@@ -29,12 +29,12 @@ import torch.distributed as dist
 import dgan
 from training.anchors import anchor_windows, fit_anchors
 from training.build import build_model, input_spec, run_name
-from training.calibrate import fit_temperature
+from training.calibrate import calibration_config, fit_temperature
 from training.checkpoint import save_atomic
 from training.config import Config
 from training.data.arrays import Windows
 from training.data.batches import prepared_batch, windows_with_targets
-from training.data.splits import training_splits
+from training.data.splits import split_windows, training_splits
 from training.export import export_checkpoint
 from training.losses import check_anchor_pool, check_cls_target, class_weights
 from training.modules.dgan import DGAN
@@ -84,6 +84,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Confi
     if cfg.train.distill_soft < 0 or (cfg.train.distill_soft > 0 and not cfg.train.distill):
         raise ValueError(f"train.distill_soft must be >= 0 and needs train.distill, got {cfg.train.distill_soft}")
     check_anchor_pool(cfg.train.anchor_pool)
+    calibration_config(cfg)  # refuses an unknown train.calibration_split before any training
     return args, cfg
 
 
@@ -316,6 +317,9 @@ def finish(
     """After the last epoch: the temperature fitted on validation into ``best.pt`` (``train.calibrate``), then the
     ONNX model exported beside it unless ``export`` is false."""
     if cfg.train.calibrate:
+        own = calibration_config(cfg)
+        if own is not cfg:  # train.calibration_split = "own": the own dataset's validation windows alone
+            val = split_windows(own, spec, "val", False)
         calibrate(out / "best.pt", model, val, spec, anchors, class_of)
     if export:
         path = export_checkpoint(out / "best.pt", out / "model.onnx", name=f"dgan-{run_name(cfg)}")

@@ -109,7 +109,9 @@ def fitted_where(cfg: dict[str, Any], whom: str = "") -> str:
     """Where the model's temperature was fitted, in the card's words (``whom``: " for the consensus", say)."""
     folds = declared_folds(cfg)
     if not folds:
-        return f"fitted{whom} on validation"
+        own = cfg["data"].get("extra_sources") and cfg["train"].get("calibration_split", "all") == "own"
+        alone = " scenes alone, not the other sources' (`train.calibration_split`)" if own else ""
+        return f"fitted{whom} on validation{alone}"
     return (
         f"cross-fitted{whom} on {len(folds) + 1} validation folds (its validation split and {len(folds)} more, each "
         "held out in turn by runs of this configuration: `train.calibration_folds`)"
@@ -263,7 +265,7 @@ def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str
 DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on {d["title"]}, with
 {cfg["train"]["anchors_per_class"]} k-means anchors per class and the hierarchical class × anchor probability.
 
-- **Data**: {d["data"]}
+- **Data**: {d["data"]}{joint_words(cfg)}
 - **Protocol**: {d["protocol"]}
 - **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP (speed, acceleration, yaw rate,
   direction of motion, length, width, one-hot class), {map_line}{m["gat_layers"]} GAT layers × {m["gat_heads"]} heads
@@ -285,6 +287,18 @@ DGAN (Dong et al. 2020): **one model for vehicles, cyclists and pedestrians** on
 - **Reproduce**: `python -m training.results {d["reproduce"]}, or
   `python -m training.train --config training/configs/{cfg["data"]["dataset"]}.toml --out runs/{name}`.
 """
+
+
+def joint_words(cfg: dict[str, Any]) -> str:
+    """The card's words for a model trained on other sources too (``data.extra_sources``), empty for one without."""
+    names = cfg["data"].get("extra_sources", "")
+    if not names:
+        return ""
+    return (
+        f" **Also trained on** the training splits of `{names}` (`data.extra_sources`, source:window stride), each "
+        "resampled onto this protocol's time base by the engine, without their maps; their validation splits took "
+        "part in choosing the epoch; their licences apply too (non-commercial research use only)."
+    )
 
 
 def distill_words(name: str, cfg: dict[str, Any]) -> str:

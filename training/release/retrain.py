@@ -94,30 +94,24 @@ def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: 
 #: The seeds of each bundled ensemble's members (``training.ensemble``), chosen on validation (`docs/seed_study.json`).
 #: HD map: one network since the standing agents, the robust prior and the noisy copies (issue 26: one network per
 #: model); its single run was below the earlier five-run consensus on validation, all targets (0.476 against 0.576 m).
+#: Since 2026-12-04 trained on every source (issue 25), without a teacher.
 #: ETH/UCY: three runs were 3.3–4.4% below their
 #: members on every fold's validation split, five runs 0.6–1.4% below three on every fold's (rule set before the
 #: runs: lower on average and on four folds of five). ApolloScape: three runs, 2.8% below its members on validation.
 ENSEMBLE_SEEDS = {"hdmap": (0,), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1, 2)}
 
 
-#: The bundled hdmap's student (issue 26): the map CNN keeps only its second residual block (3.95 against 5.30 MFLOP
-#: an agent), distilled from one run of hdmap.toml; on validation it was ahead of that run (engine top-1 below).
-HDMAP_STUDENT = ("--set", "model.map_res_blocks=1")
-
-
 def train_hdmap(root: Path) -> None:
-    """Trains the HD-map model with and without its map, one run per seed of :data:`ENSEMBLE_SEEDS`; bundles the
-    slimmer student (:data:`HDMAP_STUDENT`) of the first configuration's run as ``hdmap``, that run kept as its teacher,
-    and keeps the second's as ``training/checkpoints/baselines/hdmap-nomap.pt``."""
+    """Trains the HD-map model with and without its map (both on every source, ``data.extra_sources``), one run per
+    seed of :data:`ENSEMBLE_SEEDS`; bundles the first configuration's run as ``hdmap`` and keeps the second's as
+    ``training/checkpoints/baselines/hdmap-nomap.pt``."""
     from training.release.bundle import bundle
 
     runs = {
         config: _seed_runs(ROOT / "training" / "configs" / f"{config}.toml", root, ENSEMBLE_SEEDS["hdmap"], config)
         for config in ("hdmap", "hdmap_nomap")
     }
-    toml = ROOT / "training" / "configs" / "hdmap.toml"
-    student = _student(runs["hdmap"], TEACHERS / "hdmap.pt", toml, root, "hdmap_student", *HDMAP_STUDENT)
-    bundle(student, "hdmap", root)
+    bundle(runs["hdmap"], "hdmap", root)
     if len(runs["hdmap_nomap"]) > 1:
         ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)
         fit_top_scale(hdmap.NOMAP, root)

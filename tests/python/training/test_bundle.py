@@ -17,6 +17,7 @@ from training.release.cards import (
     extra_data_line,
     extra_licence_line,
     fitted_where,
+    joint_words,
 )
 
 
@@ -77,3 +78,16 @@ def test_the_fold_runs_must_hold_out_the_declared_splits(tmp_path: Path) -> None
         check_folds(declared, [a])
     with pytest.raises(ValueError, match="declares the validation splits none"):
         check_folds(cfg(), [a])
+
+
+def test_other_sources_and_where_the_temperature_was_fitted_are_named() -> None:
+    assert joint_words(cfg()) == ""
+    joint = {"data": {"extra_sources": "ethucy_5hz:3"}, "train": {}}
+    words = joint_words(joint)
+    assert "`ethucy_5hz:3`" in words
+    assert "non-commercial research use only" in words
+    assert fitted_where(joint) == "fitted on validation"
+    own = {"data": joint["data"], "train": {"calibration_split": "own"}}
+    assert fitted_where(own) == "fitted on validation scenes alone, not the other sources' (`train.calibration_split`)"
+    # Without other sources every validation window is the model's own: nothing to say.
+    assert fitted_where({"data": {}, "train": {"calibration_split": "own"}}) == "fitted on validation"

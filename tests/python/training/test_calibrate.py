@@ -1,5 +1,6 @@
 """training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, the
-choice itself on best modes drawn at a known temperature, and a temperature cross-fitted over validation folds."""
+choice itself on best modes drawn at a known temperature, a temperature cross-fitted over validation folds, and
+the validation windows it is fitted on (train.calibration_split)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from training.build import build_model, input_spec
 from training.calibrate import (
     best_mode_brier,
     calibrate_checkpoint,
+    calibration_config,
     choose_temperature,
     reliability_gap,
     validation_logits,
@@ -96,3 +98,18 @@ def test_a_cross_fitted_temperature_pools_every_folds_validation_split(tmp_path:
     with pytest.raises(ValueError, match="folds must share a configuration"):
         calibrate_checkpoint(main, folds=[odd])
     assert torch.load(main, weights_only=False)["temperature"] == pooled.temperature
+
+
+def test_the_calibration_split_names_the_validation_windows_of_the_fit() -> None:
+    joint = Config.from_dict(
+        {"name": "hdmap", "data": {"dataset": "hdmap", "extra_sources": "ethucy_5hz:3,sdd_5hz:20"}, "train": {}}
+    )
+    # "all" (the default): every validation window of the configuration, the extra sources' too.
+    assert calibration_config(joint) is joint
+    # "own": the configuration's own dataset's alone; everything else as configured.
+    own = calibration_config(Config.from_dict({**asdict(joint), "train": {"calibration_split": "own"}}))
+    assert own.data.extra_sources == ""
+    assert (own.data.dataset, own.train.calibration_split) == ("hdmap", "own")
+    assert own.data.augment_noise == joint.data.augment_noise
+    with pytest.raises(ValueError, match=r"train\.calibration_split must be 'all' or 'own', got 'every'"):
+        calibration_config(Config.from_dict({"train": {"calibration_split": "every"}}))
