@@ -147,9 +147,9 @@ def window_velocity(traj: Arr, mask: Arr, steps: int, dt: float, fit: str) -> tu
 
 def adaptive_window(w: Arr, tau: Arr, traj: Arr) -> Arr:
     """The weights of the most recent m valid steps of each agent's window ``w``, m (at least 2) of least expected
-    squared velocity error: the noise's 2σ² / Σ (t − mean)² plus the lag's |a|² (last − mean)², σ² and a from the
-    least-squares parabola through the whole window (a's sampling variance taken off |a|²); the last two steps where
-    the window holds fewer than four."""
+    squared velocity error: the noise's 2 var / sum (t - mean)^2 plus the lag's |a|^2 (last - mean)^2, the noise
+    variance and the acceleration a from the least-squares parabola through the whole window (a's sampling variance
+    taken off |a|^2); the last two steps where the window holds fewer than four (the engine's ``adaptive_span``)."""
     n = w.sum(axis=1)
     powers = np.stack([tau**j for j in range(3)], axis=-1)  # (N, T, 3)
     normal = np.einsum("nt,nti,ntj->nij", w, powers, powers) + np.eye(3) * 1e-12
@@ -167,8 +167,8 @@ def adaptive_window(w: Arr, tau: Arr, traj: Arr) -> Arr:
         sxx = (wm * (tau - mean_t[:, None]) ** 2).sum(axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             cost[:, m] = np.where(k == m, 2.0 * sigma2 / sxx + acc2 * mean_t**2, np.inf)
-    m = np.where(n >= 4, np.argmin(cost, axis=1), 2)
-    out: Arr = w * (from_end <= m[:, None])
+    span = np.where(n >= 4, np.argmin(cost, axis=1), 2)
+    out: Arr = w * (from_end <= span[:, None])
     return out
 
 
