@@ -34,7 +34,7 @@ from training.checkpoint import save_atomic
 from training.config import Config
 from training.data.arrays import Windows
 from training.data.batches import prepared_batch, windows_with_targets
-from training.data.splits import split_windows, training_splits
+from training.data.splits import split_windows, target_class_index, training_splits
 from training.export import export_checkpoint
 from training.losses import check_anchor_pool, check_cls_target, class_weights
 from training.modules.dgan import DGAN
@@ -298,10 +298,16 @@ def training_data(
         anchors, class_of = ckpt["anchors"], ckpt["class_of"]
     else:
         anchors, class_of = fit_anchors(cfg, anchor_windows(cfg, data.parts, data.train), spec, len(spec.classes))
-    if data.target_class is not None:  # a per-class run: only that class's agents stay targets, after the anchors
-        for w in (data.train, data.val):
-            w.target &= w.class_index == data.target_class
+    for w in (data.train, data.val):  # after the anchors
+        only_target_class(w, data.target_class)
     return data.train, data.val, anchors, class_of
+
+
+def only_target_class(w: Windows, target_class: int | None) -> None:
+    """Keeps as targets of ``w`` only the agents of ``target_class`` (a per-class run's, ``data.target_class``);
+    every target stays for None."""
+    if target_class is not None:
+        w.target &= w.class_index == target_class
 
 
 def finish(
@@ -320,6 +326,7 @@ def finish(
         own = calibration_config(cfg)
         if own is not cfg:  # train.calibration_split = "own": the own dataset's validation windows alone
             val = split_windows(own, spec, "val", False)
+            only_target_class(val, target_class_index(cfg.data.target_class, spec))
         calibrate(out / "best.pt", model, val, spec, anchors, class_of)
     if export:
         path = export_checkpoint(out / "best.pt", out / "model.onnx", name=f"dgan-{run_name(cfg)}")
