@@ -97,18 +97,21 @@ def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
 
         from training.data.batches import INPUTS
         from training.export import load_checkpoint
-        from training.losses import decode_torch
+        from training.losses import Calibration, decode_torch
     except ImportError:
         return None
     torch.set_num_threads(1)
     ckpt = ROOT / "training" / "checkpoints" / f"{name}.pt"
-    model, _, anchors, class_of, _, temperature = load_checkpoint(ckpt)
+    model, spec, anchors, class_of, _, _ = load_checkpoint(ckpt)
+    cal = Calibration.of(torch.load(ckpt, weights_only=False))
     a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
 
     def run(x: dict[str, np.ndarray]) -> Any:
         with torch.no_grad():
             cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
-            return decode_torch(cl, al, off, a, c, torch.from_numpy(x["prior"]), temperature)
+            prior = torch.from_numpy(x["prior"])
+            t = cal.anchor_temperatures(prior, spec.dt_s)
+            return decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature)
 
     return run
 

@@ -12,7 +12,8 @@ training code's network in eager PyTorch on its edge-list inputs, and decoding i
 - the map crops: a raster map resampled bilinearly through its homography; a vector map drawn per agent by a crossing
   test for regions and the distance to each segment for lines (no anti-aliasing, unlike the engine); the agents as
   blue boxes (pixel centres inside the box);
-- decoding: p(c) · p(k | c) with the temperature, modes sorted, taken back to the world.
+- decoding: p(c) · p(k | c) with the temperatures (contract 9's speed-dependent one too), modes sorted, taken back to
+  the world.
 
 It is checked against the engine in ``tests/python/benches/test_research.py`` (the same tensors to float32
 rounding, the crops of a raster map to a grey level, those of a vector map up to the anti-aliased edges). This is a
@@ -397,8 +398,11 @@ def decode(outputs: tuple[Arr, Arr, Arr], x: dict[str, Arr], contract_: dict[str
     classes = list(contract_["classes"])
     anchors = np.concatenate([np.asarray(contract_["anchors"][c], dtype=np.float64) for c in classes])
     class_of = np.concatenate([np.full(len(contract_["anchors"][c]), k) for k, c in enumerate(classes)])
-    p_class = softmax(class_logits)
-    t = float(contract_.get("temperature", 1.0))
+    p_class = softmax(class_logits / float(contract_.get("class_temperature", 1.0)))
+    # Contract 9: the anchor temperature grows with the speed of the prior, whose first step is velocity · dt.
+    speed = np.linalg.norm(x["prior"][:, 0].astype(np.float64), axis=1) / float(contract_["dt_s"])
+    exponent = float(contract_.get("temperature_speed_exponent", 0.0))
+    t = np.clip(float(contract_.get("temperature", 1.0)) * (1.0 + speed) ** exponent, 1e-3, 1e3)[:, None]
     p = np.zeros_like(anchor_logits)
     for k in range(len(classes)):
         block = class_of == k

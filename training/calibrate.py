@@ -1,9 +1,17 @@
-"""Calibration of the mode probabilities: one temperature T of the anchor logits, p(k | c) = softmax(logits / T),
-fitted on a validation split. The event is the best mode (the mode closest to the ground truth by ADE, which the
-reliability diagram of :mod:`training.evaluate` counts). Two proper scores are minimised over a grid of T: the best
-mode's negative log-likelihood and the Brier score of the best-mode indicator (which weighs the probable modes more);
-of the two temperatures, the one whose validation reliability is closer in the bins the must-show checks (p ≥ 0.3,
-at least 30 modes: :func:`training.metrics.worst_gap`) is kept. The engine applies it in decoding (contract 2).
+"""Calibration of the mode probabilities, fitted on a validation split. The event is the best mode (the mode closest
+to the ground truth by ADE, which the reliability diagram of :mod:`training.evaluate` counts).
+
+``train.calibration = "temperature"`` (contract 2): one temperature T of the anchor logits, p(k | c) =
+softmax(logits / T). Two proper scores are minimised over a grid of T: the best mode's negative log-likelihood and
+the Brier score of the best-mode indicator (which weighs the probable modes more); of the two temperatures, the one
+whose validation reliability is closer in the bins the must-show checks (p ≥ 0.3, at least 30 modes:
+:func:`training.metrics.worst_gap`) is kept.
+
+``"speed_class"`` (contract 9): T_i = T · (1 + v_i)^b for an agent whose prior moves at v_i m/s, and p(c) =
+softmax(class logits / T_c); T, b and T_c fitted together by the Brier score (Nelder-Mead from the best of a few
+starting class temperatures, since the score has more than one minimum). Fast agents' top modes are rarely the best
+of K and standing agents' often; a model whose class is an input has p(c) ≈ 1 although its best mode is often
+another class's anchor. The engine applies either in decoding (:class:`training.losses.Calibration`).
 """
 
 from __future__ import annotations
@@ -11,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -19,22 +27,50 @@ import torch
 import dgan
 from training.config import Config
 from training.data.arrays import Windows
-from training.losses import mode_probabilities
+from training.losses import Calibration, mode_probabilities
 from training.metrics import worst_gap
+
+#: ``train.calibration``: what is fitted (:func:`fit_calibration`).
+CALIBRATIONS = ("temperature", "speed_class")
+#: The class temperatures ``"speed_class"``'s search starts from (log-spaced, 1/e to e³).
+CLASS_TEMPERATURE_STARTS = np.exp(np.linspace(-1.0, 3.0, 9))
 
 #: The temperatures tried, log-spaced.
 GRID = np.exp(np.linspace(np.log(0.05), np.log(20.0), 121))
 
 
+class BestModes(NamedTuple):
+    """Per validation target: class logits ``(N, C)``, anchor logits ``(N, K)``, the index of its best mode (smallest
+    ADE) and the speed of its kinematic prior (m/s)."""
+
+    class_logits: torch.Tensor
+    anchor_logits: torch.Tensor
+    best: torch.Tensor
+    speed: torch.Tensor
+
+    def probabilities(self, class_of: torch.Tensor, cal: Calibration) -> torch.Tensor:
+        """``(N, K)`` the mode probabilities under ``cal``, as the engine decodes them."""
+        t: float | torch.Tensor = cal.temperature
+        if cal.speed_exponent != 0.0:
+            t = cal.at_speed(self.speed).to(self.anchor_logits.dtype)
+        return mode_probabilities(self.class_logits, self.anchor_logits, class_of, t, cal.class_temperature)
+
+    @staticmethod
+    def joined(parts: Sequence[BestModes]) -> BestModes:
+        """Several splits' targets as one."""
+        return BestModes(*(torch.cat(x) for x in zip(*parts, strict=True)))
+
+
 @torch.no_grad()
 def best_mode_logits(
     model: torch.nn.Module, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, batch: int = 64
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """For every target of ``w``: class logits, anchor logits and the index of its best mode (smallest ADE)."""
+) -> BestModes:
+    """For every target of ``w``: class logits, anchor logits, the index of its best mode (smallest ADE) and the
+    speed of its prior."""
     from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
 
     model.eval()
-    cls, anc, best = [], [], []
+    cls, anc, best, speed = [], [], [], []
     keep = windows_with_targets(w)
     for start in range(0, len(keep), batch):
         b = prepared_batch(w, keep[start : start + batch], spec)
@@ -45,7 +81,8 @@ def best_mode_logits(
         cls.append(cl[t])
         anc.append(al[t])
         best.append(ade.argmin(dim=1))
-    return torch.cat(cls), torch.cat(anc), torch.cat(best)
+        speed.append(torch.linalg.norm(b["prior"][t][:, 0].double(), dim=-1) / spec.dt_s)
+    return BestModes(torch.cat(cls), torch.cat(anc), torch.cat(best), torch.cat(speed))
 
 
 def best_mode_log_loss(p: torch.Tensor, best: torch.Tensor) -> float:
@@ -91,30 +128,57 @@ class TemperatureFit:
     gap_after: float
     targets: int = 0
     folds: int = 1
+    speed_exponent: float = 0.0
+    class_temperature: float = 1.0
+
+    @property
+    def calibration(self) -> Calibration:
+        """What the engine decodes with."""
+        return Calibration(self.temperature, self.speed_exponent, self.class_temperature)
 
     def __str__(self) -> str:
         where = "validation" if self.folds == 1 else f"{self.folds} validation folds"
+        extra = ""
+        if (self.speed_exponent, self.class_temperature) != (0.0, 1.0):
+            extra = f" x (1 + v)^{self.speed_exponent:.3f}, class temperature {self.class_temperature:.3f}"
         return (
-            f"temperature {self.temperature:.3f} (by {self.objective}; {self.targets} targets of {where}): "
+            f"temperature {self.temperature:.3f}{extra} (by {self.objective}; {self.targets} targets of {where}): "
             f"best-mode NLL {self.nll_before:.4f} -> {self.nll_after:.4f}, worst reliability gap "
             f"{self.gap_before:.3f} -> {self.gap_after:.3f}"
         )
 
 
 def fit_temperature(
-    model: torch.nn.Module, w: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor
+    model: torch.nn.Module,
+    w: Windows,
+    spec: dgan.InputSpec,
+    anchors: torch.Tensor,
+    class_of: torch.Tensor,
+    kind: str = "temperature",
 ) -> TemperatureFit:
-    """The temperature of smallest best-mode NLL on ``w`` and the one of smallest Brier score; keeps the one whose
-    worst checked reliability gap on ``w`` is smaller (the NLL's on a tie)."""
-    cl, al, best = best_mode_logits(model, w, spec, anchors)
-    return choose_temperature(cl, al, best, class_of)
+    """:func:`fit_calibration` of the model's predictions on ``w``."""
+    return fit_calibration(kind, best_mode_logits(model, w, spec, anchors), class_of)
+
+
+def check_calibration(kind: str) -> None:
+    """Raises a ValueError naming the choices unless ``kind`` is one of :data:`CALIBRATIONS`."""
+    if kind not in CALIBRATIONS:
+        raise ValueError(f"train.calibration must be one of {', '.join(CALIBRATIONS)}, got {kind!r}")
+
+
+def fit_calibration(kind: str, modes: BestModes, class_of: torch.Tensor) -> TemperatureFit:
+    """The ``train.calibration`` named ``kind`` fitted on ``modes`` (:func:`check_calibration`)."""
+    check_calibration(kind)
+    single = choose_temperature(modes.class_logits, modes.anchor_logits, modes.best, class_of)
+    return single if kind == "temperature" else fit_speed_class(modes, class_of, single)
 
 
 def choose_temperature(
     cl: torch.Tensor, al: torch.Tensor, best: torch.Tensor, class_of: torch.Tensor
 ) -> TemperatureFit:
-    """:func:`fit_temperature` given class logits ``cl (N, C)``, anchor logits ``al (N, K)``, the best modes
-    ``best (N,)`` and each anchor's class ``class_of (K,)``."""
+    """The temperature of smallest best-mode NLL and the one of smallest Brier score, given class logits
+    ``cl (N, C)``, anchor logits ``al (N, K)``, the best modes ``best (N,)`` and each anchor's class
+    ``class_of (K,)``; keeps the one whose worst checked reliability gap is smaller (the NLL's on a tie)."""
     nll, brier = [], []
     for t in GRID:
         p = mode_probabilities(cl, al, class_of, float(t))
@@ -138,6 +202,34 @@ def choose_temperature(
     )
 
 
+def fit_speed_class(modes: BestModes, class_of: torch.Tensor, single: TemperatureFit) -> TemperatureFit:
+    """``"speed_class"``: log T, b and log T_c minimising the best mode's Brier score on ``modes``, searched
+    (Nelder-Mead) from the start of smallest score among ``single``'s temperature with b = 0 and each of
+    :data:`CLASS_TEMPERATURE_STARTS`."""
+    from scipy.optimize import minimize
+
+    def calibration(x: np.ndarray) -> Calibration:
+        log_t, b, log_tc = (float(v) for v in np.clip(x, -6.9, 6.9))
+        return Calibration(float(np.exp(log_t)), b, float(np.exp(log_tc)))
+
+    def score(x: np.ndarray) -> float:
+        return best_mode_brier(modes.probabilities(class_of, calibration(x)), modes.best)
+
+    starts = [np.array([np.log(single.temperature), 0.0, np.log(tc)]) for tc in CLASS_TEMPERATURE_STARTS]
+    x0 = min(starts, key=score)
+    found = calibration(minimize(score, x0, method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-6}).x)
+    p = modes.probabilities(class_of, found)
+    return replace(
+        single,
+        temperature=found.temperature,
+        speed_exponent=found.speed_exponent,
+        class_temperature=found.class_temperature,
+        objective="brier (speed, class)",
+        nll_after=best_mode_log_loss(p, modes.best),
+        gap_after=reliability_gap(p, modes.best),
+    )
+
+
 #: ``train.calibration_split``: which validation windows the temperature is fitted on (:func:`calibration_config`).
 CALIBRATION_SPLITS = ("all", "own")
 
@@ -156,7 +248,7 @@ def calibration_config(cfg: Config) -> Config:
 
 def validation_logits(
     path: Path, data_root: Path | None = None, progress: bool = False
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+) -> tuple[BestModes, torch.Tensor]:
     """:func:`best_mode_logits` of the checkpoint at ``path`` on its configuration's validation split (under
     ``data_root`` if given; the windows :func:`calibration_config` names), and the class of each of its anchors."""
     from training.data.splits import split_windows
@@ -166,29 +258,45 @@ def validation_logits(
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = split_windows(calibration_config(cfg), spec, "val", progress)
-    cl, al, best = best_mode_logits(model, val, spec, torch.from_numpy(anchors).float())
-    return cl, al, best, torch.from_numpy(class_of).long()
+    return best_mode_logits(model, val, spec, torch.from_numpy(anchors).float()), torch.from_numpy(class_of).long()
 
 
 def calibrate_checkpoint(
     path: Path, data_root: Path | None = None, progress: bool = False, folds: Sequence[Path] = ()
 ) -> TemperatureFit:
-    """Fits the temperature of the checkpoint at ``path`` (one run's or an ensemble's, ``training.ensemble``) on its
-    configuration's validation split (under ``data_root`` if given) and stores it there.
+    """Fits the calibration (``train.calibration``) of the checkpoint at ``path`` (one run's or an ensemble's,
+    ``training.ensemble``) on its configuration's validation split (under ``data_root`` if given) and stores it
+    there.
 
     ``folds``: checkpoints of the same configuration trained with other validation splits (cross-fitting,
     ``data.val_recordings``); their predictions on their own validation splits join the fit, which then sees every
     fold's validation data instead of one split's."""
     from training.checkpoint import update_checkpoint
 
-    cl, al, best, class_of = validation_logits(path, data_root, progress)
-    parts = [(cl, al, best)]
+    modes, class_of = validation_logits(path, data_root, progress)
+    parts = [modes]
     for fold in folds:
-        fold_cl, fold_al, fold_best, fold_class_of = validation_logits(fold, data_root, progress)
+        fold_modes, fold_class_of = validation_logits(fold, data_root, progress)
         if not torch.equal(fold_class_of, class_of):
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
-        parts.append((fold_cl, fold_al, fold_best))
-    cl, al, best = (torch.cat(x) for x in zip(*parts, strict=True))
-    found = replace(choose_temperature(cl, al, best, class_of), folds=len(parts))
-    update_checkpoint(path, temperature=found.temperature)
+        parts.append(fold_modes)
+    kind = calibration_kind(torch.load(path, weights_only=False))
+    found = replace(fit_calibration(kind, BestModes.joined(parts), class_of), folds=len(parts))
+    update_checkpoint(path, **calibration_keys(found.calibration))
     return found
+
+
+def calibration_kind(ckpt: dict[str, Any]) -> str:
+    """The ``train.calibration`` of a checkpoint (an ensemble's: its first member's; "temperature" for one saved
+    before the option)."""
+    cfg = ckpt["members"][0]["config"] if "members" in ckpt else ckpt["config"]
+    return str(cfg["train"].get("calibration", "temperature"))
+
+
+def calibration_keys(cal: Calibration) -> dict[str, float]:
+    """What a checkpoint stores of ``cal``: every key, so that a refit replaces an earlier one's."""
+    return {
+        "temperature": cal.temperature,
+        "temperature_speed_exponent": cal.speed_exponent,
+        "class_temperature": cal.class_temperature,
+    }

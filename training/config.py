@@ -107,6 +107,10 @@ class TrainConfig:
     # window of the validation split, data.extra_sources' included) or "own" (the configuration's own dataset's
     # alone): a model trained on every source but served for one protocol's scenes calibrated on those scenes.
     calibration_split: str = "all"
+    # What is fitted (training.calibrate.CALIBRATIONS): "temperature" (one temperature of the anchor logits, contract
+    # 2) or "speed_class" (contract 9: a temperature growing with the prior's speed and one of the class logits,
+    # fitted together by the Brier score of the best mode).
+    calibration: str = "temperature"
     # One anchor of each class held at a zero residual, the kinematic prior itself, so that "nothing to add" is a mode
     # the classifier can pick (training.anchors.kmeans_anchors); the other anchors are k-means around it.
     zero_anchor: bool = False

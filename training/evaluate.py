@@ -21,11 +21,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 
 import dgan
 from training import metrics
 from training.data.datasets import DATASETS, recordings
 from training.data.windows import iter_windows, noisy_window
+from training.losses import Calibration
 
 #: Edges of the probability bins of the reliability diagram.
 CALIBRATION_BINS = np.array([0.0, 0.02, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
@@ -145,7 +147,7 @@ def evaluate(
         )
     per: dict[str, list[np.ndarray]] = {}
     labels, classes, pred_class, mode_p, mode_p_raw, mode_hit, moving = [], [], [], [], [], [], []
-    temperature = float(predictor.contract.get("temperature", 1.0))
+    cal = Calibration.of(predictor.contract)
     windows = 0
     model_classes = list(predictor.classes)
     use_map = with_map and spec.map is not None
@@ -161,7 +163,8 @@ def evaluate(
         pred_class.append(sub.class_probabilities.argmax(axis=1))
         ade_all = metrics.displacement(sub.trajectories, sw.truth).mean(axis=2)  # (n, K)
         mode_p.append(sub.probabilities.ravel())
-        mode_p_raw.append(untempered(sub, temperature).ravel())
+        speed = prior_speeds(sw.frame, spec)[sw.target] if cal.speed_exponent != 0.0 else None
+        mode_p_raw.append(untempered(sub, cal, speed).ravel())
         mode_hit.append((ade_all == ade_all.min(axis=1, keepdims=True)).ravel())
     flat = {k: np.concatenate(v) for k, v in per.items()}
     label = np.concatenate(labels)
@@ -181,7 +184,9 @@ def evaluate(
     out["class_accuracy"] = float((np.concatenate(pred_class) == klass).mean())
     hits = np.concatenate(mode_hit)
     out["calibration"] = calibration(np.concatenate(mode_p), hits)
-    out["temperature"] = temperature
+    out["temperature"] = cal.temperature
+    if cal != Calibration(cal.temperature):  # contract 9's terms
+        out.update(temperature_speed_exponent=cal.speed_exponent, class_temperature=cal.class_temperature)
     out["calibration_t1"] = calibration(np.concatenate(mode_p_raw), hits)
     return out
 
@@ -211,16 +216,44 @@ def rows_of(pred: dgan.Prediction, rows: np.ndarray, unit: float = 1.0) -> dgan.
     )
 
 
-def untempered(pred: dgan.Prediction, temperature: float) -> np.ndarray:
-    """``(N, M)`` the mode probabilities the model would give at temperature 1, from those at ``temperature``
-    (all K modes needed): p(k | c) at T is softmax(l / T), so p(k | c) at 1 is proportional to p(k | c)^T."""
+def prior_speeds(frame: dgan.Frame, spec: dgan.InputSpec) -> np.ndarray:
+    """``(N,)`` the speed (m/s) of each agent's kinematic prior, what a speed-dependent temperature reads (the
+    engine's preprocessing without the map, which the prior does not use)."""
+    prior = dgan.preprocess(frame, replace(spec, map=None), threads=1)["prior"]
+    out: np.ndarray = np.linalg.norm(prior[:, 0].astype(np.float64), axis=1) / spec.dt_s
+    return out
+
+
+def untempered(pred: dgan.Prediction, cal: Calibration | float, speed: np.ndarray | None = None) -> np.ndarray:
+    """``(N, M)`` the mode probabilities the model would give at temperature 1, from those it gave under ``cal``
+    (all K modes needed; ``speed (N,)`` the agents' prior speeds when ``cal`` depends on speed): p(k | c) at T is
+    softmax(l / T), so p(k | c) at 1 is proportional to p(k | c)^T; likewise p(c) and the class temperature."""
+    cal = cal if isinstance(cal, Calibration) else Calibration(float(cal))
     prob = pred.probabilities
-    if temperature == 1.0 or prob.size == 0:
+    if cal == Calibration() or prob.size == 0:
         return prob
+    t: float | np.ndarray = cal.temperature
+    if cal.speed_exponent != 0.0:
+        if speed is None:
+            raise ValueError("a speed-dependent temperature needs the agents' prior speeds")
+        t = cal.at_speed(torch.from_numpy(np.asarray(speed, dtype=np.float64))).numpy()
     rows = np.arange(len(prob))[:, None]
     pc = pred.class_probabilities[rows, pred.mode_classes]
-    pk = (prob / np.maximum(pc, 1e-300)) ** temperature
-    out: np.ndarray = pc * per_class_normalised(pk, pred.mode_classes)
+    pk = (prob / np.maximum(pc, 1e-300)) ** t
+    out: np.ndarray = untempered_classes(pred, cal)[rows, pred.mode_classes] * per_class_normalised(
+        pk, pred.mode_classes
+    )
+    return out
+
+
+def untempered_classes(pred: dgan.Prediction, cal: Calibration) -> np.ndarray:
+    """``(N, C)`` the class probabilities at class temperature 1, from those under ``cal``: softmax(l / T_c) at 1 is
+    proportional to its value at T_c raised to T_c."""
+    if cal.class_temperature == 1.0:
+        return pred.class_probabilities
+    log_p = cal.class_temperature * np.log(np.maximum(pred.class_probabilities, 1e-300))
+    p = np.exp(log_p - log_p.max(axis=1, keepdims=True))
+    out: np.ndarray = p / p.sum(axis=1, keepdims=True)
     return out
 
 

@@ -17,11 +17,12 @@ from dgan import _dgan
 from dgan.contract import OUTPUTS as CONTRACT_OUTPUTS
 from dgan.contract import PADDED_INPUTS, PREPROCESS_VERSION, RASTER_VERSION
 from training.config import Config
+from training.losses import Calibration
 from training.modules.dgan import DGAN, ConsensusEnsemble
 
 OUTPUTS = list(CONTRACT_OUTPUTS)
 #: What a bundled checkpoint keeps of a run's ``best.pt`` (export and the parity test need no optimizer state).
-SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature")
+SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature", *Calibration.KEYS)
 #: The inputs of an exported model (contract 3, the padded neighbour layout), in ``DGAN.forward_padded``'s order.
 INPUTS = PADDED_INPUTS
 
@@ -72,8 +73,11 @@ def contract(
     class_of: np.ndarray,
     name: str,
     description: str,
-    temperature: float = 1.0,
+    temperature: float | Calibration = 1.0,
 ) -> dict[str, Any]:
+    """The contract of an export: ``temperature`` a single temperature of the anchor logits or a contract-9
+    :class:`~training.losses.Calibration` (its keys written only where they differ from a single temperature)."""
+    cal = temperature if isinstance(temperature, Calibration) else Calibration(float(temperature))
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
@@ -82,7 +86,7 @@ def contract(
         preprocess_version=PREPROCESS_VERSION,
         units="m",
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
-        temperature=round(float(temperature), 6),
+        **cal.keys(),
         name=name,
         description=description,
         weights_sha256=UNSEALED,
@@ -142,10 +146,10 @@ def export_model(
     path: Path,
     name: str,
     description: str = "",
-    temperature: float = 1.0,
+    temperature: float | Calibration = 1.0,
 ) -> Path:
     """Exports under the contract (version 3: the padded neighbour layout, whatever layout the model trained on);
-    anchors must be grouped by class in the spec's class order."""
+    anchors must be grouped by class in the spec's class order. ``temperature``: as :func:`contract`."""
     from training.modules.dgan import PaddedDGAN
 
     spec = replace(spec, graph="padded")
@@ -209,8 +213,10 @@ def store_half(m: onnx.ModelProto) -> int:
 
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
-    model, spec, anchors, class_of, _, temperature = load_checkpoint(ckpt)
-    return export_model(model, spec, anchors, class_of, path, name, description, temperature)
+    """Exports the checkpoint at ``ckpt`` with the calibration it holds."""
+    model, spec, anchors, class_of, _, _ = load_checkpoint(ckpt)
+    calibration = Calibration.of(torch.load(ckpt, weights_only=False))
+    return export_model(model, spec, anchors, class_of, path, name, description, calibration)
 
 
 def main() -> None:

@@ -4,6 +4,10 @@ anchors, or among all with ``train.anchor_pool = "all_classes"``; c* is k*'s cla
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
 import torch
 from torch import Tensor
 
@@ -107,11 +111,67 @@ def class_weights(class_index: Tensor, num_classes: int, power: float) -> Tensor
     return w.to(torch.float32)
 
 
+#: The temperatures an agent may get (the engine's ``Calibration::MIN_TEMPERATURE`` and ``MAX_TEMPERATURE``).
+MIN_TEMPERATURE, MAX_TEMPERATURE = 1e-3, 1e3
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """How the logits become probabilities, as the engine decodes (contract 9): p(c) = softmax(class logits /
+    ``class_temperature``), p(k | c) = softmax(anchor logits / T_i) with T_i = ``temperature`` · (1 + v_i) ^
+    ``speed_exponent``, v_i the speed of agent i's kinematic prior (m/s). The defaults are contract 2's single
+    temperature of 1."""
+
+    temperature: float = 1.0
+    speed_exponent: float = 0.0
+    class_temperature: float = 1.0
+
+    #: The checkpoint and contract keys of the two contract-9 terms (``temperature`` keeps its own).
+    KEYS: ClassVar[tuple[str, ...]] = ("temperature_speed_exponent", "class_temperature")
+
+    @classmethod
+    def of(cls, ckpt: Mapping[str, Any]) -> Calibration:
+        """The calibration a checkpoint or a model's contract holds (the same keys; a single temperature of 1 for
+        one without)."""
+        return cls(
+            float(ckpt.get("temperature", 1.0)),
+            float(ckpt.get("temperature_speed_exponent", 0.0)),
+            float(ckpt.get("class_temperature", 1.0)),
+        )
+
+    def keys(self) -> dict[str, float]:
+        """The checkpoint and contract keys, rounded as the contract stores them: the temperature, and the
+        contract-9 terms where they differ from a single temperature's (so that such a model reads as before)."""
+        out = {"temperature": round(self.temperature, 6)}
+        if self.speed_exponent != 0.0:
+            out["temperature_speed_exponent"] = round(self.speed_exponent, 6)
+        if self.class_temperature != 1.0:
+            out["class_temperature"] = round(self.class_temperature, 6)
+        return out
+
+    def anchor_temperatures(self, prior: Tensor | None, dt_s: float) -> float | Tensor:
+        """Each agent's temperature of the anchor logits ``(N, 1)`` given the kinematic ``prior (N, T_f, 2)`` (its
+        first step is the velocity times ``dt_s``), or the single temperature when the speed plays no part."""
+        if self.speed_exponent == 0.0 or prior is None:
+            return self.temperature
+        return self.at_speed(torch.linalg.norm(prior[:, 0].double(), dim=-1) / dt_s).to(prior.dtype)
+
+    def at_speed(self, speed_mps: Tensor) -> Tensor:
+        """``(N, 1)`` float64 the anchor temperature of agents whose priors move at ``speed_mps (N,)``."""
+        t: Tensor = self.temperature * (1.0 + speed_mps.double().clamp_min(0.0)) ** self.speed_exponent
+        return t.clamp(MIN_TEMPERATURE, MAX_TEMPERATURE).unsqueeze(1)
+
+
 def mode_probabilities(
-    class_logits: Tensor, anchor_logits: Tensor, class_of_anchor: Tensor, temperature: float = 1.0
+    class_logits: Tensor,
+    anchor_logits: Tensor,
+    class_of_anchor: Tensor,
+    temperature: float | Tensor = 1.0,
+    class_temperature: float = 1.0,
 ) -> Tensor:
-    """``(N, K)`` p(c(k)) · p(k | c(k)) of every anchor, p(k | c) = softmax(anchor logits / temperature)."""
-    pc = torch.softmax(class_logits, dim=1)[:, class_of_anchor]
+    """``(N, K)`` p(c(k)) · p(k | c(k)) of every anchor: p(k | c) = softmax(anchor logits / temperature), one
+    temperature or one per agent ``(N, 1)``; p(c) = softmax(class logits / class_temperature)."""
+    pc = torch.softmax(class_logits / class_temperature, dim=1)[:, class_of_anchor]
     pk = torch.zeros_like(anchor_logits)
     for c in range(class_logits.shape[1]):
         sel = class_of_anchor == c
@@ -144,11 +204,13 @@ def decode_torch(
     anchors: Tensor,
     class_of_anchor: Tensor,
     prior: Tensor | None = None,
-    temperature: float = 1.0,
+    temperature: float | Tensor = 1.0,
+    class_temperature: float = 1.0,
 ) -> tuple[Tensor, Tensor]:
     """Agent-frame modes ``(N, K, T, 2)`` (the kinematic ``prior (N, T, 2)`` + anchor + offset) sorted by
-    p(c) · p(k | c), and those probabilities ``(N, K)``; the engine's decoding, in PyTorch."""
-    p = mode_probabilities(class_logits, anchor_logits, class_of_anchor, temperature)
+    p(c) · p(k | c), and those probabilities ``(N, K)``; the engine's decoding, in PyTorch (temperatures as in
+    :func:`mode_probabilities`; :meth:`Calibration.anchor_temperatures` gives a speed-dependent one)."""
+    p = mode_probabilities(class_logits, anchor_logits, class_of_anchor, temperature, class_temperature)
     order = torch.argsort(-p, dim=1, stable=True)
     modes = anchors.unsqueeze(0) + offsets
     if prior is not None:

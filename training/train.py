@@ -29,7 +29,13 @@ import torch.distributed as dist
 import dgan
 from training.anchors import anchor_windows, fit_anchors
 from training.build import build_model, input_spec, run_name
-from training.calibrate import calibration_config, fit_temperature
+from training.calibrate import (
+    TemperatureFit,
+    calibration_config,
+    calibration_keys,
+    check_calibration,
+    fit_temperature,
+)
 from training.checkpoint import save_atomic
 from training.config import Config
 from training.data.arrays import Windows
@@ -46,16 +52,23 @@ SELECT = ("val_loss", "val_ade", "last")
 
 
 def calibrate(
-    path: Path, model: DGAN, val: Windows, spec: dgan.InputSpec, anchors: torch.Tensor, class_of: torch.Tensor
-) -> float:
-    """Fits the temperature of the kept weights' anchor logits on the validation split; stores it in ``path``."""
+    path: Path,
+    model: DGAN,
+    val: Windows,
+    spec: dgan.InputSpec,
+    anchors: torch.Tensor,
+    class_of: torch.Tensor,
+    kind: str = "temperature",
+) -> TemperatureFit:
+    """Fits the kept weights' calibration (``train.calibration``: ``kind``) on the validation split; stores it in
+    ``path``."""
     ckpt = torch.load(path, weights_only=False)
     model.load_state_dict(ckpt["model"])
-    found = fit_temperature(model, val, spec, anchors, class_of)
-    ckpt["temperature"] = found.temperature
+    found = fit_temperature(model, val, spec, anchors, class_of, kind)
+    ckpt.update(calibration_keys(found.calibration))
     save_atomic(ckpt, path)
     print(found, flush=True)
-    return found.temperature
+    return found
 
 
 def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Config]:
@@ -85,6 +98,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Confi
         raise ValueError(f"train.distill_soft must be >= 0 and needs train.distill, got {cfg.train.distill_soft}")
     check_anchor_pool(cfg.train.anchor_pool)
     calibration_config(cfg)  # refuses an unknown train.calibration_split before any training
+    check_calibration(cfg.train.calibration)
     return args, cfg
 
 
@@ -327,7 +341,7 @@ def finish(
         if own is not cfg:  # train.calibration_split = "own": the own dataset's validation windows alone
             val = split_windows(own, spec, "val", False)
             only_target_class(val, target_class_index(cfg.data.target_class, spec))
-        calibrate(out / "best.pt", model, val, spec, anchors, class_of)
+        calibrate(out / "best.pt", model, val, spec, anchors, class_of, cfg.train.calibration)
     if export:
         path = export_checkpoint(out / "best.pt", out / "model.onnx", name=f"dgan-{run_name(cfg)}")
         print(f"exported {path}")

@@ -56,7 +56,12 @@ def _info(args: argparse.Namespace) -> int:
     else:
         how = f"mean velocity over {prior.window_s:g} s" if prior.window_s else "velocity of the last two steps"
         print(f"prior      {prior.kind} ({how})")
-    print(f"temperature {c.get('temperature', 1.0):g} (of the anchor logits; contract {c['contract_version']})")
+    temp = f"temperature {c.get('temperature', 1.0):g} (of the anchor logits"
+    if c.get("temperature_speed_exponent"):
+        temp += f", x (1 + speed in m/s)^{c['temperature_speed_exponent']:g}"
+    if c.get("class_temperature", 1.0) != 1.0:
+        temp += f"; class logits {c['class_temperature']:g}"
+    print(f"{temp}; contract {c['contract_version']})")
     print(f"providers  {', '.join(dgan.available_execution_providers())} (in this ONNX Runtime library)")
     if c.get("description"):
         print(f"about      {c['description']}")

@@ -90,8 +90,21 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             "Agents' headings come from their direction of motion"
             + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
         )
-    parts.append(f"Mode probabilities at the temperature {metrics.get('temperature', 1.0):.2f} {fitted_where(cfg)}.")
+    parts.append(f"Mode probabilities at {temperature_words(metrics)} {fitted_where(cfg)}.")
     return " ".join(parts)
+
+
+def temperature_words(metrics: dict[str, Any]) -> str:
+    """The model's temperatures in the card's words: a single one, or contract 9's speed-dependent anchor temperature
+    with its class temperature (``training.evaluate.evaluate`` records them)."""
+    words = f"the temperature {metrics.get('temperature', 1.0):.2f}"
+    if "temperature_speed_exponent" in metrics:
+        words += (
+            f" × (1 + speed in m/s)^{metrics['temperature_speed_exponent']:.2f} with a class temperature of "
+            f"{metrics['class_temperature']:.2f} (contract 9: the speed-dependent and class temperatures, "
+            '`train.calibration = "speed_class"`),'
+        )
+    return words
 
 
 def calibration_folds(declared: str) -> list[str]:

@@ -44,7 +44,8 @@ from training import metrics
 from training.calibrate import best_mode_brier, best_mode_log_loss, best_mode_reliability
 from training.data.datasets import DATASETS, recordings
 from training.data.windows import iter_windows
-from training.evaluate import per_class_normalised, rows_of, untempered
+from training.evaluate import per_class_normalised, prior_speeds, rows_of, untempered, untempered_classes
+from training.losses import Calibration
 from training.metrics import worst_gap
 
 #: (bundled model, dataset, ETH/UCY fold, test datasets).
@@ -62,7 +63,7 @@ class Modes:
 
     def __init__(self, predictor: dgan.Predictor, dataset: str, root: Path, fold: str, split: str) -> None:
         spec, info = predictor.spec, DATASETS[dataset]
-        temperature = float(predictor.contract.get("temperature", 1.0))
+        cal = Calibration.of(predictor.contract)
         use_map = spec.map is not None
         pk, pc, mc, best, speed, own, margin = [], [], [], [], [], [], []
         for rec in recordings(dataset, root, split, fold, with_map=use_map):
@@ -70,8 +71,9 @@ class Modes:
                 t = w.target
                 pred = rows_of(predictor.predict(w.frame(info, spec.t_obs, with_map=use_map)), t)
                 rows = np.arange(len(pred.probabilities))[:, None]
-                pcm = pred.class_probabilities[rows, pred.mode_classes]
-                pk.append(untempered(pred, temperature) / np.maximum(pcm, 1e-300))
+                pcm = np.asarray(untempered_classes(pred, cal)[rows, pred.mode_classes], np.float64)  # p(c), T_c = 1
+                v = prior_speeds(w.frame(info, spec.t_obs, with_map=False), spec)[t] if cal.speed_exponent else None
+                pk.append(untempered(pred, cal, v) / np.maximum(pcm, 1e-300))
                 pc.append(pcm)
                 mc.append(pred.mode_classes)
                 gt = w.positions[t, spec.t_obs :]
@@ -88,7 +90,7 @@ class Modes:
         #: The model's most probable class of each target, and how much closer its best mode (of all K) is than the
         #: best of that class's modes (0 where the best is that class's).
         self.own, self.margin = np.concatenate(own), np.concatenate(margin)
-        self.temperature, self.classes = temperature, spec.classes
+        self.temperature, self.classes = cal.temperature, spec.classes
 
     def nll(self, p: np.ndarray) -> float:
         """Mean −log probability of the best mode, given the modes' calibrated probabilities ``p``."""

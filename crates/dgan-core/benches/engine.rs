@@ -16,7 +16,7 @@
 //!   22 pedestrians), and 200 agents at 10 Hz resampled to a 0.4 s model (100 ticks).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use dgan_core::decode::{decode, Anchors, DecodeParams, NetworkOutputs};
+use dgan_core::decode::{decode, Anchors, Calibration, DecodeParams, NetworkOutputs};
 use dgan_core::graph::{attention_zone_edges, attention_zone_edges_brute_force};
 use dgan_core::preprocess::preprocess;
 use dgan_core::raster::rasterize;
@@ -125,7 +125,8 @@ fn bench_decode(c: &mut Criterion) {
     let prior = Array3::from_shape_fn((n, t_f, 2), |(i, t, d)| (i * t + d) as f32 * 0.05);
     let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, 0.0], i as f64 * 0.1)).collect();
     let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
-    let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), temperature: 1.3 };
+    let calibration = Calibration { temperature: 1.3, speed_exponent: 0.5, class_temperature: 2.0 };
+    let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5 };
     c.bench_function("decode/100", |b| b.iter(|| decode(out, params, &poses, 60)));
 }
 
@@ -212,7 +213,9 @@ fn bench_hdmap(c: &mut Criterion) {
     let (cl, al, off) = predictor.run(pre.inputs.clone()).expect("the network runs");
     let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
     let anchors = predictor.anchors();
-    let params = DecodeParams { anchors, prior: Some(pre.prior.view()), temperature: predictor.contract().temperature };
+    let contract = predictor.contract();
+    let params =
+        DecodeParams { anchors, prior: Some(pre.prior.view()), calibration: contract.calibration(), dt_s: spec.dt_s };
     g.bench_function("decode", |b| b.iter(|| decode(out, params, &pre.poses, anchors.total())));
     g.finish();
 }

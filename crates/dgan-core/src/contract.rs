@@ -2,9 +2,9 @@
 //! `docs/model-contract.md`; this module is the one the runtime checks against.
 
 use crate::class::AgentClass;
-use crate::decode::Anchors;
+use crate::decode::{Anchors, Calibration};
 use crate::error::{DganError, Result};
-use crate::prior::{PriorSpec, VelocityFit};
+use crate::prior::{PriorKind, PriorSpec, VelocityFit};
 use crate::spec::{GraphLayout, HeadingSource, InputSpec, MapRender, EDGE_FEATURES};
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
@@ -14,15 +14,19 @@ use std::collections::BTreeMap;
 /// and the temperature of the anchor logits; version 3 the padded neighbour layout of the graph; version 4 the
 /// sealed weights (`weights_sha256`); version 5 where headings come from (`heading`); version 6 how the prior's
 /// velocity is fitted (`prior.fit`) and its standing threshold (`prior.standing_mps`); version 7 the tiled map
-/// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`).
-pub const CONTRACT_VERSION: u32 = 8;
+/// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`); version 9 a temperature that grows
+/// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`).
+pub const CONTRACT_VERSION: u32 = 9;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 8] = [1, 2, 3, 4, 5, 6, 7, 8];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
 pub const MAX_ANCHORS_PER_CLASS: usize = 1024;
+
+/// The largest |temperature_speed_exponent|: beyond it a few m/s would take the temperature out of its range.
+pub const MAX_SPEED_EXPONENT: f64 = 10.0;
 
 /// The ONNX `metadata_props` key holding the contract as JSON.
 pub const METADATA_KEY: &str = "dgan_contract";
@@ -102,6 +106,13 @@ pub struct ModelContract {
     /// The anchor logits are divided by this before their softmax (fitted on a validation split; 1 = as trained).
     #[serde(default = "unit_temperature")]
     pub temperature: f64,
+    /// Contract 9: agent i's anchor temperature is `temperature · (1 + v_i)^temperature_speed_exponent`, v_i the
+    /// speed of its kinematic prior (m/s); 0 (the default) = `temperature` for every agent. Needs a prior.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub temperature_speed_exponent: f64,
+    /// Contract 9: the class logits are divided by this before their softmax (1, the default: as trained).
+    #[serde(default = "unit_temperature", skip_serializing_if = "is_one")]
+    pub class_temperature: f64,
     /// A short model name.
     #[serde(default)]
     pub name: String,
@@ -161,6 +172,14 @@ fn keyed(path: &str, msg: &str) -> String {
 
 fn unit_temperature() -> f64 {
     1.0
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 impl ModelContract {
@@ -257,17 +276,50 @@ impl ModelContract {
             }
             _ => {}
         }
-        if !(self.temperature.is_finite() && (1e-3..=1e3).contains(&self.temperature)) {
-            return Err(DganError::Contract(format!(
-                "temperature must be a number in [0.001, 1000], got {}",
-                self.temperature
-            )));
-        }
+        self.check_calibration()?;
         if self.units != "m" {
             return Err(DganError::Contract(format!("units must be \"m\", got {:?}", self.units)));
         }
         self.input.validate().map_err(|e| DganError::Contract(e.to_string()))?;
         self.anchors().map(|_| ())
+    }
+
+    /// The temperatures decoding applies.
+    pub fn calibration(&self) -> Calibration {
+        Calibration {
+            temperature: self.temperature,
+            speed_exponent: self.temperature_speed_exponent,
+            class_temperature: self.class_temperature,
+        }
+    }
+
+    fn check_calibration(&self) -> Result<()> {
+        let (lo, hi) = (Calibration::MIN_TEMPERATURE, Calibration::MAX_TEMPERATURE);
+        for (key, t) in [("temperature", self.temperature), ("class_temperature", self.class_temperature)] {
+            if !(t.is_finite() && (lo..=hi).contains(&t)) {
+                return Err(DganError::Contract(format!("{key} must be a number in [{lo}, {hi}], got {t}")));
+            }
+        }
+        let exponent = self.temperature_speed_exponent;
+        if !(exponent.is_finite() && (-MAX_SPEED_EXPONENT..=MAX_SPEED_EXPONENT).contains(&exponent)) {
+            return Err(DganError::Contract(format!(
+                "temperature_speed_exponent must be a number in [-{MAX_SPEED_EXPONENT}, {MAX_SPEED_EXPONENT}], got \
+                 {exponent}"
+            )));
+        }
+        if self.contract_version < 9 && (exponent != 0.0 || self.class_temperature != 1.0) {
+            return Err(DganError::Contract(
+                "temperature_speed_exponent and class_temperature are contract-9 keys; versions 1 to 8 take one \
+                 temperature of the anchor logits"
+                    .into(),
+            ));
+        }
+        if exponent != 0.0 && self.input.prior.kind == PriorKind::None {
+            return Err(DganError::Contract(
+                "temperature_speed_exponent reads the speed of the kinematic prior; this model declares none".into(),
+            ));
+        }
+        Ok(())
     }
 
     /// The anchors as arrays, in the model's class order.
@@ -506,6 +558,30 @@ mod tests {
         assert!(err.contains("\"adaptive\" is contract 8"), "{err}");
         let v8 = adaptive.replace("\"contract_version\": 7", "\"contract_version\": 8");
         assert_eq!(ModelContract::from_json(&v8).unwrap().input.prior.fit, VelocityFit::Adaptive);
+        // Version 9: a temperature growing with speed and one of the class logits; version 8 cannot.
+        let calibrated = "\"temperature_speed_exponent\": 0.5, \"class_temperature\": 3.0, \"temperature\"";
+        let v9 =
+            v8.replace("\"contract_version\": 8", "\"contract_version\": 9").replace("\"temperature\"", calibrated);
+        let c = ModelContract::from_json(&v9).unwrap();
+        let want = Calibration { temperature: 1.5, speed_exponent: 0.5, class_temperature: 3.0 };
+        assert_eq!(c.calibration(), want);
+        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+        let err = ModelContract::from_json(&v8.replace("\"temperature\"", calibrated)).unwrap_err().to_string();
+        assert!(err.contains("contract-9 keys"), "{err}");
+        for (bad, says) in [
+            ("\"temperature_speed_exponent\": 11.0", "temperature_speed_exponent must be"),
+            ("\"class_temperature\": 0.0", "class_temperature must be"),
+        ] {
+            let key = bad.split(':').next().unwrap_or_default();
+            let text = v9.replace(&format!("{key}: {}", if key.contains("class") { "3.0" } else { "0.5" }), bad);
+            let err = ModelContract::from_json(&text).unwrap_err().to_string();
+            assert!(err.contains(says), "{bad}: {err}");
+        }
+        let no_prior = v9.replace("\"kind\": \"constant_velocity\"", "\"kind\": \"none\"");
+        let err = ModelContract::from_json(&no_prior).unwrap_err().to_string();
+        assert!(err.contains("declares none"), "{err}");
+        // Version 8's single temperature is version 9's with exponent 0 and class temperature 1.
+        assert_eq!(ModelContract::from_json(&v8).unwrap().calibration(), Calibration::single(1.5));
     }
 
     #[test]

@@ -1,5 +1,6 @@
-//! Anchor decoding: hierarchical probabilities p(mode) = p(c) · p(k | c) with p(k | c) = softmax(anchor logits / T),
-//! trajectories = kinematic prior + anchor + offset taken back to the world frame, modes ranked by probability.
+//! Anchor decoding: hierarchical probabilities p(mode) = p(c) · p(k | c) with p(k | c) = softmax(anchor logits / T)
+//! and p(c) = softmax(class logits / T_c), trajectories = kinematic prior + anchor + offset taken back to the world
+//! frame, modes ranked by probability. T may grow with the agent's speed ([`Calibration`]).
 
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
@@ -147,23 +148,75 @@ pub struct NetworkOutputs<'a> {
     pub offsets: ArrayView4<'a, f32>,
 }
 
+/// How logits become probabilities: the temperature of the anchor logits, its growth with speed (contract 9) and
+/// the temperature of the class logits (contract 9). Agent i's anchor temperature is
+/// `temperature · (1 + v_i)^speed_exponent`, v_i the speed of its kinematic prior in metres per second, kept within
+/// [[`Calibration::MIN_TEMPERATURE`], [`Calibration::MAX_TEMPERATURE`]].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Calibration {
+    /// The anchor logits' temperature of a standing agent (of every agent when `speed_exponent` is 0).
+    pub temperature: f64,
+    /// How the anchor temperature grows with speed; 0 = one temperature for every agent.
+    pub speed_exponent: f64,
+    /// p(c) = softmax(class_logits / class_temperature); 1 = as trained.
+    pub class_temperature: f64,
+}
+
+impl Calibration {
+    /// The smallest temperature an agent gets.
+    pub const MIN_TEMPERATURE: f64 = 1e-3;
+    /// The largest temperature an agent gets.
+    pub const MAX_TEMPERATURE: f64 = 1e3;
+
+    /// One anchor temperature for every agent and class probabilities as trained (contracts 2 to 8).
+    pub const fn single(temperature: f64) -> Self {
+        Self { temperature, speed_exponent: 0.0, class_temperature: 1.0 }
+    }
+
+    /// The anchor temperature of an agent whose prior moves at `speed_mps`.
+    pub fn anchor_temperature(&self, speed_mps: f64) -> f64 {
+        if self.speed_exponent == 0.0 {
+            return self.temperature;
+        }
+        let t = self.temperature * (1.0 + speed_mps.max(0.0)).powf(self.speed_exponent);
+        if t.is_nan() {
+            self.temperature
+        } else {
+            t.clamp(Self::MIN_TEMPERATURE, Self::MAX_TEMPERATURE)
+        }
+    }
+
+    fn check(&self) -> Result<()> {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !(positive(self.temperature) && positive(self.class_temperature) && self.speed_exponent.is_finite()) {
+            return Err(DganError::Contract(format!(
+                "temperatures must be positive and the speed exponent finite, got {self:?}"
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// How to turn outputs into modes: the anchors, the kinematic prior `(N, T_f, 2)` they are relative to (agent
-/// frame; `None` for none) and the temperature of the anchor logits.
+/// frame; `None` for none), the calibration and the model's step (the prior's first step over it is the speed a
+/// speed-dependent temperature reads).
 #[derive(Debug, Clone, Copy)]
 pub struct DecodeParams<'a> {
     /// The model's anchors.
     pub anchors: &'a Anchors,
     /// The kinematic prior of each agent, added to every mode.
     pub prior: Option<ArrayView3<'a, f32>>,
-    /// p(k | c) = softmax(anchor_logits / temperature).
-    pub temperature: f64,
+    /// The temperatures of the logits.
+    pub calibration: Calibration,
+    /// The model's time step, seconds.
+    pub dt_s: f64,
 }
 
 /// Decodes the network's outputs for agents whose agent-centric frames are `poses`, keeping the top `modes`
 /// (at most K).
 pub fn decode(out: NetworkOutputs<'_>, params: DecodeParams<'_>, poses: &[AgentPose], modes: usize) -> Result<Decoded> {
     let NetworkOutputs { class_logits, anchor_logits, offsets } = out;
-    let DecodeParams { anchors, prior, temperature } = params;
+    let DecodeParams { anchors, prior, calibration, dt_s } = params;
     let n = poses.len();
     let c = anchors.classes().len();
     let k_total = anchors.total();
@@ -183,8 +236,9 @@ pub fn decode(out: NetworkOutputs<'_>, params: DecodeParams<'_>, poses: &[AgentP
             return bad(format!("the prior has shape {:?}, expected ({n}, {t_f}, 2)", p.dim()));
         }
     }
-    if !(temperature.is_finite() && temperature > 0.0) {
-        return Err(DganError::Contract(format!("temperature must be positive, got {temperature}")));
+    calibration.check()?;
+    if !(dt_s.is_finite() && dt_s > 0.0) {
+        return Err(DganError::Contract(format!("dt_s must be positive, got {dt_s}")));
     }
     if class_logits.iter().chain(anchor_logits.iter()).chain(offsets.iter()).any(|v| !v.is_finite()) {
         return bad("the model produced NaN or infinite values".into());
@@ -194,7 +248,10 @@ pub fn decode(out: NetworkOutputs<'_>, params: DecodeParams<'_>, poses: &[AgentP
     let class_of = anchors.class_of_anchor();
     let mut out = Decoded::zeros(n, m, t_f, c);
     for (i, pose) in poses.iter().enumerate() {
-        let pc = softmax(class_logits.row(i).iter().map(|&v| f64::from(v)));
+        let pc = softmax(class_logits.row(i).iter().map(|&v| f64::from(v) / calibration.class_temperature));
+        // The prior's first step is its velocity times dt (a constant-velocity rollout; 0 without a prior).
+        let speed = prior.map_or(0.0, |p| f64::from(p[[i, 0, 0]]).hypot(f64::from(p[[i, 0, 1]])) / dt_s);
+        let temperature = calibration.anchor_temperature(speed);
         let mut p = Vec::with_capacity(k_total);
         let mut start = 0;
         for (ci, &kc) in per_class.iter().enumerate() {
@@ -249,7 +306,12 @@ mod tests {
             anchor_logits: anchor_logits.view(),
             offsets: offsets.view(),
         };
-        let params = DecodeParams { anchors, prior: prior.map(|p| p.view()), temperature };
+        let params = DecodeParams {
+            anchors,
+            prior: prior.map(|p| p.view()),
+            calibration: Calibration::single(temperature),
+            dt_s: 0.5,
+        };
         decode(out, params, &[pose], modes)
     }
 
@@ -272,6 +334,49 @@ mod tests {
         let bad = array![[[0.5f32, -1.0], [0.0, 0.0]]];
         assert!(run(&array![[0.0f32]], &logits, &offsets, &anchors, Some(&bad), 1.0, pose, 2).is_err());
         assert!(run(&array![[0.0f32]], &logits, &offsets, &anchors, None, 0.0, pose, 2).is_err());
+    }
+
+    #[test]
+    fn speed_dependent_and_class_temperatures() {
+        let anchors = Anchors::new(
+            vec![AgentClass::Vehicle, AgentClass::Pedestrian],
+            vec![array![[[1.0, 0.0]], [[2.0, 0.0]]], array![[[0.0, 1.0]]]],
+        )
+        .unwrap();
+        let offsets = Array4::<f32>::zeros((2, 3, 1, 2));
+        let class_logits = array![[2f32.ln(), 0.0], [2f32.ln(), 0.0]];
+        let anchor_logits = array![[0.0, 2f32.ln(), 0.0], [0.0, 2f32.ln(), 0.0]];
+        // Agent 0 stands, agent 1's prior moves 1.5 m in its first 0.5 s step: 3 m/s.
+        let prior = array![[[0.0f32, 0.0]], [[0.9, 1.2]]];
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let poses = [AgentPose::new([0.0, 0.0], 0.0); 2];
+        let calibration = Calibration { temperature: 0.5, speed_exponent: 0.5, class_temperature: 2.0 };
+        let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5 };
+        let d = decode(out, params, &poses, 3).unwrap();
+        // p(c) = softmax(ln 2 / 2, 0) = (√2, 1) / (1 + √2) for both agents.
+        let pv = 2f64.sqrt() / (1.0 + 2f64.sqrt());
+        for i in 0..2 {
+            assert!((d.class_probabilities[[i, 0]] - pv).abs() < 1e-9);
+        }
+        // Standing: T = 0.5, p(k | vehicle) = softmax(0, 2 ln 2) = (1, 4) / 5.
+        assert!((d.probabilities[[0, 0]] - pv * 0.8).abs() < 1e-6, "{}", d.probabilities[[0, 0]]);
+        // 3 m/s: T = 0.5 · 4^0.5 = 1, p(k | vehicle) = (1, 2) / 3, second after the pedestrian anchor's 1 - pv.
+        assert!((d.probabilities[[1, 0]] - (1.0 - pv)).abs() < 1e-6, "{}", d.probabilities[[1, 0]]);
+        assert!((d.probabilities[[1, 1]] - pv * 2.0 / 3.0).abs() < 1e-6, "{}", d.probabilities[[1, 1]]);
+        assert_eq!(Calibration::single(1.7).anchor_temperature(100.0), 1.7);
+        let extreme = Calibration { temperature: 1.0, speed_exponent: 10.0, class_temperature: 1.0 };
+        assert_eq!(extreme.anchor_temperature(1e30), Calibration::MAX_TEMPERATURE);
+        for bad in [
+            Calibration { class_temperature: 0.0, ..calibration },
+            Calibration { speed_exponent: f64::NAN, ..calibration },
+        ] {
+            assert!(decode(out, DecodeParams { calibration: bad, ..params }, &poses, 3).is_err());
+        }
+        assert!(decode(out, DecodeParams { dt_s: 0.0, ..params }, &poses, 3).is_err());
     }
 
     #[test]

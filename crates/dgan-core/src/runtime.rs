@@ -535,8 +535,12 @@ impl Predictor {
             anchor_logits: anchor_logits.view(),
             offsets: offsets.view(),
         };
-        let params =
-            DecodeParams { anchors: &self.anchors, prior: Some(prior), temperature: self.contract.temperature };
+        let params = DecodeParams {
+            anchors: &self.anchors,
+            prior: Some(prior),
+            calibration: self.contract.calibration(),
+            dt_s: self.contract.input.dt_s,
+        };
         decode(out, params, poses, modes)
     }
 

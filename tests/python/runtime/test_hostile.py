@@ -501,7 +501,7 @@ def contract_cases(tmp: Path) -> list[Case]:
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 9, 99, "4", None, -1],
+        "contract_version": [0, 10, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",

@@ -119,3 +119,25 @@ def test_bad_ground_truth_masks_and_histories_are_clear_errors() -> None:
     mask[1] = False
     with pytest.raises(exc.InvalidFrameError, match=r"1 agent.* no observed step, e.g. row 1"):
         metrics.constant_velocity(np.zeros((2, 4, 2)), mask, 3)
+
+
+def test_untempered_probabilities_invert_speed_and_class_temperatures() -> None:
+    import torch
+
+    import dgan
+    from training.evaluate import untempered
+    from training.losses import Calibration, mode_probabilities
+
+    g = torch.Generator().manual_seed(0)
+    cl, al = torch.randn(4, 2, generator=g, dtype=torch.float64), torch.randn(4, 5, generator=g, dtype=torch.float64)
+    classes = torch.tensor([0, 0, 0, 1, 1])
+    speed = np.array([0.0, 0.5, 3.0, 12.0])
+    cal = Calibration(0.7, 0.5, 2.0)
+    p = mode_probabilities(cl, al, classes, cal.at_speed(torch.from_numpy(speed)), cal.class_temperature)
+    pc = torch.softmax(cl / cal.class_temperature, dim=1).numpy()
+    mode_classes = np.tile(classes.numpy(), (4, 1))
+    edges = np.zeros((0, 2), np.int64)
+    pred = dgan.Prediction(np.arange(4), np.zeros((4, 5, 1, 2)), p.numpy(), pc, mode_classes, edges, ())
+    np.testing.assert_allclose(untempered(pred, cal, speed), mode_probabilities(cl, al, classes).numpy(), rtol=1e-9)
+    with pytest.raises(ValueError, match="prior speeds"):
+        untempered(pred, cal)

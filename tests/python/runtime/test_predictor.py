@@ -218,7 +218,7 @@ def test_bundled_map_models_also_serve_frames_without_a_map(zara1_frame: dgan.Fr
 def test_the_prior_and_temperature_are_declared(zara1_frame: dgan.Frame) -> None:
     predictor = dgan.Predictor("zara1")
     c = predictor.contract
-    assert dgan._dgan.CONTRACT_VERSION == 8
+    assert dgan._dgan.CONTRACT_VERSION == 9
     assert c["contract_version"] in (5, 6, 7)
     assert c["graph"] == "padded"
     assert c["prior"]["kind"] == "constant_velocity"

@@ -18,6 +18,7 @@ from training.release.cards import (
     extra_licence_line,
     fitted_where,
     joint_words,
+    temperature_words,
 )
 
 
@@ -91,3 +92,10 @@ def test_other_sources_and_where_the_temperature_was_fitted_are_named() -> None:
     assert fitted_where(own) == "fitted on validation scenes alone, not the other sources' (`train.calibration_split`)"
     # Without other sources every validation window is the model's own: nothing to say.
     assert fitted_where({"data": {}, "train": {"calibration_split": "own"}}) == "fitted on validation"
+
+
+def test_the_card_names_contract_9s_temperatures() -> None:
+    assert temperature_words({"temperature": 1.349}) == "the temperature 1.35"
+    words = temperature_words({"temperature": 0.733, "temperature_speed_exponent": 0.956, "class_temperature": 7.104})
+    assert words.startswith("the temperature 0.73 × (1 + speed in m/s)^0.96 with a class temperature of 7.10")
+    assert "`train.calibration" in words

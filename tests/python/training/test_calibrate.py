@@ -1,6 +1,7 @@
 """training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, the
-choice itself on best modes drawn at a known temperature, a temperature cross-fitted over validation folds, and
-the validation windows it is fitted on (train.calibration_split)."""
+choice itself on best modes drawn at a known temperature, the speed-dependent and class temperatures of contract 9
+given back from best modes drawn with them, a temperature cross-fitted over validation folds, and the validation
+windows it is fitted on (train.calibration_split)."""
 
 from __future__ import annotations
 
@@ -15,14 +16,18 @@ from conftest import shared_data
 
 from training.build import build_model, input_spec
 from training.calibrate import (
+    BestModes,
     best_mode_brier,
     calibrate_checkpoint,
     calibration_config,
+    check_calibration,
     choose_temperature,
+    fit_calibration,
     reliability_gap,
     validation_logits,
 )
 from training.config import Config
+from training.losses import Calibration
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -58,6 +63,29 @@ def test_best_modes_drawn_at_a_temperature_give_it_back() -> None:
     assert "temperature" in str(fit)
 
 
+def test_speed_and_class_temperatures_drawn_are_given_back() -> None:
+    # Two classes of three anchors; the best mode drawn from p(c) at T_c = 3 and p(k | c) at 0.5 · (1 + v)^0.8.
+    g = torch.Generator().manual_seed(1)
+    n, true = 40000, Calibration(0.5, 0.8, 3.0)
+    class_of = torch.tensor([0, 0, 0, 1, 1, 1])
+    cl = torch.stack([torch.full((n,), 4.0), torch.zeros(n)], dim=1) + torch.randn(n, 2, generator=g)
+    al = 2.0 * torch.randn(n, 6, generator=g)
+    speed = 10.0 * torch.rand(n, generator=g, dtype=torch.float64)
+    drawn = BestModes(cl, al, torch.zeros(n, dtype=torch.long), speed)
+    best = torch.multinomial(drawn.probabilities(class_of, true), 1, generator=g).squeeze(1)
+    modes = drawn._replace(best=best)
+    fit = fit_calibration("speed_class", modes, class_of)
+    assert fit.objective == "brier (speed, class)"
+    assert (fit.temperature, fit.speed_exponent, fit.class_temperature) == pytest.approx((0.5, 0.8, 3.0), rel=0.15)
+    single = fit_calibration("temperature", modes, class_of)
+    assert (single.speed_exponent, single.class_temperature) == (0.0, 1.0)
+    # One temperature cannot be right for slow and fast agents at once.
+    assert fit.gap_after < 0.03 < single.gap_after
+    assert "class temperature" in str(fit)
+    with pytest.raises(ValueError, match=r"train\.calibration must be one of temperature, speed_class"):
+        check_calibration("platt")
+
+
 def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int) -> Path:
     """An untrained ApolloScape network with random anchors, saved as a checkpoint whose validation split is
     ``val_recordings`` (the default split if empty)."""
@@ -82,8 +110,8 @@ def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int) -> P
 def test_a_cross_fitted_temperature_pools_every_folds_validation_split(tmp_path: Path) -> None:
     main = _apollo_checkpoint(tmp_path / "main.pt", "", 4, 0)
     fold = _apollo_checkpoint(tmp_path / "fold.pt", "9053,9059", 4, 1)
-    own = len(validation_logits(main)[2])
-    other = len(validation_logits(fold)[2])
+    own = len(validation_logits(main)[0].best)
+    other = len(validation_logits(fold)[0].best)
     assert own > 0
     assert other > 0
     alone = calibrate_checkpoint(main)

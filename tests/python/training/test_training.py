@@ -20,7 +20,7 @@ from training.build import build_model, input_spec
 from training.config import Config
 from training.data.batches import INPUTS
 from training.export import export_model, load_checkpoint
-from training.losses import anchor_pool, class_weights, closest_anchor, decode_torch, dgan_loss
+from training.losses import Calibration, anchor_pool, class_weights, closest_anchor, decode_torch, dgan_loss
 from training.modules.dgan import DGAN
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -151,10 +151,12 @@ def assert_parity(
     anchors: np.ndarray,
     class_of: np.ndarray,
     onnx_path: Path,
-    temperature: float = 1.0,
+    temperature: float | Calibration = 1.0,
 ) -> None:
-    """The engine's predictions equal PyTorch's (model, kinematic prior, decoding at ``temperature``) on real
-    frames, and, for a model whose map is optional, on the same frames without their map."""
+    """The engine's predictions equal PyTorch's (model, kinematic prior, decoding at ``temperature``, a single one
+    or a contract-9 calibration) on real frames, and, for a model whose map is optional, on the same frames without
+    their map."""
+    cal = temperature if isinstance(temperature, Calibration) else Calibration(temperature)
     predictor = dgan.Predictor(onnx_path)
     frames = real_frames(spec)
     if spec.map is not None and spec.map.optional:
@@ -165,7 +167,8 @@ def assert_parity(
             cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
             prior = torch.from_numpy(x["prior"])
             a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
-            traj, prob = decode_torch(cl, al, off, a, c, prior, temperature)
+            t = cal.anchor_temperatures(prior, spec.dt_s)
+            traj, prob = decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature)
         n, k = traj.shape[:2]
         flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
         world = dgan.to_world_frame(flat, x["origin"], x["heading"]).reshape(n, k, -1, 2)
@@ -190,8 +193,9 @@ def tied_order(expected: np.ndarray, prob: np.ndarray, got: np.ndarray, tie: flo
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(p.stem for p in CHECKPOINTS.glob("*.pt")))
 def test_bundled_models_match_pytorch(name: str) -> None:
-    model, spec, anchors, class_of, _, temperature = load_checkpoint(CHECKPOINTS / f"{name}.pt")
-    assert_parity(model, spec, anchors, class_of, dgan.models.path(name), temperature)
+    model, spec, anchors, class_of, _, _ = load_checkpoint(CHECKPOINTS / f"{name}.pt")
+    calibration = Calibration.of(torch.load(CHECKPOINTS / f"{name}.pt", weights_only=False))
+    assert_parity(model, spec, anchors, class_of, dgan.models.path(name), calibration)
 
 
 def test_every_bundled_model_has_a_checkpoint() -> None:
@@ -234,7 +238,9 @@ def test_fresh_exports_match_pytorch(config: str, variant: dict[str, object], tm
     class_of = np.repeat(np.arange(len(spec.classes)), k_c)
     anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (k, spec.t_f, 2)), axis=1).astype(np.float32)
     model = randomised_batch_norm(build_model(cfg, spec, k).eval())
-    path = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "fresh", temperature=1.7)
+    # Contract 9's speed-dependent and class temperatures where the model has a prior for the speed.
+    cal = Calibration(1.7, 0.6, 2.5) if cfg.data.prior != "none" else Calibration(1.7)
+    path = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "fresh", temperature=cal)
     predictor = dgan.Predictor(path)
     assert predictor.classes == spec.classes
     assert predictor.contract["contract_version"] == dgan._dgan.CONTRACT_VERSION
@@ -243,7 +249,12 @@ def test_fresh_exports_match_pytorch(config: str, variant: dict[str, object], tm
     assert predictor.contract["preprocess_version"] == dgan.contract.PREPROCESS_VERSION
     assert predictor.spec.graph == "padded"
     assert predictor.contract["temperature"] == pytest.approx(1.7)
-    assert_parity(model, spec, anchors, class_of, path, temperature=1.7)
+    assert predictor.contract.get("temperature_speed_exponent", 0.0) == pytest.approx(cal.speed_exponent)
+    assert predictor.contract.get("class_temperature", 1.0) == pytest.approx(cal.class_temperature)
+    assert_parity(model, spec, anchors, class_of, path, temperature=cal)
+    if cfg.data.prior == "none":  # the speed is the prior's: a model without one cannot declare the exponent
+        with pytest.raises(dgan.exceptions.ContractError, match="declares none"):
+            export_model(model, spec, anchors, class_of, tmp_path / "n.onnx", "x", temperature=Calibration(1.7, 0.6))
 
 
 @pytest.mark.slow
