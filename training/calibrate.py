@@ -250,14 +250,16 @@ def validation_logits(
     path: Path, data_root: Path | None = None, progress: bool = False
 ) -> tuple[BestModes, torch.Tensor]:
     """:func:`best_mode_logits` of the checkpoint at ``path`` on its configuration's validation split (under
-    ``data_root`` if given; the windows :func:`calibration_config` names), and the class of each of its anchors."""
-    from training.data.splits import split_windows
+    ``data_root`` if given; the windows :func:`calibration_config` names, and of a per-class run only its class's
+    targets, as the trainer counts them), and the class of each of its anchors."""
+    from training.data.splits import only_target_class, split_windows, target_class_index
     from training.export import load_checkpoint
 
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = split_windows(calibration_config(cfg), spec, "val", progress)
+    only_target_class(val, target_class_index(cfg.data.target_class, spec))  # a per-class run's class alone
     return best_mode_logits(model, val, spec, torch.from_numpy(anchors).float()), torch.from_numpy(class_of).long()
 
 

@@ -40,7 +40,7 @@ from training.checkpoint import save_atomic
 from training.config import Config
 from training.data.arrays import Windows
 from training.data.batches import prepared_batch, windows_with_targets
-from training.data.splits import split_windows, target_class_index, training_splits
+from training.data.splits import only_target_class, split_windows, target_class_index, training_splits
 from training.export import export_checkpoint
 from training.losses import check_anchor_pool, check_cls_target, class_weights
 from training.modules.dgan import DGAN
@@ -315,13 +315,6 @@ def training_data(
     for w in (data.train, data.val):  # after the anchors
         only_target_class(w, data.target_class)
     return data.train, data.val, anchors, class_of
-
-
-def only_target_class(w: Windows, target_class: int | None) -> None:
-    """Keeps as targets of ``w`` only the agents of ``target_class`` (a per-class run's, ``data.target_class``);
-    every target stays for None."""
-    if target_class is not None:
-        w.target &= w.class_index == target_class
 
 
 def finish(

@@ -142,6 +142,14 @@ def target_class_index(target_class: str, spec: dgan.InputSpec) -> int | None:
     return list(spec.classes).index(target_class)
 
 
+def only_target_class(w: Windows, target_class: int | None) -> None:
+    """Keeps as targets of ``w`` only the agents of ``target_class`` (a per-class run's, ``data.target_class``:
+    :func:`target_class_index`); every target stays for None. The trainer's validation and temperature and
+    bundling's temperature (``training.calibrate.validation_logits``) count the same targets through it."""
+    if target_class is not None:
+        w.target &= w.class_index == target_class
+
+
 def located(sets: list[WindowSet], root: Path, spec: dgan.InputSpec) -> list[Located]:
     """Each of ``sets`` located under ``root`` by the registry, with a reader at ``spec``'s time base (maps read
     only for a model that takes them)."""

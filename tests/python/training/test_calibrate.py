@@ -86,11 +86,15 @@ def test_speed_and_class_temperatures_drawn_are_given_back() -> None:
         check_calibration("platt")
 
 
-def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int) -> Path:
+def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int, target_class: str = "") -> Path:
     """An untrained ApolloScape network with random anchors, saved as a checkpoint whose validation split is
-    ``val_recordings`` (the default split if empty)."""
+    ``val_recordings`` (the default split if empty), a per-class run's for ``target_class``."""
     torch.manual_seed(seed)
-    overrides = {"data.val_recordings": val_recordings, "data.root": str(shared_data("apolloscape_trajectory"))}
+    overrides = {
+        "data.val_recordings": val_recordings,
+        "data.root": str(shared_data("apolloscape_trajectory")),
+        "data.target_class": target_class,
+    }
     cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", overrides)
     spec = input_spec(cfg)
     k = kc * len(spec.classes)
@@ -126,6 +130,22 @@ def test_a_cross_fitted_temperature_pools_every_folds_validation_split(tmp_path:
     with pytest.raises(ValueError, match="folds must share a configuration"):
         calibrate_checkpoint(main, folds=[odd])
     assert torch.load(main, weights_only=False)["temperature"] == pooled.temperature
+
+
+@pytest.mark.slow
+def test_a_per_class_runs_temperature_is_fitted_on_its_class_alone(tmp_path: Path) -> None:
+    from training.data.splits import split_windows
+
+    every = validation_logits(_apollo_checkpoint(tmp_path / "all.pt", "", 2, 0))[0]
+    cyclists = validation_logits(_apollo_checkpoint(tmp_path / "cyc.pt", "", 2, 0, "cyclist"))[0]
+    cfg = Config.load(
+        ROOT / "training" / "configs" / "apolloscape.toml", {"data.root": str(shared_data("apolloscape_trajectory"))}
+    )
+    spec = input_spec(cfg)
+    val = split_windows(cfg, spec, "val", False)
+    want = int((val.target & (val.class_index == list(spec.classes).index("cyclist"))).sum())
+    assert len(every.best) == val.num_targets
+    assert 0 < len(cyclists.best) == want < len(every.best)
 
 
 def test_the_calibration_split_names_the_validation_windows_of_the_fit() -> None:
