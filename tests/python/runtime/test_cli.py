@@ -23,6 +23,17 @@ def test_info(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "no map branch" in out
 
 
+def test_info_names_contract_9s_temperatures(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", "sdd"]) == 0  # bundled with a speed-dependent and a class temperature
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("temperature"))
+    assert "x (1 + speed in m/s)^" in line
+    assert "class logits" in line
+    assert line.endswith("contract 9)")
+    assert main(["info", "zara1"]) == 0  # one temperature
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("temperature"))
+    assert "speed" not in line
+
+
 def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["predict", str(nomap_model), str(SCENE), "--time", "5500", "--modes", "2"]) == 0
     out = capsys.readouterr().out
