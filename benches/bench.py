@@ -97,13 +97,12 @@ def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
 
         from training.data.batches import INPUTS
         from training.export import load_checkpoint
-        from training.losses import Calibration, decode_torch
+        from training.losses import decode_torch
     except ImportError:
         return None
     torch.set_num_threads(1)
     ckpt = ROOT / "training" / "checkpoints" / f"{name}.pt"
-    model, spec, anchors, class_of, _, _ = load_checkpoint(ckpt)
-    cal = Calibration.of(torch.load(ckpt, weights_only=False))
+    model, spec, anchors, class_of, _, cal = load_checkpoint(ckpt)
     a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
 
     def run(x: dict[str, np.ndarray]) -> Any:

@@ -248,10 +248,10 @@ def calibration_config(cfg: Config) -> Config:
 
 def validation_logits(
     path: Path, data_root: Path | None = None, progress: bool = False
-) -> tuple[BestModes, torch.Tensor]:
+) -> tuple[BestModes, torch.Tensor, str]:
     """:func:`best_mode_logits` of the checkpoint at ``path`` on its configuration's validation split (under
     ``data_root`` if given; the windows :func:`calibration_config` names, and of a per-class run only its class's
-    targets, as the trainer counts them), and the class of each of its anchors."""
+    targets, as the trainer counts them), the class of each of its anchors, and its ``train.calibration``."""
     from training.data.splits import only_target_class, split_windows, target_class_index
     from training.export import load_checkpoint
 
@@ -260,7 +260,8 @@ def validation_logits(
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = split_windows(calibration_config(cfg), spec, "val", progress)
     only_target_class(val, target_class_index(cfg.data.target_class, spec))  # a per-class run's class alone
-    return best_mode_logits(model, val, spec, torch.from_numpy(anchors).float()), torch.from_numpy(class_of).long()
+    modes = best_mode_logits(model, val, spec, torch.from_numpy(anchors).float())
+    return modes, torch.from_numpy(class_of).long(), cfg.train.calibration
 
 
 def calibrate_checkpoint(
@@ -275,30 +276,13 @@ def calibrate_checkpoint(
     fold's validation data instead of one split's."""
     from training.checkpoint import update_checkpoint
 
-    modes, class_of = validation_logits(path, data_root, progress)
+    modes, class_of, kind = validation_logits(path, data_root, progress)
     parts = [modes]
     for fold in folds:
-        fold_modes, fold_class_of = validation_logits(fold, data_root, progress)
+        fold_modes, fold_class_of, _ = validation_logits(fold, data_root, progress)
         if not torch.equal(fold_class_of, class_of):
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
         parts.append(fold_modes)
-    kind = calibration_kind(torch.load(path, weights_only=False))
     found = replace(fit_calibration(kind, BestModes.joined(parts), class_of), folds=len(parts))
-    update_checkpoint(path, **calibration_keys(found.calibration))
+    update_checkpoint(path, **found.calibration.keys(complete=True))
     return found
-
-
-def calibration_kind(ckpt: dict[str, Any]) -> str:
-    """The ``train.calibration`` of a checkpoint (an ensemble's: its first member's; "temperature" for one saved
-    before the option)."""
-    cfg = ckpt["members"][0]["config"] if "members" in ckpt else ckpt["config"]
-    return str(cfg["train"].get("calibration", "temperature"))
-
-
-def calibration_keys(cal: Calibration) -> dict[str, float]:
-    """What a checkpoint stores of ``cal``: every key, so that a refit replaces an earlier one's."""
-    return {
-        "temperature": cal.temperature,
-        "temperature_speed_exponent": cal.speed_exponent,
-        "class_temperature": cal.class_temperature,
-    }

@@ -28,6 +28,7 @@ import torch
 
 from training.calibrate import calibrate_checkpoint
 from training.export import SLIM_KEYS, export_checkpoint, load_checkpoint
+from training.losses import Calibration
 from training.modules.dgan import ConsensusEnsemble
 
 #: The residual scales tried for a class's most probable mode (:func:`fit_top_scale`); 1 is the network as trained.
@@ -48,8 +49,8 @@ def ensemble_checkpoint(runs: list[Path], out: Path, half: bool = False) -> Path
             member["model"] = {k: v.half() if v.is_floating_point() else v for k, v in member["model"].items()}
         members.append(member)
     out.parent.mkdir(parents=True, exist_ok=True)
-    first_t = float(members[0].get("temperature", 1.0))
-    torch.save({"members": members, "runs": [r.name for r in runs], "temperature": first_t}, out)
+    first = Calibration.of(members[0]).keys(complete=True)  # the first member's until refitted
+    torch.save({"members": members, "runs": [r.name for r in runs], **first}, out)
     load_checkpoint(out)  # the members must share inputs and classes
     return out
 
@@ -89,7 +90,7 @@ def top_mode_errors(
     from training.data.splits import split_windows
     from training.losses import mode_probabilities
 
-    model, spec, anchors_np, class_of_np, cfg, temperature = load_checkpoint(path)
+    model, spec, anchors_np, class_of_np, cfg, cal = load_checkpoint(path)
     if not isinstance(model, ConsensusEnsemble):
         raise ValueError(f"{path}: not an ensemble checkpoint (training.ensemble); a top-mode scale needs one")
     model.top_scale.fill_(1.0)
@@ -103,7 +104,8 @@ def top_mode_errors(
         b = prepared_batch(w, keep[start : start + 64], spec)
         cl, al, off = model(*forward_inputs(b))
         t = b["target"]
-        top = mode_probabilities(cl[t], al[t], class_of, temperature).argmax(dim=1)
+        temperature = cal.anchor_temperatures(b["prior"][t], spec.dt_s)
+        top = mode_probabilities(cl[t], al[t], class_of, temperature, cal.class_temperature).argmax(dim=1)
         residual = (anchors.unsqueeze(0) + off[t].float())[torch.arange(len(top)), top]  # (n, T, 2)
         prior = b["prior"][t].double()
         errors.append(scaled_errors((prior + residual).numpy(), prior.numpy(), b["future"][t].numpy()))

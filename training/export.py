@@ -6,7 +6,7 @@ import argparse
 import json
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import onnx
@@ -27,14 +27,25 @@ SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature", *
 INPUTS = PADDED_INPUTS
 
 
-def load_checkpoint(
-    path: Path,
-) -> tuple[DGAN | ConsensusEnsemble, dgan.InputSpec, np.ndarray, np.ndarray, Config, float]:
+class Checkpoint(NamedTuple):
+    """A checkpoint loaded for inference (:func:`load_checkpoint`)."""
+
+    model: DGAN | ConsensusEnsemble
+    spec: dgan.InputSpec
+    anchors: np.ndarray
+    class_of: np.ndarray
+    config: Config
+    calibration: Calibration
+
+
+def load_checkpoint(path: Path) -> Checkpoint:
     """The model (eval mode), its input spec, anchors ``(K, T_f, 2)``, the class of each anchor, the config and the
-    temperature fitted on validation after training (1 for a checkpoint without one). An ensemble's checkpoint
-    (``training.ensemble``) holds its members' checkpoints: its anchors and config are its first member's, and its
-    ``top_scale`` (per class, ``training.ensemble.fit_top_scale``) if fitted."""
+    calibration fitted on validation after training (:meth:`Calibration.of`: a single temperature of 1 for a
+    checkpoint without one). An ensemble's checkpoint (``training.ensemble``) holds its members' checkpoints: its
+    anchors and config are its first member's, and its ``top_scale`` (per class, ``training.ensemble.fit_top_scale``)
+    if fitted."""
     ckpt = torch.load(path, weights_only=False)
+    calibration = Calibration.of(ckpt)
     if "members" in ckpt:
         members = [_member(m) for m in ckpt["members"]]
         first = members[0]
@@ -45,9 +56,8 @@ def load_checkpoint(
         ensemble = ConsensusEnsemble(
             [m[0] for m in members], tables, len(first[1].classes), ckpt.get("top_scale")
         ).eval()
-        return ensemble, first[1], first[2], first[3], first[4], float(ckpt.get("temperature", 1.0))
-    model, spec, anchors, class_of, cfg = _member(ckpt)
-    return model, spec, anchors, class_of, cfg, float(ckpt.get("temperature", 1.0))
+        return Checkpoint(ensemble, *first[1:], calibration)
+    return Checkpoint(*_member(ckpt), calibration)
 
 
 def _member(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
@@ -214,8 +224,7 @@ def store_half(m: onnx.ModelProto) -> int:
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
     """Exports the checkpoint at ``ckpt`` with the calibration it holds."""
-    model, spec, anchors, class_of, _, _ = load_checkpoint(ckpt)
-    calibration = Calibration.of(torch.load(ckpt, weights_only=False))
+    model, spec, anchors, class_of, _, calibration = load_checkpoint(ckpt)
     return export_model(model, spec, anchors, class_of, path, name, description, calibration)
 
 

@@ -139,9 +139,13 @@ class Calibration:
             float(ckpt.get("class_temperature", 1.0)),
         )
 
-    def keys(self) -> dict[str, float]:
-        """The checkpoint and contract keys, rounded as the contract stores them: the temperature, and the
-        contract-9 terms where they differ from a single temperature's (so that such a model reads as before)."""
+    def keys(self, complete: bool = False) -> dict[str, float]:
+        """The contract's keys, rounded as the contract stores them: the temperature, and the contract-9 terms where
+        they differ from a single temperature's (so that such a model reads as before). ``complete``: a
+        checkpoint's instead, every key at full precision (so that a refit replaces an earlier one's)."""
+        if complete:
+            exponent, klass = self.KEYS
+            return {"temperature": self.temperature, exponent: self.speed_exponent, klass: self.class_temperature}
         out = {"temperature": round(self.temperature, 6)}
         if self.speed_exponent != 0.0:
             out["temperature_speed_exponent"] = round(self.speed_exponent, 6)

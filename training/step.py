@@ -13,7 +13,7 @@ from training.config import Config
 from training.data.arrays import Windows
 from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
 from training.export import load_checkpoint
-from training.losses import anchor_pool, decode_torch, dgan_loss, soft_class_loss
+from training.losses import Calibration, anchor_pool, decode_torch, dgan_loss, soft_class_loss
 from training.modules.dgan import DGAN
 
 
@@ -24,25 +24,33 @@ class Teacher:
     model: torch.nn.Module
     anchors: torch.Tensor
     class_of: torch.Tensor
-    temperature: float
+    calibration: Calibration
+    dt_s: float
 
     @classmethod
     def load(cls, path: str, spec: dgan.InputSpec) -> Teacher:
-        model, tspec, anchors, class_of, _, temperature = load_checkpoint(Path(path))
+        model, tspec, anchors, class_of, _, calibration = load_checkpoint(Path(path))
         # A teacher runs on the student's crops whichever way its own were drawn (map.render): the same tensors.
         if tspec.map is not None and spec.map is not None:
             tspec = replace(tspec, map=replace(tspec.map, render=spec.map.render))
         if tspec.to_json() != spec.to_json():
             raise ValueError(f"train.distill: {path} takes other inputs than this configuration ({tspec.to_json()})")
-        return cls(model.eval(), torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long(), temperature)
+        anchors_t, class_of_t = torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long()
+        return cls(model.eval(), anchors_t, class_of_t, calibration, spec.dt_s)
 
     @torch.no_grad()
-    def top_residual(self, b: dict[str, torch.Tensor]) -> torch.Tensor:
-        """``(targets, T_f, 2)`` the teacher's most probable mode of each target, as a residual from the prior."""
+    def modes(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """The teacher's modes of each target ``(targets, K_t, T_f, 2)`` (residuals from the prior), most probable
+        first, and their probabilities ``(targets, K_t)`` under its calibration (as the engine decodes it)."""
         cl, al, off = self.model(*forward_inputs(b))
         t = b["target"]
-        modes, _ = decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, self.temperature)
-        return modes[:, 0]
+        cal = self.calibration
+        temperature = cal.anchor_temperatures(b["prior"][t], self.dt_s)
+        return decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, temperature, cal.class_temperature)
+
+    def top_residual(self, b: dict[str, torch.Tensor]) -> torch.Tensor:
+        """``(targets, T_f, 2)`` the teacher's most probable mode of each target, as a residual from the prior."""
+        return self.modes(b)[0][:, 0]
 
     @torch.no_grad()
     def mode_targets(
@@ -50,12 +58,11 @@ class Teacher:
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """The teacher's most probable mode of each target ``(targets, T_f, 2)`` (a residual from the prior, as
         :meth:`top_residual`) and its whole mode distribution carried onto the student's ``anchors``
-        ``(targets, K)``: each teacher mode's probability (with the teacher's temperature) goes to the student anchor
-        closest to it among those ``pool`` allows (``training.losses.anchor_pool``). That is the class the data's
-        loss would teach if the future were drawn from the teacher's modes (``train.distill_soft``)."""
-        cl, al, off = self.model(*forward_inputs(b))
+        ``(targets, K)``: each teacher mode's probability (with the teacher's calibration) goes to the student
+        anchor closest to it among those ``pool`` allows (``training.losses.anchor_pool``). That is the class the
+        data's loss would teach if the future were drawn from the teacher's modes (``train.distill_soft``)."""
+        modes, p = self.modes(b)
         t = b["target"]
-        modes, p = decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, self.temperature)
         n, k_t = p.shape
         flat = modes.reshape(n, k_t, -1).double()
         ref = anchors.reshape(len(anchors), -1).double()

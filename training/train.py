@@ -32,7 +32,6 @@ from training.build import build_model, input_spec, run_name
 from training.calibrate import (
     TemperatureFit,
     calibration_config,
-    calibration_keys,
     check_calibration,
     fit_temperature,
 )
@@ -65,7 +64,7 @@ def calibrate(
     ckpt = torch.load(path, weights_only=False)
     model.load_state_dict(ckpt["model"])
     found = fit_temperature(model, val, spec, anchors, class_of, kind)
-    ckpt.update(calibration_keys(found.calibration))
+    ckpt.update(found.calibration.keys(complete=True))
     save_atomic(ckpt, path)
     print(found, flush=True)
     return found

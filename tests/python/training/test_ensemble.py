@@ -27,6 +27,7 @@ from training.ensemble import (
     top_mode_errors,
 )
 from training.export import export_model, load_checkpoint, store_half
+from training.losses import Calibration
 from training.modules.dgan import ConsensusEnsemble
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -138,12 +139,12 @@ def test_the_top_scale_is_fitted_on_validation_stored_and_exported(tmp_path: Pat
     # Random anchors and untrained networks refine nothing: the prior alone is best for some class.
     assert 0.0 in fit.scale
     assert "top-mode scale on validation" in str(fit)
-    model, spec, anchors, class_of, _, temperature = load_checkpoint(ckpt)
+    model, spec, anchors, class_of, _, cal = load_checkpoint(ckpt)
     assert isinstance(model, ConsensusEnsemble)
     assert model.top_scale.tolist() == list(fit.scale)
     # The scale is part of the exported graph: the engine matches PyTorch with it.
-    path = export_model(model, spec, anchors, class_of, tmp_path / "scaled.onnx", "scaled", temperature=temperature)
-    assert_parity(model, spec, anchors, class_of, path, temperature)
+    path = export_model(model, spec, anchors, class_of, tmp_path / "scaled.onnx", "scaled", temperature=cal)
+    assert_parity(model, spec, anchors, class_of, path, cal)
     # Fitting again measures the network at scale 1 whatever the checkpoint holds: the same scales.
     assert fit_top_scale(ckpt).scale == fit.scale
 
@@ -161,8 +162,11 @@ def test_members_need_the_same_anchor_layout() -> None:
         ConsensusEnsemble([torch.nn.Identity()] * 2, [torch.zeros(6, 3, 2)], 2)
 
 
-def _members(tmp_path: Path, seeds: tuple[int, ...]) -> tuple[list[Path], dgan.InputSpec]:
-    """Untrained hdmap networks saved as training runs (``best.pt``, ``config.json``), different anchors each."""
+def _members(
+    tmp_path: Path, seeds: tuple[int, ...], calibration: Calibration | None = None
+) -> tuple[list[Path], dgan.InputSpec]:
+    """Untrained hdmap networks saved as training runs (``best.pt``, ``config.json``), different anchors each, with
+    ``calibration`` (a single temperature of 1.2 if not given)."""
     runs = []
     spec = None
     for seed in seeds:
@@ -184,7 +188,7 @@ def _members(tmp_path: Path, seeds: tuple[int, ...]) -> tuple[list[Path], dgan.I
             "class_of": np.repeat(np.arange(len(spec.classes)), kc),
             "config": asdict(cfg),
             "epoch": 0,
-            "temperature": 1.2,
+            **(calibration or Calibration(1.2)).keys(complete=True),
         }
         torch.save(ckpt, run / "best.pt")
         (run / "config.json").write_text(json.dumps({"config": asdict(cfg)}))
@@ -197,19 +201,34 @@ def _members(tmp_path: Path, seeds: tuple[int, ...]) -> tuple[list[Path], dgan.I
 def test_a_float16_ensemble_exports_and_matches_pytorch(tmp_path: Path) -> None:
     runs, spec = _members(tmp_path, (0, 1))
     ckpt = ensemble_checkpoint(runs, tmp_path / "ensemble.pt", half=True)
-    model, spec2, anchors, class_of, _, temperature = load_checkpoint(ckpt)
+    model, spec2, anchors, class_of, _, cal = load_checkpoint(ckpt)
     assert isinstance(model, ConsensusEnsemble)
     assert len(model.members) == 2
     assert spec2.to_json() == spec.to_json()
-    assert temperature == pytest.approx(1.2)
-    path = export_model(model, spec, anchors, class_of, tmp_path / "e.onnx", "ensemble", temperature=temperature)
+    assert cal == Calibration(cal.temperature)  # a single temperature
+    assert cal.temperature == pytest.approx(1.2)
+    path = export_model(model, spec, anchors, class_of, tmp_path / "e.onnx", "ensemble", temperature=cal)
     stored = {i.data_type for i in onnx.load(str(path)).graph.initializer}
     assert TensorProto.FLOAT16 in stored
-    assert_parity(model, spec, anchors, class_of, path, temperature)
+    assert_parity(model, spec, anchors, class_of, path, cal)
     # The same two members at float32: the float16 file is much smaller.
     full = load_checkpoint(ensemble_checkpoint(runs, tmp_path / "full.pt"))
     path32 = export_model(full[0], spec, anchors, class_of, tmp_path / "f.onnx", "ensemble32")
     assert path.stat().st_size < 0.7 * path32.stat().st_size
+
+
+@pytest.mark.slow
+def test_an_ensemble_keeps_its_first_member_s_contract_9_calibration(tmp_path: Path) -> None:
+    # Until refitted, the consensus decodes as its first member did: the speed exponent and class temperature too,
+    # in PyTorch (load_checkpoint) and in the engine (the exported contract).
+    cal = Calibration(0.8, 0.5, 2.0)
+    runs, spec = _members(tmp_path, (0, 1), cal)
+    model, _, anchors, class_of, _, loaded = load_checkpoint(ensemble_checkpoint(runs, tmp_path / "e.pt"))
+    assert loaded == cal
+    path = export_model(model, spec, anchors, class_of, tmp_path / "e.onnx", "ensemble", temperature=loaded)
+    contract = dgan.Predictor(path).contract
+    assert (contract["temperature_speed_exponent"], contract["class_temperature"]) == (0.5, 2.0)
+    assert_parity(model, spec, anchors, class_of, path, loaded)
 
 
 def test_members_of_different_configurations_are_refused(tmp_path: Path) -> None:

@@ -193,8 +193,7 @@ def tied_order(expected: np.ndarray, prob: np.ndarray, got: np.ndarray, tie: flo
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(p.stem for p in CHECKPOINTS.glob("*.pt")))
 def test_bundled_models_match_pytorch(name: str) -> None:
-    model, spec, anchors, class_of, _, _ = load_checkpoint(CHECKPOINTS / f"{name}.pt")
-    calibration = Calibration.of(torch.load(CHECKPOINTS / f"{name}.pt", weights_only=False))
+    model, spec, anchors, class_of, _, calibration = load_checkpoint(CHECKPOINTS / f"{name}.pt")
     assert_parity(model, spec, anchors, class_of, dgan.models.path(name), calibration)
 
 
@@ -488,7 +487,9 @@ def test_a_teacher_s_mode_distribution_is_a_soft_target_of_the_classifier(tmp_pa
     # ... where each teacher mode's probability sits at the anchor closest to that mode.
     with torch.no_grad():
         cl, al, off = teacher.model(*forward_inputs(b))
-        modes, p = decode_torch(cl, al, off, teacher.anchors, teacher.class_of, None, teacher.temperature)
+        cal = teacher.calibration
+        t = cal.anchor_temperatures(b["prior"], spec.dt_s)
+        modes, p = decode_torch(cl, al, off, teacher.anchors, teacher.class_of, None, t, cal.class_temperature)
     for i in range(n):
         pool = (class_of == b["class_index"][i]).repeat(modes.shape[1], 1)
         nearest = closest_anchor(modes[i], anchors, pool)
