@@ -116,9 +116,14 @@ class TrainConfig:
     zero_anchor: bool = False
     # Ensemble distillation: a teacher checkpoint (a consensus of several runs, training.ensemble, or one run) whose
     # most probable mode on each training batch is a second target of the same loss, weighing distill_weight beside
-    # the data's (its inputs must be the student's: the same data and prior settings). "" = no teacher.
+    # the data's (its inputs must be the student's, the same data settings; its own kinematic prior may differ, its
+    # modes are then carried onto the student's). "" = no teacher.
     distill: str = ""
     distill_weight: float = 1.0
+    # Whether the teacher also teaches on the noisy copies' windows (data.augment_noise). False: on the clean histories
+    # alone, where the teacher is good; the noisy copies then learn from the data alone (a teacher trained on clean
+    # tracks is no guide to noisy ones).
+    distill_noisy: bool = True
     # Whether the teacher's most probable mode also teaches the classifier (its closest anchor or mode as a second
     # class target). False: it only teaches the offsets; the mode probabilities learn from the data alone, so that a
     # hard window, where the teacher's top mode and the truth disagree, does not push probability onto the top mode.

@@ -11,7 +11,7 @@ import torch
 import dgan
 from training.config import Config
 from training.data.arrays import Windows
-from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
+from training.data.batches import batch_prior, forward_inputs, prepared_batch, windows_with_targets
 from training.export import load_checkpoint
 from training.losses import Calibration, anchor_pool, decode_torch, dgan_loss, soft_class_loss
 from training.modules.dgan import DGAN
@@ -25,7 +25,10 @@ class Teacher:
     anchors: torch.Tensor
     class_of: torch.Tensor
     calibration: Calibration
-    dt_s: float
+    #: The teacher's input spec: the student's but for its kinematic prior, which may differ.
+    spec: dgan.InputSpec
+    #: Whether that prior differs from the student's (the teacher's modes are then carried onto the student's).
+    own_prior: bool
 
     @classmethod
     def load(cls, path: str, spec: dgan.InputSpec) -> Teacher:
@@ -33,20 +36,27 @@ class Teacher:
         # A teacher runs on the student's crops whichever way its own were drawn (map.render): the same tensors.
         if tspec.map is not None and spec.map is not None:
             tspec = replace(tspec, map=replace(tspec.map, render=spec.map.render))
-        if tspec.to_json() != spec.to_json():
+        # The prior is not a network input: a teacher with another one runs on the same tensors.
+        if replace(tspec, prior=spec.prior).to_json() != spec.to_json():
             raise ValueError(f"train.distill: {path} takes other inputs than this configuration ({tspec.to_json()})")
         anchors_t, class_of_t = torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long()
-        return cls(model.eval(), anchors_t, class_of_t, calibration, spec.dt_s)
+        return cls(model.eval(), anchors_t, class_of_t, calibration, tspec, tspec.prior != spec.prior)
 
     @torch.no_grad()
     def modes(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-        """The teacher's modes of each target ``(targets, K_t, T_f, 2)`` (residuals from the prior), most probable
-        first, and their probabilities ``(targets, K_t)`` under its calibration (as the engine decodes it)."""
+        """The teacher's modes of each target ``(targets, K_t, T_f, 2)`` as residuals from the student's prior
+        (``b["prior"]``), most probable first, and their probabilities ``(targets, K_t)`` under its calibration (as
+        the engine decodes it, with its own prior's speeds)."""
         cl, al, off = self.model(*forward_inputs(b))
         t = b["target"]
+        prior = b["prior"][t]
+        if self.own_prior:
+            prior = torch.from_numpy(batch_prior(b, self.spec, t))
         cal = self.calibration
-        temperature = cal.anchor_temperatures(b["prior"][t], self.dt_s)
-        return decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, None, temperature, cal.class_temperature)
+        temperature = cal.anchor_temperatures(prior, self.spec.dt_s)
+        shift = (prior - b["prior"][t]) if self.own_prior else None  # the teacher's prior from the student's
+        tc = cal.class_temperature
+        return decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, shift, temperature, tc)
 
     def top_residual(self, b: dict[str, torch.Tensor]) -> torch.Tensor:
         """``(targets, T_f, 2)`` the teacher's most probable mode of each target, as a residual from the prior."""
@@ -97,30 +107,46 @@ def forward_loss(
     weights = None if weight_of_class is None else weight_of_class[classes]
     tr = cfg.train
 
-    def loss_to(target: torch.Tensor, classify: bool = True) -> tuple[torch.Tensor, dict[str, float]]:
+    def loss_to(
+        target: torch.Tensor, classify: bool = True, keep: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, dict[str, float]]:
+        """The loss of the targets ``keep`` selects (all if None) towards ``target`` (theirs)."""
+        sel = outs if keep is None else (outs[0][keep], outs[1][keep], outs[2][keep])
         return dgan_loss(
-            *outs,
+            *sel,
             target,
-            classes,
+            classes if keep is None else classes[keep],
             anchors,
             class_of,
             tr.alpha,
             tr.beta,
-            weights,
+            weights if keep is None or weights is None else weights[keep],
             tr.cls_target,
             tr.anchor_pool,
             classify,
         )
 
     loss, parts = loss_to(residual)
-    if teacher is not None:
-        top, soft = teacher.mode_targets(b, anchors, class_of, tr.anchor_pool)
-        distilled, _ = loss_to(top, tr.distill_classifier)
-        loss = loss + tr.distill_weight * distilled
-        if tr.distill_soft > 0:
-            ce = soft_class_loss(outs[0], outs[1], class_of, soft)
-            parts["soft"] = float(ce.mean().detach())
-            loss = loss + tr.distill_soft * (ce.mean() if weights is None else (weights * ce).sum() / weights.sum())
+    if teacher is None:
+        return loss, parts, outs
+    top, soft = teacher.mode_targets(b, anchors, class_of, tr.anchor_pool)
+    keep = None
+    if not tr.distill_noisy and "noisy" in b:
+        # The teacher teaches on the clean histories alone, each of their targets weighing as it would in a batch
+        # of clean windows (the mean over them, times their share of the batch's targets).
+        keep = ~b["noisy"][t]
+        if not keep.any():
+            return loss, parts, outs
+        top, soft = top[keep], soft[keep]
+    distilled, _ = loss_to(top, tr.distill_classifier, keep)
+    share = 1.0 if keep is None else float(keep.float().mean())
+    loss = loss + tr.distill_weight * share * distilled
+    if tr.distill_soft > 0:
+        cl_k, al_k = (outs[0], outs[1]) if keep is None else (outs[0][keep], outs[1][keep])
+        w_k = weights if keep is None or weights is None else weights[keep]
+        ce = soft_class_loss(cl_k, al_k, class_of, soft)
+        parts["soft"] = float(ce.mean().detach())
+        loss = loss + tr.distill_soft * share * (ce.mean() if w_k is None else (w_k * ce).sum() / w_k.sum())
     return loss, parts, outs
 
 

@@ -39,6 +39,8 @@ class Windows:
     files: list[str]
     # (A,) bool: the agent's frame had no map (a dataset without one, for a model whose map is optional); None: none
     map_absent: Arr | None = None
+    # (A,) bool: the agent's window is a noisy copy (data.augment_noise, training.data.augment); None: none is
+    noisy: Arr | None = None
 
     @property
     def num_windows(self) -> int:
@@ -71,6 +73,8 @@ class Windows:
             out["map"] = self.map[a_idx].astype(np.float32) / 255.0
         if self.map_absent is not None:
             out["map_absent"] = self.map_absent[a_idx]
+        if self.noisy is not None:
+            out["noisy"] = self.noisy[a_idx]
         if flip is not None and flip.any():
             mirror(out, np.repeat(flip, n_agents), np.repeat(flip, n_edges))
         return out
@@ -116,17 +120,25 @@ def concat_windows(parts: Sequence[Windows]) -> Windows:
         agents, edges, files = agents + int(p.agent_ptr[-1]), edges + int(p.edge_ptr[-1]), files + len(p.files)
     rows = [*("trajectory", "trajectory_mask", "state", "edge_index", "edge_features", "future", "target")]
     rows += ["class_index", "origin", "heading", "window_frame"]
-    absent = None
-    if any(p.map_absent is not None for p in parts):
-        absent = np.concatenate(
-            [np.zeros(int(p.agent_ptr[-1]), bool) if p.map_absent is None else p.map_absent for p in parts]
-        )
+    absent, noisy = (_flags(parts, name) for name in ("map_absent", "noisy"))
     return Windows(
         map=None if parts[0].map is None else np.concatenate([p.map for p in parts if p.map is not None]),
         map_absent=absent,
+        noisy=noisy,
         agent_ptr=np.concatenate(agent_ptr),
         edge_ptr=np.concatenate(edge_ptr),
         window_file=np.concatenate(window_file),
         files=[f for p in parts for f in p.files],
         **{k: np.concatenate([getattr(p, k) for p in parts]) for k in rows},
+    )
+
+
+def _flags(parts: Sequence[Windows], name: str) -> Arr | None:
+    """The per-agent flag ``name`` of several window sets concatenated (false for a set without it); None if none
+    has it."""
+    flags: list[Arr | None] = [getattr(p, name) for p in parts]
+    if all(f is None for f in flags):
+        return None
+    return np.concatenate(
+        [np.zeros(int(p.agent_ptr[-1]), bool) if f is None else f for p, f in zip(parts, flags, strict=True)]
     )

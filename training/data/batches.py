@@ -33,6 +33,13 @@ def forward_inputs(b: dict[str, Any]) -> list[Any]:
     return [b[k] for k in INPUTS if k in b]
 
 
+def batch_prior(b: dict[str, Any], spec: dgan.InputSpec, rows: Any = slice(None)) -> np.ndarray:
+    """The engine's kinematic prior ``(N, T_f, 2)`` under ``spec`` of a batch's agents (``rows`` of them; arrays or
+    CPU tensors)."""
+    traj, mask, state = (np.asarray(b[k][rows]) for k in INPUTS[:3])  # the prior's inputs lead the contract's
+    return dgan.kinematic_prior(traj, mask, state, spec)
+
+
 def prepared_batch(
     w: Windows,
     idx: np.ndarray,
@@ -45,7 +52,7 @@ def prepared_batch(
     whose map is optional, ``map_present``: 1, or 0 for the share ``drop`` of agents whose crop is blanked (drawn
     from ``rng``, the trainer's seeded generator) and for the agents of windows without a map (``map_absent``)."""
     b = w.batch(idx, flip)
-    b["prior"] = dgan.kinematic_prior(b["trajectory"], b["trajectory_mask"], b["state"], spec)
+    b["prior"] = batch_prior(b, spec)
     if spec.map is not None and spec.map.optional:
         present = np.ones(len(b["state"]), dtype=np.float32)
         if "map_absent" in b:  # windows of a dataset without maps: a blank crop, flagged absent as the engine does

@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
+
 import dgan
 from training.config import Config, DataConfig
 from training.data.arrays import Windows, concat_windows
@@ -53,7 +55,12 @@ def set_windows(d: DataConfig, sets: list[WindowSet], spec: dgan.InputSpec, prog
     """The windows of each of ``sets``, located under ``data.root`` and cached under ``data.cache_dir``."""
     root, cache = Path(d.root).expanduser(), Path(d.cache_dir).expanduser()
     found = located(sets, root, spec)
-    return cached(found, spec, cache, progress)
+    windows = cached(found, spec, cache, progress)
+    # A noisy copy's agents are flagged (train.distill_noisy = false keeps the teacher off them).
+    return [
+        replace(w, noisy=np.ones(len(w.target), bool)) if part.noise != (0.0, 0.0) else w
+        for part, w in zip(sets, windows, strict=True)
+    ]
 
 
 def window_set(part: WindowSet, root: Path, spec: dgan.InputSpec, cache_dir: Path, progress: bool = False) -> Windows:

@@ -427,3 +427,38 @@ def replace_info(info: Any) -> Any:
 
     labels = tuple(dgan.CLASSES)
     return replace(info, labels=labels, label_class=labels, scored=(True,) * 3, min_targets=1)
+
+
+@pytest.mark.slow
+def test_a_noisy_copy_s_agents_are_flagged_noisy(tmp_path: Path) -> None:
+    """``data.augment_noise``'s copies carry ``noisy`` (``train.distill_noisy``), through concatenation into the
+    batch; the dataset's own windows and the validation split do not."""
+    from training.config import DataConfig
+    from training.data.arrays import concat_windows
+    from training.data.batches import prepared_batch
+    from training.data.splits import set_windows, window_sets
+
+    d = DataConfig(
+        root=str(shared_data("eth_ucy")),
+        dataset="ethucy",
+        scene="zara1",
+        window_stride=40,
+        cache_dir=str(tmp_path),
+        extra_pedestrians="",
+        augment_noise="0.3",
+    )
+    spec = dgan.Predictor("zara1").spec
+    own, copy = set_windows(d, window_sets(d, "train"), spec, False)
+    assert own.noisy is None
+    assert copy.noisy is not None
+    assert copy.noisy.all()
+    assert len(copy.noisy) == len(copy.target)
+    assert all(w.noisy is None for w in set_windows(d, window_sets(d, "val"), spec, False))
+    both = concat_windows([own, copy])
+    b = prepared_batch(both, np.arange(both.num_windows), spec)
+    n_own = int(own.agent_ptr[-1])
+    assert not b["noisy"][:n_own].any()
+    assert b["noisy"][n_own:].all()
+    # The copy is the same windows, agents and targets, with other observed histories.
+    np.testing.assert_array_equal(copy.target, own.target)
+    assert not np.allclose(copy.trajectory, own.trajectory)

@@ -468,6 +468,67 @@ def test_a_teacher_s_most_probable_mode_is_a_second_target_of_the_loss() -> None
     assert no_cls_parts == second_parts
 
 
+def test_a_teacher_with_another_prior_teaches_residuals_from_the_student_s() -> None:
+    from training.data.batches import batch_prior
+    from training.step import Teacher
+
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml")
+    spec, b, _, _ = _teacher_batch(cfg, 4)
+    same = Teacher.load(str(ROOT / "training" / "checkpoints" / "apolloscape.pt"), spec)
+    assert not same.own_prior
+    # A student with the adaptive prior: the teacher runs on the same tensors, its modes carried onto that prior.
+    adaptive = replace(spec, prior=replace(spec.prior, fit="adaptive", window_s=2.0))
+    b2 = dict(b, prior=torch.from_numpy(batch_prior(b, adaptive)))
+    assert not torch.allclose(b2["prior"], b["prior"])
+    other = Teacher.load(str(ROOT / "training" / "checkpoints" / "apolloscape.pt"), adaptive)
+    assert other.own_prior
+    mine, p = same.modes(b)
+    carried, p2 = other.modes(b2)
+    torch.testing.assert_close(p2, p)  # the same network, the same calibration at its own prior's speeds
+    torch.testing.assert_close(carried + b2["prior"].unsqueeze(1), mine + b["prior"].unsqueeze(1))
+
+
+def test_a_teacher_can_leave_the_noisy_copies_to_the_data() -> None:
+    from training.losses import dgan_loss
+    from training.step import Teacher, forward_loss
+
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", {"train.distill_noisy": False})
+    spec, b, anchors, class_of = _teacher_batch(cfg, 4)
+    n = len(b["target"])
+    teacher = Teacher.load(str(ROOT / "training" / "checkpoints" / "apolloscape.pt"), spec)
+    student = build_model(cfg, spec, len(anchors)).eval()
+    alone, _, outs = forward_loss(student, b, anchors, class_of, cfg)
+    # Every agent of a noisy copy: the data's loss alone.
+    noisy = dict(b, noisy=torch.ones(n, dtype=torch.bool))
+    torch.testing.assert_close(forward_loss(student, noisy, anchors, class_of, cfg, teacher=teacher)[0], alone)
+    # Half of them: the teacher's term over the clean half, times its share of the targets.
+    half = torch.arange(n) % 2 == 0
+    taught, _, _ = forward_loss(student, dict(b, noisy=half), anchors, class_of, cfg, teacher=teacher)
+    keep = ~half
+    tr = cfg.train
+    top = teacher.top_residual(b)[keep]
+    cl, al, off = (o[keep] for o in outs)
+    second, _ = dgan_loss(
+        cl,
+        al,
+        off,
+        top,
+        b["class_index"][keep],
+        anchors,
+        class_of,
+        tr.alpha,
+        tr.beta,
+        None,
+        tr.cls_target,
+        tr.anchor_pool,
+    )
+    torch.testing.assert_close(taught, alone + float(keep.float().mean()) * second)
+    # train.distill_noisy true (the default): the flag changes nothing.
+    every = replace(cfg, train=replace(cfg.train, distill_noisy=True))
+    with_flag = forward_loss(student, dict(b, noisy=half), anchors, class_of, every, teacher=teacher)[0]
+    torch.testing.assert_close(with_flag, forward_loss(student, b, anchors, class_of, every, teacher=teacher)[0])
+
+
 def test_a_teacher_s_mode_distribution_is_a_soft_target_of_the_classifier(tmp_path: Path) -> None:
     from training.data.batches import forward_inputs
     from training.losses import soft_class_loss
