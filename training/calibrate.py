@@ -205,18 +205,21 @@ def choose_temperature(
 def fit_speed_class(modes: BestModes, class_of: torch.Tensor, single: TemperatureFit) -> TemperatureFit:
     """``"speed_class"``: log T, b and log T_c minimising the best mode's Brier score on ``modes``, searched
     (Nelder-Mead) from the start of smallest score among ``single``'s temperature with b = 0 and each of
-    :data:`CLASS_TEMPERATURE_STARTS`."""
+    :data:`CLASS_TEMPERATURE_STARTS`. A model of one class keeps T_c = 1 (its class probability is 1 whatever T_c:
+    nothing to fit), and only T and b are searched."""
     from scipy.optimize import minimize
 
+    one_class = modes.class_logits.shape[1] == 1
+
     def calibration(x: np.ndarray) -> Calibration:
-        log_t, b, log_tc = (float(v) for v in np.clip(x, -6.9, 6.9))
-        return Calibration(float(np.exp(log_t)), b, float(np.exp(log_tc)))
+        log_t, b, *log_tc = (float(v) for v in np.clip(x, -6.9, 6.9))
+        return Calibration(float(np.exp(log_t)), b, float(np.exp(log_tc[0])) if log_tc else 1.0)
 
     def score(x: np.ndarray) -> float:
         return best_mode_brier(modes.probabilities(class_of, calibration(x)), modes.best)
 
     starts = [np.array([np.log(single.temperature), 0.0, np.log(tc)]) for tc in CLASS_TEMPERATURE_STARTS]
-    x0 = min(starts, key=score)
+    x0 = starts[0][:2] if one_class else min(starts, key=score)
     found = calibration(minimize(score, x0, method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-6}).x)
     p = modes.probabilities(class_of, found)
     return replace(
@@ -224,7 +227,7 @@ def fit_speed_class(modes: BestModes, class_of: torch.Tensor, single: Temperatur
         temperature=found.temperature,
         speed_exponent=found.speed_exponent,
         class_temperature=found.class_temperature,
-        objective="brier (speed, class)",
+        objective="brier (speed)" if one_class else "brier (speed, class)",
         nll_after=best_mode_log_loss(p, modes.best),
         gap_after=reliability_gap(p, modes.best),
     )

@@ -86,6 +86,22 @@ def test_speed_and_class_temperatures_drawn_are_given_back() -> None:
         check_calibration("platt")
 
 
+def test_a_one_class_model_keeps_a_class_temperature_of_one() -> None:
+    # Its class probability is 1 whatever T_c: only T and b are fitted (the search had wandered to T_c = 0.001 or 992).
+    g = torch.Generator().manual_seed(2)
+    n, true = 20000, Calibration(0.7, 0.6)
+    class_of = torch.zeros(5, dtype=torch.long)
+    al = 2.0 * torch.randn(n, 5, generator=g)
+    speed = 5.0 * torch.rand(n, generator=g, dtype=torch.float64)
+    drawn = BestModes(torch.zeros(n, 1), al, torch.zeros(n, dtype=torch.long), speed)
+    modes = drawn._replace(best=torch.multinomial(drawn.probabilities(class_of, true), 1, generator=g).squeeze(1))
+    fit = fit_calibration("speed_class", modes, class_of)
+    assert fit.objective == "brier (speed)"
+    assert fit.class_temperature == 1.0
+    assert (fit.temperature, fit.speed_exponent) == pytest.approx((0.7, 0.6), rel=0.15)
+    assert set(fit.calibration.keys(complete=False)) == {"temperature", "temperature_speed_exponent"}
+
+
 def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int, target_class: str = "") -> Path:
     """An untrained ApolloScape network with random anchors, saved as a checkpoint whose validation split is
     ``val_recordings`` (the default split if empty), a per-class run's for ``target_class``."""
