@@ -49,12 +49,11 @@ class Teacher:
         the engine decodes it, with its own prior's speeds)."""
         cl, al, off = self.model(*forward_inputs(b))
         t = b["target"]
-        prior = b["prior"][t]
-        if self.own_prior:
-            prior = torch.from_numpy(batch_prior(b, self.spec, t))
+        student = b["prior"][t]
+        prior = torch.from_numpy(batch_prior(b, self.spec, t)) if self.own_prior else student
         cal = self.calibration
         temperature = cal.anchor_temperatures(prior, self.spec.dt_s)
-        shift = (prior - b["prior"][t]) if self.own_prior else None  # the teacher's prior from the student's
+        shift = (prior - student) if self.own_prior else None  # the teacher's prior from the student's
         tc = cal.class_temperature
         return decode_torch(cl[t], al[t], off[t], self.anchors, self.class_of, shift, temperature, tc)
 
@@ -84,6 +83,19 @@ class Teacher:
         return modes[:, 0], soft / soft.sum(dim=1, keepdim=True).clamp_min(1e-12)
 
 
+#: A network's class logits, anchor logits and offsets.
+Outputs = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
+
+
+def _selected(
+    keep: torch.Tensor | None, outs: Outputs, classes: torch.Tensor, weights: torch.Tensor | None
+) -> tuple[Outputs, torch.Tensor, torch.Tensor | None]:
+    """The targets' outputs, classes and weights, of those ``keep`` selects (all if None)."""
+    if keep is None:
+        return outs, classes, weights
+    return (outs[0][keep], outs[1][keep], outs[2][keep]), classes[keep], None if weights is None else weights[keep]
+
+
 def forward_loss(
     net: torch.nn.Module,
     b: dict[str, torch.Tensor],
@@ -92,7 +104,7 @@ def forward_loss(
     cfg: Config,
     weight_of_class: torch.Tensor | None = None,
     teacher: Teacher | None = None,
-) -> tuple[torch.Tensor, dict[str, float], tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+) -> tuple[torch.Tensor, dict[str, float], Outputs]:
     """The network on a batch and the loss over its target agents (on their residuals from the kinematic prior),
     each weighted by its class's ``weight_of_class`` if given (``train.class_balance``); also the targets' outputs.
     With a ``teacher``, the same loss towards its most probable mode is added, weighing ``train.distill_weight``
@@ -111,16 +123,16 @@ def forward_loss(
         target: torch.Tensor, classify: bool = True, keep: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, dict[str, float]]:
         """The loss of the targets ``keep`` selects (all if None) towards ``target`` (theirs)."""
-        sel = outs if keep is None else (outs[0][keep], outs[1][keep], outs[2][keep])
+        outs_k, classes_k, weights_k = _selected(keep, outs, classes, weights)
         return dgan_loss(
-            *sel,
+            *outs_k,
             target,
-            classes if keep is None else classes[keep],
+            classes_k,
             anchors,
             class_of,
             tr.alpha,
             tr.beta,
-            weights if keep is None or weights is None else weights[keep],
+            weights_k,
             tr.cls_target,
             tr.anchor_pool,
             classify,
@@ -129,6 +141,8 @@ def forward_loss(
     loss, parts = loss_to(residual)
     if teacher is None:
         return loss, parts, outs
+    if tr.distill_soft > 0:
+        parts["soft"] = 0.0  # a batch of noisy copies alone has no term
     top, soft = teacher.mode_targets(b, anchors, class_of, tr.anchor_pool)
     keep = None
     if not tr.distill_noisy and "noisy" in b:
@@ -142,8 +156,7 @@ def forward_loss(
     share = 1.0 if keep is None else float(keep.float().mean())
     loss = loss + tr.distill_weight * share * distilled
     if tr.distill_soft > 0:
-        cl_k, al_k = (outs[0], outs[1]) if keep is None else (outs[0][keep], outs[1][keep])
-        w_k = weights if keep is None or weights is None else weights[keep]
+        (cl_k, al_k, _), _, w_k = _selected(keep, outs, classes, weights)
         ce = soft_class_loss(cl_k, al_k, class_of, soft)
         parts["soft"] = float(ce.mean().detach())
         loss = loss + tr.distill_soft * share * (ce.mean() if w_k is None else (w_k * ce).sum() / w_k.sum())

@@ -523,6 +523,11 @@ def test_a_teacher_can_leave_the_noisy_copies_to_the_data() -> None:
         tr.anchor_pool,
     )
     torch.testing.assert_close(taught, alone + float(keep.float().mean()) * second)
+    # With the soft term, a batch of noisy copies alone reports it as 0 (the epoch's totals add it up) and adds none.
+    soft = replace(cfg, train=replace(cfg.train, distill_soft=0.7))
+    soft_loss, soft_parts, _ = forward_loss(student, noisy, anchors, class_of, soft, teacher=teacher)
+    torch.testing.assert_close(soft_loss, alone)
+    assert soft_parts["soft"] == 0.0
     # train.distill_noisy true (the default): the flag changes nothing.
     every = replace(cfg, train=replace(cfg.train, distill_noisy=True))
     with_flag = forward_loss(student, dict(b, noisy=half), anchors, class_of, every, teacher=teacher)[0]
