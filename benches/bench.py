@@ -90,8 +90,10 @@ def median_ms(fn: Callable[[], Any], repeat: int, warmup: int = 3) -> float:
     return 1e3 * statistics.median(times)
 
 
-def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
-    """The training code's model from the bundled checkpoint, eager, with `decode_torch`; None without torch."""
+def torch_pipeline(name: str, device: str = "cpu") -> Callable[[dict[str, np.ndarray]], Any] | None:
+    """The training code's model from the bundled checkpoint, eager, with `decode_torch`; None without torch. On
+    ``device`` (``"cuda"``: the preprocessed tensors are copied there and the decoded modes back, as the engine's CUDA
+    provider does); on one thread on the CPU."""
     try:
         import torch
 
@@ -103,14 +105,16 @@ def torch_pipeline(name: str) -> Callable[[dict[str, np.ndarray]], Any] | None:
     torch.set_num_threads(1)
     ckpt = ROOT / "training" / "checkpoints" / f"{name}.pt"
     model, spec, anchors, class_of, _, cal = load_checkpoint(ckpt)
-    a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
+    model = model.to(device)
+    a, c = torch.from_numpy(anchors).to(device), torch.from_numpy(class_of).long().to(device)
 
     def run(x: dict[str, np.ndarray]) -> Any:
         with torch.no_grad():
-            cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
-            prior = torch.from_numpy(x["prior"])
+            cl, al, off = model(*[torch.from_numpy(x[k]).to(device) for k in INPUTS if k in x])
+            prior = torch.from_numpy(x["prior"]).to(device)
             t = cal.anchor_temperatures(prior, spec.dt_s)
-            return decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature)
+            modes, p = decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature)
+            return modes.cpu().numpy(), p.cpu().numpy()
 
     return run
 
@@ -247,6 +251,68 @@ def latency_table(models: list[str], repeat: int, matmul_ms: float) -> None:
         latency(name, [32, 256], repeat, matmul_ms)
 
 
+def matched_difference(a: dgan.Prediction, b: dgan.Prediction) -> tuple[float, float]:
+    """Largest difference of two predictions of the same frame, robust to near-tied modes that change order: each
+    mode of ``a`` against the nearest mode of ``b`` (metres), and the sorted mode probabilities."""
+    ta, tb = a.trajectories, b.trajectories  # (N, K, T, 2)
+    gap = np.abs(ta[:, :, None] - tb[:, None]).max(axis=(3, 4))  # (N, K, K)
+    return float(gap.min(axis=2).max()), float(np.abs(a.probabilities - b.probabilities).max())
+
+
+def large(name: str, library: str, provider: str, threads: int) -> dgan.Predictor:
+    """A Predictor with the limits on edges and input bytes raised for thousands of tiled agents."""
+    return dgan.Predictor(
+        name,
+        onnxruntime_library=library,
+        execution_provider=provider,
+        threads=threads,
+        max_edges=50_000_000,
+        max_input_bytes=16 << 30,
+    )
+
+
+def cuda_table(models: list[str], agents: list[int], repeat: int, library: str) -> None:
+    """The engine on ONNX Runtime's CUDA provider against the same checkpoint in eager PyTorch on CUDA (and the
+    engine on the CPU, one thread, with the same library), at large N; medians over ``repeat`` calls. The engine's
+    preprocessing (and so each pipeline's) runs on one thread and on every core."""
+    import torch
+
+    # Plain float32 on both sides, as the engine asks of ONNX Runtime (TF32 moves the outputs by about 1e-3 m).
+    torch.backends.cuda.matmul.allow_tf32 = False
+    torch.backends.cudnn.allow_tf32 = False
+    cores = os.cpu_count() or 1
+    print(f"\nGPU: {torch.cuda.get_device_name(0)}; torch {torch.__version__}; ONNX Runtime library {library}")
+    print(
+        f"\n| model | N | E | preprocess ms, 1 / {cores} threads | predict ms, CUDA, 1 / {cores} threads "
+        f"| predict ms, CPU 1 thread | torch CUDA ms | torch CUDA pipeline ms, 1 / {cores} threads "
+        f"| vs torch CUDA, 1 / {cores} | CUDA vs CPU: modes m, p |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in models:
+        gpu = {t: large(name, library, "cuda", t) for t in (1, cores)}
+        cpu = large(name, library, "cpu", 1)
+        eager = torch_pipeline(name, device="cuda")
+        frame = scene_for(cpu.spec).frame
+        for n in agents:
+            f = tiled(frame, n)
+            x = dgan.preprocess(f, cpu.spec, threads=1)
+            pre = {t: median_ms(partial(dgan.preprocess, f, cpu.spec, threads=t), repeat) for t in gpu}
+            on_gpu = {t: median_ms(partial(p.predict, f), repeat) for t, p in gpu.items()}
+            on_cpu = median_ms(partial(cpu.predict, f), max(3, repeat // 4), warmup=1)
+            modes_m, p_diff = matched_difference(gpu[1].predict(f), cpu.predict(f))
+            cells = [str(n), str(len(x["edge_index"])), f"{pre[1]:.1f} / {pre[cores]:.1f}"]
+            cells += [f"{on_gpu[1]:.1f} / {on_gpu[cores]:.1f}", f"{on_cpu:.1f}"]
+            if eager is not None:
+                eager_ms = median_ms(partial(eager, x), repeat)
+                pipe = {c: pre[c] + eager_ms for c in gpu}
+                cells += [f"{eager_ms:.2f}", f"{pipe[1]:.1f} / {pipe[cores]:.1f}"]
+                cells.append(f"{pipe[1] / on_gpu[1]:.2f}× / {pipe[cores] / on_gpu[cores]:.2f}×")
+            else:
+                cells += ["-", "-", "-"]
+            cells.append(f"{modes_m:.1e}, {p_diff:.1e}")
+            print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+
+
 def real_frames(predictor: dgan.Predictor, count: int) -> list[dgan.Frame]:
     """``count`` real frames of the bundled scene at successive times (cycling when the scene is shorter)."""
     first = scene_for(predictor.spec)
@@ -330,7 +396,18 @@ def main() -> None:
     ap.add_argument("--flops", action="store_true", help="only the operations per agent (no timing)")
     ap.add_argument("--latency", action="store_true", help="only one predict on 1 and 2 threads")
     ap.add_argument("--session-options", action="store_true", help="only ONNX Runtime's options against the engine's")
+    ap.add_argument(
+        "--cuda",
+        metavar="LIBONNXRUNTIME",
+        help="only the CUDA provider (absolute path of onnxruntime-gpu's libonnxruntime.so) against eager PyTorch on "
+        "CUDA, at --agents (e.g. 256 1024 4096)",
+    )
     a = ap.parse_args()
+    if a.cuda:
+        print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
+        cuda_table(a.models, a.agents, a.repeat, a.cuda)
+        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+        return
     if a.flops:
         flops_table(a.models, a.agents)
         return

@@ -110,10 +110,11 @@ class GATLayer(nn.Module):
         weight = torch.exp(torch.clamp(score, -20.0, 20.0))  # (E, H)
         # scatter_add, not index_add: the ONNX export of index_add mishandles repeated receivers.
         r2 = recv.unsqueeze(-1).expand(-1, self.heads)
-        denom = torch.zeros(n, self.heads, dtype=h.dtype).scatter_add(0, r2, weight)
+        denom = torch.zeros(n, self.heads, dtype=h.dtype, device=h.device).scatter_add(0, r2, weight)
         alpha = weight / (torch.gather(denom, 0, r2) + 1e-9)
         r3 = recv.view(-1, 1, 1).expand(-1, self.heads, self.dh)
-        agg = torch.zeros(n, self.heads, self.dh, dtype=h.dtype).scatter_add(0, r3, alpha.unsqueeze(-1) * msg)
+        agg = torch.zeros(n, self.heads, self.dh, dtype=h.dtype, device=h.device)
+        agg = agg.scatter_add(0, r3, alpha.unsqueeze(-1) * msg)
         out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
         return out
 
@@ -143,7 +144,7 @@ class GATLayer(nn.Module):
         w2 = lin2.weight.view(heads, dh, -1)  # (H, dh, dim)
         v = (w2 * self.a_send.unsqueeze(-1)).sum(1).t()  # (dim, H)
         c = (lin2.bias.view(heads, dh) * self.a_send).sum(-1)  # (H,)
-        eye = torch.eye(heads, dtype=h.dtype)
+        eye = torch.eye(heads, dtype=h.dtype, device=h.device)
         # The block-diagonal (H·dim, H·dh) of the heads' W2ᵀ (torch.block_diag has no ONNX export).
         w2_blocks = (w2.transpose(1, 2).unsqueeze(2) * eye.view(heads, 1, heads, 1)).reshape(-1, heads * dh)
         own = eye.repeat_interleave(dh, dim=1)  # (H, dim): head k keeps its own dh columns

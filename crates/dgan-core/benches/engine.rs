@@ -3,7 +3,8 @@
 //! - `graph/rtree/{1000,10000}` vs `graph/brute_force/{1000,10000}`: the attention-zone graph at constant density
 //!   (one agent per 100 m², a mix of pedestrian and vehicle radii), so 10× the agents means ~10× the edges.
 //! - `raster/vector_map/32` and `raster/raster_map/32`: 32 agent crops of 64×64 px.
-//! - `decode/100`: 100 agents, K = 60 anchors, T_f = 12.
+//! - `decode/{100,4096}` and `decode/4096/2_threads`: 100 and 4,096 agents, K = 60 anchors, T_f = 12, on one thread
+//!   and shared out over two.
 //! - `predict/contract_map/32`: one whole predict (preprocess, raster, ONNX Runtime, decode) with the map fixture;
 //!   needs `ORT_DYLIB_PATH`.
 //! - `hdmap_waymo/raster` and `hdmap_waymo/predict`: a real Waymo Open Motion frame (45 agents, its whole vector map
@@ -16,7 +17,7 @@
 //!   22 pedestrians), and 200 agents at 10 Hz resampled to a 0.4 s model (100 ticks).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use dgan_core::decode::{decode, Anchors, Calibration, DecodeParams, NetworkOutputs};
+use dgan_core::decode::{decode, decode_on, Anchors, Calibration, DecodeParams, NetworkOutputs};
 use dgan_core::graph::{attention_zone_edges, attention_zone_edges_brute_force};
 use dgan_core::preprocess::preprocess;
 use dgan_core::raster::rasterize;
@@ -115,19 +116,24 @@ fn bench_raster(c: &mut Criterion) {
 }
 
 fn bench_decode(c: &mut Criterion) {
-    let (n, t_f) = (100, 12);
+    let t_f = 12;
     let sets = (0..3).map(|c| Array3::from_shape_fn((20, t_f, 2), |(k, t, d)| (c * k * t + d) as f64 * 0.1)).collect();
     let anchors = Anchors::new(AgentClass::ALL.to_vec(), sets).expect("valid anchors");
-    let mut rng = ChaCha8Rng::seed_from_u64(3);
-    let cl = Array2::from_shape_fn((n, 3), |_| rng.random_range(-2.0f32..2.0));
-    let al = Array2::from_shape_fn((n, 60), |_| rng.random_range(-2.0f32..2.0));
-    let off = Array4::from_shape_fn((n, 60, t_f, 2), |_| rng.random_range(-0.5f32..0.5));
-    let prior = Array3::from_shape_fn((n, t_f, 2), |(i, t, d)| (i * t + d) as f32 * 0.05);
-    let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, 0.0], i as f64 * 0.1)).collect();
-    let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
-    let calibration = Calibration { temperature: 1.3, speed_exponent: 0.5, class_temperature: 2.0 };
-    let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5 };
-    c.bench_function("decode/100", |b| b.iter(|| decode(out, params, &poses, 60)));
+    let mut g = c.benchmark_group("decode");
+    for (n, threads) in [(100, 1), (4096, 1), (4096, 2)] {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let cl = Array2::from_shape_fn((n, 3), |_| rng.random_range(-2.0f32..2.0));
+        let al = Array2::from_shape_fn((n, 60), |_| rng.random_range(-2.0f32..2.0));
+        let off = Array4::from_shape_fn((n, 60, t_f, 2), |_| rng.random_range(-0.5f32..0.5));
+        let prior = Array3::from_shape_fn((n, t_f, 2), |(i, t, d)| (i * t + d) as f32 * 0.05);
+        let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, 0.0], i as f64 * 0.1)).collect();
+        let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
+        let calibration = Calibration { temperature: 1.3, speed_exponent: 0.5, class_temperature: 2.0 };
+        let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5 };
+        let id = if threads == 1 { format!("{n}") } else { format!("{n}/{threads}_threads") };
+        g.bench_function(id, |b| b.iter(|| decode_on(out, params, &poses, 60, threads)));
+    }
+    g.finish();
 }
 
 /// The model at `path` (relative to the repository root), or None with a note when ONNX Runtime is not configured.

@@ -4,8 +4,9 @@
 
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
+use crate::limits::on_threads;
 use crate::transform::AgentPose;
-use ndarray::{s, Array2, Array3, Array4, ArrayView2, ArrayView3, ArrayView4};
+use ndarray::{s, Array2, Array3, Array4, ArrayView2, ArrayView3, ArrayView4, ArrayViewMut2, ArrayViewMut4, Axis};
 
 /// Per-class anchor trajectories in the agent-centric frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -129,12 +130,17 @@ impl Decoded {
     }
 }
 
-fn softmax(logits: impl Iterator<Item = f64>) -> Vec<f64> {
-    let v: Vec<f64> = logits.collect();
-    let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let e: Vec<f64> = v.iter().map(|x| (x - max).exp()).collect();
-    let sum: f64 = e.iter().sum();
-    e.into_iter().map(|x| x / sum).collect()
+/// The softmax of `logits` into `out` (cleared first), without allocating once `out` has room.
+fn softmax_into(logits: impl Iterator<Item = f64>, out: &mut Vec<f64>) {
+    out.clear();
+    out.extend(logits);
+    let max = out.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mut sum = 0.0;
+    for x in out.iter_mut() {
+        *x = (*x - max).exp();
+        sum += *x;
+    }
+    out.iter_mut().for_each(|x| *x /= sum);
 }
 
 /// The network's outputs for N agents.
@@ -215,12 +221,53 @@ pub struct DecodeParams<'a> {
 /// Decodes the network's outputs for agents whose agent-centric frames are `poses`, keeping the top `modes`
 /// (at most K).
 pub fn decode(out: NetworkOutputs<'_>, params: DecodeParams<'_>, poses: &[AgentPose], modes: usize) -> Result<Decoded> {
+    decode_on(out, params, poses, modes, 1)
+}
+
+/// Agents below which [`decode_on`] stays on the calling thread: a scoped thread costs about as much as decoding a
+/// few dozen agents of 60 modes.
+pub const PARALLEL_DECODE_FROM: usize = 128;
+
+/// [`decode`] with the agents shared out over up to `threads` threads (scoped, ending with the call) when there are
+/// at least [`PARALLEL_DECODE_FROM`]; each agent's result is the same on any number of threads.
+pub fn decode_on(
+    out: NetworkOutputs<'_>,
+    params: DecodeParams<'_>,
+    poses: &[AgentPose],
+    modes: usize,
+    threads: usize,
+) -> Result<Decoded> {
+    let (n, c, k_total, t_f) =
+        (poses.len(), params.anchors.classes().len(), params.anchors.total(), params.anchors.steps());
+    check_outputs(&out, &params, n)?;
+    let m = modes.clamp(1, k_total);
+    let mut decoded = Decoded::zeros(n, m, t_f, c);
+    let lanes = if n >= PARALLEL_DECODE_FROM { threads.clamp(1, n) } else { 1 };
+    let rows = n.div_ceil(lanes).max(1);
+    let d = &mut decoded;
+    let parts: Vec<(usize, DecodedMut<'_>)> = d
+        .trajectories
+        .axis_chunks_iter_mut(Axis(0), rows)
+        .zip(d.probabilities.axis_chunks_iter_mut(Axis(0), rows))
+        .zip(d.class_probabilities.axis_chunks_iter_mut(Axis(0), rows))
+        .zip(d.mode_classes.axis_chunks_iter_mut(Axis(0), rows))
+        .zip(d.mode_anchors.axis_chunks_iter_mut(Axis(0), rows))
+        .enumerate()
+        .map(|(part, ((((trajectories, probabilities), class_probabilities), mode_classes), mode_anchors))| {
+            (part * rows, DecodedMut { trajectories, probabilities, class_probabilities, mode_classes, mode_anchors })
+        })
+        .collect();
+    let work = |(first, mut part): (usize, DecodedMut<'_>)| decode_rows(&out, &params, poses, first, &mut part);
+    let panicked = || Err(DganError::Inference("a decoding thread panicked".into()));
+    on_threads(parts, work, panicked).into_iter().collect::<Result<()>>()?;
+    Ok(decoded)
+}
+
+/// The shapes of the outputs and the prior against N agents and the anchors; the calibration and time step.
+fn check_outputs(out: &NetworkOutputs<'_>, params: &DecodeParams<'_>, n: usize) -> Result<()> {
     let NetworkOutputs { class_logits, anchor_logits, offsets } = out;
     let DecodeParams { anchors, prior, calibration, dt_s } = params;
-    let n = poses.len();
-    let c = anchors.classes().len();
-    let k_total = anchors.total();
-    let t_f = anchors.steps();
+    let (c, k_total, t_f) = (anchors.classes().len(), anchors.total(), anchors.steps());
     let bad = |m: String| Err(DganError::Inference(m));
     if class_logits.dim() != (n, c) {
         return bad(format!("class_logits has shape {:?}, expected ({n}, {c})", class_logits.dim()));
@@ -237,52 +284,94 @@ pub fn decode(out: NetworkOutputs<'_>, params: DecodeParams<'_>, poses: &[AgentP
         }
     }
     calibration.check()?;
-    if !(dt_s.is_finite() && dt_s > 0.0) {
+    if !(dt_s.is_finite() && *dt_s > 0.0) {
         return Err(DganError::Contract(format!("dt_s must be positive, got {dt_s}")));
     }
+    Ok(())
+}
+
+/// Rows `first..` of [`Decoded`], as mutable views: one thread's share of [`decode_on`].
+struct DecodedMut<'a> {
+    trajectories: ArrayViewMut4<'a, f64>,
+    probabilities: ArrayViewMut2<'a, f64>,
+    class_probabilities: ArrayViewMut2<'a, f64>,
+    mode_classes: ArrayViewMut2<'a, i64>,
+    mode_anchors: ArrayViewMut2<'a, i64>,
+}
+
+/// Decodes agents `first..first + part's rows` (checked shapes) into `part`: the outputs, prior and anchors read as
+/// contiguous rows (copied once into that layout if they are not), each agent's rows written in place.
+fn decode_rows(
+    out: &NetworkOutputs<'_>,
+    params: &DecodeParams<'_>,
+    poses: &[AgentPose],
+    first: usize,
+    part: &mut DecodedMut<'_>,
+) -> Result<()> {
+    let DecodeParams { anchors, prior, calibration, dt_s } = *params;
+    let (rows, m, t_f, _) = part.trajectories.dim();
+    let agents = first..first + rows;
+    let class_logits = out.class_logits.slice(s![agents.clone(), ..]);
+    let anchor_logits = out.anchor_logits.slice(s![agents.clone(), ..]);
+    let offsets = out.offsets.slice(s![agents.clone(), .., .., ..]);
     if class_logits.iter().chain(anchor_logits.iter()).chain(offsets.iter()).any(|v| !v.is_finite()) {
-        return bad("the model produced NaN or infinite values".into());
+        return Err(DganError::Inference("the model produced NaN or infinite values".into()));
     }
-    let m = modes.clamp(1, k_total);
+    let k_total = anchors.total();
     let per_class = anchors.per_class();
     let class_of = anchors.class_of_anchor();
-    let mut out = Decoded::zeros(n, m, t_f, c);
-    for (i, pose) in poses.iter().enumerate() {
-        let pc = softmax(class_logits.row(i).iter().map(|&v| f64::from(v) / calibration.class_temperature));
+    let step = t_f * 2;
+    let anchor_flat: Vec<f64> = (0..k_total)
+        .flat_map(|k| anchors.anchor(k).map(|a| a.iter().copied().collect::<Vec<_>>()).unwrap_or_default())
+        .collect();
+    let offsets = offsets.as_standard_layout();
+    let offsets = offsets.as_slice().ok_or_else(|| DganError::Inference("offsets are not contiguous".into()))?;
+    let zeros = vec![0f32; step];
+    let prior_rows = prior.map(|p| p.slice_move(s![agents.clone(), .., ..]).as_standard_layout().into_owned());
+    let mut p = Vec::with_capacity(k_total);
+    let mut order: Vec<usize> = Vec::with_capacity(k_total);
+    let (mut pc, mut scratch) = (Vec::new(), Vec::new());
+    for (r, pose) in poses[agents].iter().enumerate() {
+        softmax_into(class_logits.row(r).iter().map(|&v| f64::from(v) / calibration.class_temperature), &mut pc);
+        let base: &[f32] = match &prior_rows {
+            Some(pr) => pr.slice(s![r, .., ..]).to_slice().unwrap_or(&zeros),
+            None => &zeros,
+        };
         // The prior's first step is its velocity times dt (a constant-velocity rollout; 0 without a prior).
-        let speed = prior.map_or(0.0, |p| f64::from(p[[i, 0, 0]]).hypot(f64::from(p[[i, 0, 1]])) / dt_s);
+        let speed = f64::from(base[0]).hypot(f64::from(base[1])) / dt_s;
         let temperature = calibration.anchor_temperature(speed);
-        let mut p = Vec::with_capacity(k_total);
+        p.clear();
         let mut start = 0;
         for (ci, &kc) in per_class.iter().enumerate() {
-            let pk = softmax((start..start + kc).map(|k| f64::from(anchor_logits[[i, k]]) / temperature));
-            p.extend(pk.into_iter().map(|v| v * pc[ci]));
+            softmax_into((start..start + kc).map(|k| f64::from(anchor_logits[[r, k]]) / temperature), &mut scratch);
+            p.extend(scratch.iter().map(|v| v * pc[ci]));
             start += kc;
         }
-        let mut order: Vec<usize> = (0..k_total).collect();
+        order.clear();
+        order.extend(0..k_total);
         // Stable: equal probabilities keep anchor order.
         order.sort_by(|&a, &b| p[b].total_cmp(&p[a]));
-        for (ci, v) in pc.iter().enumerate() {
-            out.class_probabilities[[i, ci]] = *v;
-        }
+        part.class_probabilities.row_mut(r).iter_mut().zip(&pc).for_each(|(o, v)| *o = *v);
+        let off_agent = &offsets[r * k_total * step..(r + 1) * k_total * step];
+        let mut traj = part.trajectories.slice_mut(s![r, .., .., ..]);
+        let traj = traj.as_slice_mut().ok_or_else(|| DganError::Inference("trajectories are not contiguous".into()))?;
         for (mi, &k) in order.iter().take(m).enumerate() {
-            out.probabilities[[i, mi]] = p[k];
-            out.mode_classes[[i, mi]] = class_of[k] as i64;
-            out.mode_anchors[[i, mi]] = k as i64;
-            let Some(anchor) = anchors.anchor(k) else { continue };
-            for t in 0..t_f {
-                let base = prior.map_or([0.0, 0.0], |p| [f64::from(p[[i, t, 0]]), f64::from(p[[i, t, 1]])]);
+            part.probabilities[[r, mi]] = p[k];
+            part.mode_classes[[r, mi]] = class_of[k] as i64;
+            part.mode_anchors[[r, mi]] = k as i64;
+            let (anchor, off) = (&anchor_flat[k * step..(k + 1) * step], &off_agent[k * step..(k + 1) * step]);
+            for (t, w_out) in traj[mi * step..(mi + 1) * step].chunks_exact_mut(2).enumerate() {
                 let local = [
-                    base[0] + anchor[[t, 0]] + f64::from(offsets[[i, k, t, 0]]),
-                    base[1] + anchor[[t, 1]] + f64::from(offsets[[i, k, t, 1]]),
+                    f64::from(base[2 * t]) + anchor[2 * t] + f64::from(off[2 * t]),
+                    f64::from(base[2 * t + 1]) + anchor[2 * t + 1] + f64::from(off[2 * t + 1]),
                 ];
                 let w = pose.to_world(local);
-                out.trajectories[[i, mi, t, 0]] = w[0];
-                out.trajectories[[i, mi, t, 1]] = w[1];
+                w_out[0] = w[0];
+                w_out[1] = w[1];
             }
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -377,6 +466,47 @@ mod tests {
             assert!(decode(out, DecodeParams { calibration: bad, ..params }, &poses, 3).is_err());
         }
         assert!(decode(out, DecodeParams { dt_s: 0.0, ..params }, &poses, 3).is_err());
+    }
+
+    #[test]
+    fn threads_give_the_single_threaded_result_and_refuse_nan_in_any_share() {
+        let anchors = Anchors::new(
+            vec![AgentClass::Vehicle, AgentClass::Pedestrian],
+            vec![array![[[1.0, 0.0], [2.0, 0.5]], [[2.0, 0.0], [4.0, -1.0]]], array![[[0.0, 1.0], [0.0, 2.0]]]],
+        )
+        .unwrap();
+        let n = PARALLEL_DECODE_FROM + 37;
+        let wave = |i: usize, k: usize| ((i * 7 + k * 3) as f32 * 0.37).sin();
+        let class_logits = Array2::from_shape_fn((n, 2), |(i, c)| wave(i, c));
+        let anchor_logits = Array2::from_shape_fn((n, 3), |(i, k)| 2.0 * wave(i, k + 5));
+        let mut offsets = Array4::from_shape_fn((n, 3, 2, 2), |(i, k, t, d)| wave(i + t, k + d) * 0.3);
+        let prior = Array3::from_shape_fn((n, 2, 2), |(i, t, d)| (t + 1) as f32 * wave(i, d + 9));
+        let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, -(i as f64)], i as f64 * 0.1)).collect();
+        let calibration = Calibration { temperature: 0.8, speed_exponent: 0.3, class_temperature: 1.5 };
+        let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5 };
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let one = decode_on(out, params, &poses, 2, 1).unwrap();
+        for threads in [2, 3, 8] {
+            let many = decode_on(out, params, &poses, 2, threads).unwrap();
+            assert_eq!(many.trajectories, one.trajectories, "{threads} threads");
+            assert_eq!(many.probabilities, one.probabilities);
+            assert_eq!(many.class_probabilities, one.class_probabilities);
+            assert_eq!(many.mode_classes, one.mode_classes);
+            assert_eq!(many.mode_anchors, one.mode_anchors);
+        }
+        assert!(decode_on(out, params, &poses[..3], 2, 8).is_err(), "outputs of {n} agents for 3 poses");
+        // A NaN in the last share's rows refuses the whole call.
+        offsets[[n - 1, 2, 1, 0]] = f32::NAN;
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        assert!(matches!(decode_on(out, params, &poses, 2, 4), Err(DganError::Inference(_))));
     }
 
     #[test]

@@ -11,7 +11,7 @@ use crate::contract::{
     INPUT_NEIGHBOR_MASK, INPUT_STATE, INPUT_TRAJECTORY, INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS,
     OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
 };
-use crate::decode::{decode, Anchors, DecodeParams, Decoded, NetworkOutputs};
+use crate::decode::{decode_on, Anchors, DecodeParams, Decoded, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
 use crate::limits::on_threads;
@@ -279,7 +279,9 @@ fn open_session(path: &Path, bytes: &[u8], options: &PredictorOptions) -> Result
         .with_config_entry("session.force_spinning_stop", "1")
         .map_err(builder_err)?;
     if let ExecutionProvider::Cuda { device_id } = options.execution_provider {
-        let cuda = ort::ep::CUDA::default().with_device_id(device_id).build().error_on_failure();
+        // Plain float32 products, as on the CPU: with ONNX Runtime's default TF32 the outputs moved by about 1e-3 m
+        // and near-tied modes changed order (an H200, docs/speed.md).
+        let cuda = ort::ep::CUDA::default().with_device_id(device_id).with_tf32(false).build().error_on_failure();
         builder = builder.with_execution_providers([cuda]).map_err(|e| {
             DganError::RuntimeLibrary(format!(
                 "the CUDA execution provider (device {device_id}) cannot be used with this ONNX Runtime library: {e}; \
@@ -508,10 +510,10 @@ impl Predictor {
             if let (true, Some(m)) = (crops_later, &self.contract.input.map) {
                 inputs.map = Some(rasterize_rows(frame, &pre.states, m, rows, 1)?);
             }
-            let (class_logits, anchor_logits, offsets) = self.run_on(&self.lanes, inputs)?;
+            let outputs = self.run_on(&self.lanes, inputs)?;
             let prior = pre.prior.select(Axis(0), rows);
             let poses: Vec<_> = rows.iter().map(|&i| pre.poses[i]).collect();
-            self.decode_outputs(&class_logits, &anchor_logits, &offsets, prior.view(), &poses, modes)
+            self.decode_outputs(&outputs, prior.view(), &poses, modes, 1)
         };
         let panicked = || Err(DganError::Inference("a network thread panicked".into()));
         let decoded: Vec<Decoded> =
@@ -520,15 +522,14 @@ impl Predictor {
         Ok(Prediction::of(frame, Decoded::gather(pre.poses.len(), &parts)?, edge_array(&pre.edges)))
     }
 
-    /// Decodes one network call's outputs.
+    /// Decodes one network call's outputs ([`Predictor::run`]'s) on `threads`.
     fn decode_outputs(
         &self,
-        class_logits: &Array2<f32>,
-        anchor_logits: &Array2<f32>,
-        offsets: &Array4<f32>,
+        (class_logits, anchor_logits, offsets): &(Array2<f32>, Array2<f32>, Array4<f32>),
         prior: ArrayView3<'_, f32>,
         poses: &[AgentPose],
         modes: usize,
+        threads: usize,
     ) -> Result<Decoded> {
         let out = NetworkOutputs {
             class_logits: class_logits.view(),
@@ -541,7 +542,7 @@ impl Predictor {
             calibration: self.contract.calibration(),
             dt_s: self.contract.input.dt_s,
         };
-        decode(out, params, poses, modes)
+        decode_on(out, params, poses, modes, threads)
     }
 
     /// Predicts several frames: each frame is preprocessed on its own (in parallel), consecutive frames' graphs are
@@ -645,6 +646,8 @@ impl Predictor {
         modes: usize,
         pool: &[Mutex<Session>],
     ) -> Result<Vec<Prediction>> {
+        // The single-threaded lanes run concurrently; the sessions' calls, one at a time, decode on `threads`.
+        let threads = if std::ptr::eq(pool, self.lanes.as_slice()) { 1 } else { self.threads };
         let spec = &self.contract.input;
         let (c, k, t_f) = (spec.classes.len(), self.anchors.total(), spec.t_f);
         let m = modes.min(k);
@@ -667,14 +670,14 @@ impl Predictor {
         let decoded = if n == 0 {
             None
         } else {
-            let (class_logits, anchor_logits, offsets) = self.run_on(pool, inputs)?;
+            let outputs = self.run_on(pool, inputs)?;
             let prior = if priors.len() == 1 {
                 priors.pop().ok_or_else(|| DganError::Inference("no prior".into()))?
             } else {
                 let views: Vec<_> = priors.iter().map(|p| p.view()).collect();
                 ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?
             };
-            Some(self.decode_outputs(&class_logits, &anchor_logits, &offsets, prior.view(), &poses, modes)?)
+            Some(self.decode_outputs(&outputs, prior.view(), &poses, modes, threads)?)
         };
         let decoded = match (frames, decoded) {
             // One frame: its prediction is the whole decode, moved rather than sliced and copied.
