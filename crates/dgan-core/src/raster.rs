@@ -68,6 +68,31 @@ pub fn rasterize_rows(
     rows: &[usize],
     threads: usize,
 ) -> Result<Array4<f32>> {
+    rasterize_rows_into(frame, states, spec, rows, threads, Vec::new())
+}
+
+/// [`rasterize_on`] drawn into `buffer`'s memory (any length; grown or cut to the crops' size, every value then
+/// overwritten): a caller that keeps the buffer of one call for the next (`Array4::into_raw_vec_and_offset`) spares
+/// the operating system's page faults of a fresh allocation, most of the cost of large crops beyond drawing them.
+pub fn rasterize_into(
+    frame: &Frame,
+    states: &[TrafficState],
+    spec: &MapSpec,
+    threads: usize,
+    buffer: Vec<f32>,
+) -> Result<Array4<f32>> {
+    let every: Vec<usize> = (0..frame.len()).collect();
+    rasterize_rows_into(frame, states, spec, &every, threads, buffer)
+}
+
+fn rasterize_rows_into(
+    frame: &Frame,
+    states: &[TrafficState],
+    spec: &MapSpec,
+    rows: &[usize],
+    threads: usize,
+    mut buffer: Vec<f32>,
+) -> Result<Array4<f32>> {
     spec.validate()?;
     if states.len() != frame.len() {
         return Err(DganError::InvalidFrame(format!("{} states for {} agents", states.len(), frame.len())));
@@ -81,7 +106,12 @@ pub fn rasterize_rows(
     let agents: RTree<GeomWithData<[f64; 2], usize>> =
         RTree::bulk_load(states.iter().enumerate().map(|(i, s)| GeomWithData::new(s.position, i)).collect());
     let max_half_diag = states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max);
-    let mut out = Array4::<f32>::zeros((rows.len(), 3, h, w));
+    // Every crop writes all of its 3 × h × w values (`Canvas::write_chw`): what the buffer held is overwritten.
+    let len = rows.len() * 3 * h * w;
+    buffer.truncate(len);
+    buffer.resize(len, 0.0);
+    let mut out = Array4::from_shape_vec((rows.len(), 3, h, w), buffer)
+        .map_err(|e| DganError::InvalidSpec(format!("raster buffer: {e}")))?;
     let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("raster buffer is not contiguous".into()))?;
     let threads = (threads / IN_FLIGHT.load(Ordering::SeqCst).max(1)).min(rows.len() / 8).max(1);
     // Every agent whose box can reach into world bounds `v`.

@@ -16,11 +16,11 @@ use crate::error::{DganError, Result};
 use crate::frame::Frame;
 use crate::limits::on_threads;
 use crate::preprocess::{preprocess_on, preprocess_without_crops, Limits, NetworkInputs, Preprocessed};
-use crate::raster::{rasterize_on, rasterize_rows};
+use crate::raster::{rasterize_into, rasterize_rows};
 use crate::transform::AgentPose;
 use ndarray::{s, Array2, Array4, ArrayView3, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
-use ort::value::{Tensor, TensorElementType, ValueType};
+use ort::value::{Tensor, TensorElementType, TensorRef, ValueType};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, TryLockError};
@@ -229,6 +229,9 @@ pub struct Predictor {
     path: PathBuf,
     limits: Limits,
     threads: usize,
+    /// The memory of the last call's map crops, drawn into by the next ([`crate::raster::rasterize_into`]): large
+    /// crops in fresh memory cost as much in page faults as in drawing. Empty for a model without a map.
+    spare_crops: Mutex<Vec<f32>>,
 }
 
 fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
@@ -397,6 +400,7 @@ impl Predictor {
             sessions,
             lanes,
             next: AtomicUsize::new(0),
+            spare_crops: Mutex::new(Vec::new()),
             contract,
             anchors,
             path,
@@ -460,19 +464,18 @@ impl Predictor {
         check_modes(modes)?;
         let _in_flight = crate::raster::InFlight::enter();
         let spec = &self.contract.input;
-        let pre = if self.lanes.len() >= 2 {
-            // The crops wait until the frame's parts are known: a split frame's are drawn on its parts' threads.
-            let (mut pre, later) = preprocess_without_crops(frame, spec, &self.limits)?;
+        // The crops wait until the frame's parts are known (a split frame's are drawn on its parts' threads); a whole
+        // frame's are drawn into the memory of the last call's.
+        let (mut pre, later) = preprocess_without_crops(frame, spec, &self.limits)?;
+        if self.lanes.len() >= 2 {
             if let Some(parts) = self.split(&pre) {
                 return self.run_split(frame, pre, parts, later, modes);
             }
-            if let (true, Some(m)) = (later, &spec.map) {
-                pre.inputs.map = Some(rasterize_on(frame, &pre.states, m, self.threads)?);
-            }
-            pre
-        } else {
-            preprocess_on(frame, spec, &self.limits, self.threads)?
-        };
+        }
+        if let (true, Some(m)) = (later, &spec.map) {
+            let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
+            pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
+        }
         // A small frame on a lane: waking intra-op workers costs more than they give there.
         let pool =
             if pre.poses.len() < INTRA_MIN_AGENTS && !self.lanes.is_empty() { &self.lanes } else { &self.sessions };
@@ -741,14 +744,22 @@ impl Predictor {
                 feed.push((INPUT_EDGE_FEATURES, Tensor::from_array(inputs.edge_features).map_err(infer)?.into()));
             }
         }
-        if let Some(map) = inputs.map {
-            feed.push((INPUT_MAP, Tensor::from_array(map).map_err(infer)?.into()));
+        // The crops are lent to ONNX Runtime, and their memory kept for the next call's ([`Predictor::spare_crops`]).
+        let map = inputs.map;
+        if let Some(map) = &map {
+            feed.push((INPUT_MAP, TensorRef::from_array_view(map).map_err(infer)?.into()));
         }
         if let Some(present) = inputs.map_present {
             feed.push((INPUT_MAP_PRESENT, Tensor::from_array(present).map_err(infer)?.into()));
         }
         let mut session = self.session(pool)?;
         let outputs = session.run(feed).map_err(infer)?;
+        if let Some(map) = map {
+            let mut spare = self.spare_crops.lock().unwrap_or_else(|e| e.into_inner());
+            if map.len() > spare.capacity() {
+                *spare = map.into_raw_vec_and_offset().0;
+            }
+        }
         let get = |name: &str| {
             outputs
                 .get(name)

@@ -261,6 +261,25 @@ def test_predict_batch_equals_predict_per_frame() -> None:
 
 
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="threads=2 needs two cores")
+def test_the_crops_memory_kept_between_calls_leaves_nothing_behind() -> None:
+    """A Predictor draws a call's map crops into the memory of the last call's: larger, smaller, empty and map-less
+    frames in turn give what a fresh Predictor gives, bit for bit."""
+    from dgan.demo import scene_for
+
+    predictor = dgan.Predictor("zara1")
+    scene = scene_for(predictor.spec)
+    small = [scene_for(predictor.spec, scene.default_now + k * scene.time_step).frame for k in range(3)]
+    big = np.cumsum(np.full((300, predictor.spec.t_obs, 2), 0.3), axis=1) + np.arange(300)[:, None, None] * 7.0
+    empty = dgan.Frame(np.zeros((0, predictor.spec.t_obs, 2)), map=small[0].map)
+    unmapped = dgan.Frame(small[1].positions)
+    frames = [dgan.Frame(big, map=small[0].map), small[0], empty, small[1], unmapped, small[2], small[0]]
+    for frame in frames:
+        got = predictor.predict(frame)
+        want = dgan.Predictor("zara1").predict(frame)
+        np.testing.assert_array_equal(got.trajectories, want.trajectories)
+        np.testing.assert_array_equal(got.probabilities, want.probabilities)
+
+
 def test_two_threads_split_frames_and_batches_with_the_one_thread_results() -> None:
     from dgan.demo import scene_for
 
