@@ -288,8 +288,9 @@ fn open_session(path: &Path, bytes: &[u8], options: &PredictorOptions) -> Result
         builder = builder.with_execution_providers([cuda]).map_err(|e| {
             DganError::RuntimeLibrary(format!(
                 "the CUDA execution provider (device {device_id}) cannot be used with this ONNX Runtime library: {e}; \
-                 install onnxruntime-gpu with CUDA and point onnxruntime_library (or ORT_DYLIB_PATH) at its \
-                 libonnxruntime, or use the CPU"
+                 install onnxruntime-gpu, point onnxruntime_library (or ORT_DYLIB_PATH) at its libonnxruntime and \
+                 put the CUDA and cuDNN libraries it was built for (libcublas, libcudnn, libcufft, libcurand) on \
+                 LD_LIBRARY_PATH, or use the CPU"
             ))
         })?;
     }
