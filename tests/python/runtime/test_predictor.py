@@ -315,7 +315,8 @@ def test_execution_providers_and_thread_bounds(tmp_path: Path, monkeypatch: pyte
     assert dgan.Predictor("zara1", execution_provider="CPU").num_modes > 0
     if "cuda" not in dgan.available_execution_providers():
         # The CPU wheel's library has no CUDA: refused at load with the fix, never a silent fall-back to the CPU.
-        with pytest.raises(exc.RuntimeLibraryError, match=r"CUDA execution provider .* install onnxruntime-gpu.*LD_LIBRARY_PATH"):
+        fix = r"CUDA execution provider .* install onnxruntime-gpu.*LD_LIBRARY_PATH"
+        with pytest.raises(exc.RuntimeLibraryError, match=fix):
             dgan.Predictor("zara1", execution_provider="cuda:0")
     for bad in ("tpu", "cuda:-1", "cuda:x", ""):
         with pytest.raises(exc.InvalidSpecError, match="execution provider"):
