@@ -756,10 +756,8 @@ impl Predictor {
         let mut session = self.session(pool)?;
         let outputs = session.run(feed).map_err(infer)?;
         if let Some(map) = map {
-            let mut spare = self.spare_crops.lock().unwrap_or_else(|e| e.into_inner());
-            if map.len() > spare.capacity() {
-                *spare = map.into_raw_vec_and_offset().0;
-            }
+            // The last call's, not the largest: a Predictor holds at most one call's crops beyond the call.
+            *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()) = map.into_raw_vec_and_offset().0;
         }
         let get = |name: &str| {
             outputs
