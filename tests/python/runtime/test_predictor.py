@@ -299,7 +299,12 @@ def test_two_threads_split_frames_and_batches_with_the_one_thread_results() -> N
             widths=None if base.widths is None else np.concatenate([base.widths, base.widths]),
             map=base.map,
         )
-        for frame in [*frames, doubled, doubled.without_map()]:
+        # 160 walkers 1 m apart near the scene's agents: one component, one call on two intra-op threads, its
+        # decoding shared over both (from 128 agents).
+        grid = np.stack(np.meshgrid(np.arange(16.0), np.arange(10.0)), axis=-1).reshape(-1, 1, 2)
+        steps = np.arange(one.spec.t_obs)[None, :, None] * np.array([0.5, 0.1]) * one.spec.dt_s
+        crowd = dgan.Frame(base.positions[:, -1].mean(axis=0) + grid + steps, map=base.map)
+        for frame in [*frames, doubled, doubled.without_map(), crowd]:
             want, got = one.predict(frame), two.predict(frame)
             np.testing.assert_allclose(got.trajectories, want.trajectories, atol=1e-5)
             np.testing.assert_allclose(got.probabilities, want.probabilities, atol=1e-6)
