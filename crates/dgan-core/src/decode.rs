@@ -66,15 +66,9 @@ impl Anchors {
         self.per_class().iter().enumerate().flat_map(|(c, &k)| std::iter::repeat_n(c, k)).collect()
     }
 
-    fn anchor(&self, k: usize) -> Option<ndarray::ArrayView2<'_, f64>> {
-        let mut k = k;
-        for s in &self.sets {
-            if k < s.dim().0 {
-                return Some(s.index_axis(ndarray::Axis(0), k));
-            }
-            k -= s.dim().0;
-        }
-        None
+    /// The K anchors `(K, T_f, 2)` flattened in that order: anchor k's steps at `k · 2 T_f ..`.
+    fn flat(&self) -> Vec<f64> {
+        self.sets.iter().flat_map(|s| s.iter().copied()).collect()
     }
 }
 
@@ -257,7 +251,9 @@ pub fn decode_on(
             (part * rows, DecodedMut { trajectories, probabilities, class_probabilities, mode_classes, mode_anchors })
         })
         .collect();
-    let work = |(first, mut part): (usize, DecodedMut<'_>)| decode_rows(&out, &params, poses, first, &mut part);
+    let anchor_flat = params.anchors.flat();
+    let work =
+        |(first, mut part): (usize, DecodedMut<'_>)| decode_rows(&out, &params, &anchor_flat, poses, first, &mut part);
     let panicked = || Err(DganError::Inference("a decoding thread panicked".into()));
     on_threads(parts, work, panicked).into_iter().collect::<Result<()>>()?;
     Ok(decoded)
@@ -304,6 +300,7 @@ struct DecodedMut<'a> {
 fn decode_rows(
     out: &NetworkOutputs<'_>,
     params: &DecodeParams<'_>,
+    anchor_flat: &[f64],
     poses: &[AgentPose],
     first: usize,
     part: &mut DecodedMut<'_>,
@@ -321,22 +318,19 @@ fn decode_rows(
     let per_class = anchors.per_class();
     let class_of = anchors.class_of_anchor();
     let step = t_f * 2;
-    let anchor_flat: Vec<f64> = (0..k_total)
-        .flat_map(|k| anchors.anchor(k).map(|a| a.iter().copied().collect::<Vec<_>>()).unwrap_or_default())
-        .collect();
     let offsets = offsets.as_standard_layout();
     let offsets = offsets.as_slice().ok_or_else(|| DganError::Inference("offsets are not contiguous".into()))?;
-    let zeros = vec![0f32; step];
-    let prior_rows = prior.map(|p| p.slice_move(s![agents.clone(), .., ..]).as_standard_layout().into_owned());
+    // This share's prior rows, contiguous; zeros without a prior.
+    let prior_rows = match prior {
+        Some(p) => p.slice_move(s![agents.clone(), .., ..]).iter().copied().collect(),
+        None => vec![0f32; rows * step],
+    };
     let mut p = Vec::with_capacity(k_total);
     let mut order: Vec<usize> = Vec::with_capacity(k_total);
     let (mut pc, mut scratch) = (Vec::new(), Vec::new());
     for (r, pose) in poses[agents].iter().enumerate() {
         softmax_into(class_logits.row(r).iter().map(|&v| f64::from(v) / calibration.class_temperature), &mut pc);
-        let base: &[f32] = match &prior_rows {
-            Some(pr) => pr.slice(s![r, .., ..]).to_slice().unwrap_or(&zeros),
-            None => &zeros,
-        };
+        let base = &prior_rows[r * step..(r + 1) * step];
         // The prior's first step is its velocity times dt (a constant-velocity rollout; 0 without a prior).
         let speed = f64::from(base[0]).hypot(f64::from(base[1])) / dt_s;
         let temperature = calibration.anchor_temperature(speed);

@@ -55,8 +55,7 @@ pub fn rasterize(frame: &Frame, states: &[TrafficState], spec: &MapSpec) -> Resu
 /// [`rasterize`] on at most `threads` threads (the calling one included), shared with the other predictions in
 /// flight in this process, and at least 8 crops to a thread. The crops are the same whatever the threads.
 pub fn rasterize_on(frame: &Frame, states: &[TrafficState], spec: &MapSpec, threads: usize) -> Result<Array4<f32>> {
-    let every: Vec<usize> = (0..frame.len()).collect();
-    rasterize_rows(frame, states, spec, &every, threads)
+    rasterize_into(frame, states, spec, threads, Vec::new())
 }
 
 /// The crops of the agents `rows` only (in that order), each as [`rasterize_on`] draws it: the boxes of every agent

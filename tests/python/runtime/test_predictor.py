@@ -260,7 +260,6 @@ def test_predict_batch_equals_predict_per_frame() -> None:
         dgan.Predictor("zara1").predict_batch([dgan.Frame(np.zeros((2, 3, 2)))])
 
 
-@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="threads=2 needs two cores")
 def test_the_crops_memory_kept_between_calls_leaves_nothing_behind() -> None:
     """A Predictor draws a call's map crops into the memory of the last call's: larger, smaller, empty and map-less
     frames in turn give what a fresh Predictor gives, bit for bit."""
@@ -280,6 +279,7 @@ def test_the_crops_memory_kept_between_calls_leaves_nothing_behind() -> None:
         np.testing.assert_array_equal(got.probabilities, want.probabilities)
 
 
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="threads=2 needs two cores")
 def test_two_threads_split_frames_and_batches_with_the_one_thread_results() -> None:
     from dgan.demo import scene_for
 
