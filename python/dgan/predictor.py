@@ -161,6 +161,20 @@ class Predictor:
     def path(self) -> Path:
         return Path(self._predictor.path)
 
+    @property
+    def last_timings(self) -> dict[str, float] | None:
+        """Where the latest :meth:`predict` call's time went, in milliseconds (None before the first; with several
+        threads predicting at once, the call that finished last; :meth:`predict_batch` is not timed).
+
+        ``preprocess``: the tensors other than the map crops, on the calling thread. ``crops``: the map crops, on up
+        to ``threads`` threads (zero without a map). ``network``: the ONNX Runtime call, copies to and from a GPU
+        included. ``decode``: world-frame modes, on up to ``threads`` threads. ``parts``: a frame split across lanes
+        draws, runs and decodes each part on its own thread, so those three are this one figure there (zero
+        otherwise). ``total``: the engine's whole call (the Python wrapping of the result is outside it).
+        """
+        timings = self._predictor.last_timings
+        return None if timings is None else dict(timings)
+
     def predict(self, frame: Frame, *, modes: int | None = None, unknown_classes: str = "error") -> Prediction:
         """Predicts every agent of ``frame``. Releases the GIL while the engine runs.
 

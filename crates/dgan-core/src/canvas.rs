@@ -318,11 +318,25 @@ impl Canvas<'_> {
         let (r, rest) = out.split_at_mut(plane);
         let (g, b) = rest.split_at_mut(plane);
         for (k, px) in self.pixmap.data().chunks_exact(4).enumerate() {
-            r[k] = f32::from(px[0]) / 255.0;
-            g[k] = f32::from(px[1]) / 255.0;
-            b[k] = f32::from(px[2]) / 255.0;
+            r[k] = UNIT[usize::from(px[0])];
+            g[k] = UNIT[usize::from(px[1])];
+            b[k] = UNIT[usize::from(px[2])];
         }
     }
+}
+
+/// `f32::from(v) / 255.0` for every byte `v`, computed once (exactly: the division is correctly rounded either way):
+/// a crop's values without a division per channel and pixel, which was most of the cost of resampling tiles.
+pub(crate) static UNIT: [f32; 256] = unit_table();
+
+const fn unit_table() -> [f32; 256] {
+    let mut table = [0.0f32; 256];
+    let mut v = 0;
+    while v < 256 {
+        table[v] = v as f32 / 255.0;
+        v += 1;
+    }
+    table
 }
 
 /// `x.round().clamp(0.0, 255.0) as u8` for the non-negative, finite values a bilinear sample of a u8 image gives,

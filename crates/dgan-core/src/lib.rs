@@ -63,7 +63,8 @@ pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
 pub use preprocess::Limits;
 pub use prior::{PriorKind, PriorSpec, VelocityFit};
 pub use runtime::{
-    available_execution_providers, init_onnxruntime, ExecutionProvider, Prediction, Predictor, PredictorOptions,
+    available_execution_providers, init_onnxruntime, ExecutionProvider, PhaseTimes, Prediction, Predictor,
+    PredictorOptions,
 };
 pub use spec::{GraphLayout, HeadingSource, InputSpec, MapRender, MapSpec};
 

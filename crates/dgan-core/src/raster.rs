@@ -11,7 +11,7 @@ use crate::limits::on_threads;
 use crate::map::SceneMap;
 use crate::spec::{MapRender, MapSpec};
 use crate::state::TrafficState;
-use crate::tiles::{resample, tile, Overlay};
+use crate::tiles::{resample_chw, tile, Overlay};
 use ndarray::Array4;
 use rstar::primitives::GeomWithData;
 use rstar::{RTree, AABB};
@@ -128,21 +128,27 @@ fn rasterize_rows_into(
         _ => None,
     };
     let draw = |crop: &mut [f32], s: &TrafficState| -> Result<()> {
+        // From tiles, straight into the crop: the boxes, if drawn, are on the overlay's tiles already.
+        match (frame.map(), &overlay) {
+            (Some(SceneMap::Vector(m)), Some(o)) => {
+                resample_chw(spec, &s.pose(), |i, j| o.get(i, j).unwrap_or_else(|| tile(m, spec, i, j)), crop);
+                return Ok(());
+            }
+            (Some(SceneMap::Vector(m)), None) if spec.render == MapRender::Tiles => {
+                resample_chw(spec, &s.pose(), |i, j| tile(m, spec, i, j), crop);
+                return Ok(());
+            }
+            _ => {}
+        }
         let mut canvas = Canvas::new(spec, s.pose())
             .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {w}×{h} crop")))?;
         let view = canvas.view;
-        match (frame.map(), &overlay) {
-            (Some(SceneMap::Vector(m)), Some(o)) => {
-                resample(&mut canvas, |i, j| o.get(i, j).unwrap_or_else(|| tile(m, spec, i, j)));
-            }
-            (Some(SceneMap::Vector(m)), None) if spec.render == MapRender::Tiles => {
-                resample(&mut canvas, |i, j| tile(m, spec, i, j));
-            }
-            (Some(SceneMap::Vector(m)), None) => canvas.draw_vector(m),
-            (Some(SceneMap::Raster(m)), _) => canvas.draw_raster(m),
-            (None, _) => {}
+        match frame.map() {
+            Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
+            Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
+            None => {}
         }
-        if spec.draw_agents && overlay.is_none() {
+        if spec.draw_agents {
             canvas.draw_boxes(boxes_near(view).into_iter());
         }
         canvas.write_chw(crop);
@@ -420,6 +426,14 @@ mod tests {
         assert!(m.tiles().contains(&key(0)));
         assert!((1..6).all(|i| !m.tiles().contains(&key(i))));
         assert!(m.tiles().contains(&key(6)) && m.tiles().contains(&key(cap + 4)));
+    }
+
+    #[test]
+    fn the_unit_table_is_the_division() {
+        for v in 0..=255u8 {
+            let divided = f32::from(std::hint::black_box(v)) / std::hint::black_box(255.0f32);
+            assert_eq!(crate::canvas::UNIT[usize::from(v)].to_bits(), divided.to_bits(), "{v}");
+        }
     }
 
     #[test]

@@ -24,6 +24,7 @@ use ort::value::{Tensor, TensorElementType, TensorRef, ValueType};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, TryLockError};
+use std::time::{Duration, Instant};
 
 /// The environment variable naming the ONNX Runtime shared library.
 pub const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";
@@ -214,6 +215,26 @@ pub fn edge_array(edges: &[[u32; 2]]) -> Array2<i64> {
     Array2::from_shape_fn((edges.len(), 2), |(e, k)| i64::from(edges[e][k]))
 }
 
+/// Where the wall time of one [`Predictor::predict_modes`] call went. A frame that runs as one network call has its
+/// map crops, network and decoding timed apart; a frame split across lanes draws, runs and decodes each part on its own
+/// thread, so those three are one figure there, `parts`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// The frame's tensors other than the map crops (states, transforms, graph, edge features, prior), on the calling
+    /// thread.
+    pub preprocess: Duration,
+    /// The map crops, on up to `threads` threads (zero for a model without a map).
+    pub crops: Duration,
+    /// The network call: tensors handed to ONNX Runtime, the run (copies to and from a GPU included), outputs read.
+    pub network: Duration,
+    /// Decoding the outputs into world-frame modes, on up to `threads` threads.
+    pub decode: Duration,
+    /// A split frame's parts (crops, network and decoding of each on its own lane), zero for a frame in one call.
+    pub parts: Duration,
+    /// The whole call.
+    pub total: Duration,
+}
+
 /// A loaded, contract-checked DGAN model.
 #[derive(Debug)]
 pub struct Predictor {
@@ -232,6 +253,8 @@ pub struct Predictor {
     /// The memory of the last call's map crops, drawn into by the next ([`crate::raster::rasterize_into`]): large
     /// crops in fresh memory cost as much in page faults as in drawing. Empty for a model without a map.
     spare_crops: Mutex<Vec<f32>>,
+    /// The phase times of the latest `predict_modes` call to finish.
+    last_times: Mutex<Option<PhaseTimes>>,
 }
 
 fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
@@ -402,6 +425,7 @@ impl Predictor {
             lanes,
             next: AtomicUsize::new(0),
             spare_crops: Mutex::new(Vec::new()),
+            last_times: Mutex::new(None),
             contract,
             anchors,
             path,
@@ -464,24 +488,40 @@ impl Predictor {
     pub fn predict_modes(&self, frame: &Frame, modes: usize) -> Result<Prediction> {
         check_modes(modes)?;
         let _in_flight = crate::raster::InFlight::enter();
+        let started = Instant::now();
+        let mut times = PhaseTimes::default();
         let spec = &self.contract.input;
         // The crops wait until the frame's parts are known (a split frame's are drawn on its parts' threads); a whole
         // frame's are drawn into the memory of the last call's.
         let (mut pre, later) = preprocess_without_crops(frame, spec, &self.limits)?;
+        times.preprocess = started.elapsed();
         if self.lanes.len() >= 2 {
             if let Some(parts) = self.split(&pre) {
-                return self.run_split(frame, pre, parts, later, modes);
+                let out = self.run_split(frame, pre, parts, later, modes)?;
+                times.total = started.elapsed();
+                times.parts = times.total.saturating_sub(times.preprocess);
+                *self.last_times.lock().unwrap_or_else(|e| e.into_inner()) = Some(times);
+                return Ok(out);
             }
         }
         if let (true, Some(m)) = (later, &spec.map) {
             let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
             pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
+            times.crops = started.elapsed().saturating_sub(times.preprocess);
         }
         // A small frame on a lane: waking intra-op workers costs more than they give there.
         let pool =
             if pre.poses.len() < INTRA_MIN_AGENTS && !self.lanes.is_empty() { &self.lanes } else { &self.sessions };
-        let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes, pool)?;
+        let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes, pool, Some(&mut times))?;
+        times.total = started.elapsed();
+        *self.last_times.lock().unwrap_or_else(|e| e.into_inner()) = Some(times);
         out.pop().ok_or_else(|| DganError::Inference("no prediction for the frame".into()))
+    }
+
+    /// Where the time of the latest [`Predictor::predict_modes`] call to finish went (with several threads predicting
+    /// at once, whichever finished last); None before the first. Calls to [`Predictor::predict_batch`] are not timed.
+    pub fn last_times(&self) -> Option<PhaseTimes> {
+        *self.last_times.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// The parts a frame runs as on the lanes, or None when it does not split well ([`SPLIT_MAX_LOAD`]): then one
@@ -607,7 +647,7 @@ impl Predictor {
         }
         let call = |(start, group): Call, pool: &[Mutex<Session>]| {
             let end = start + group.len();
-            self.run_and_decode(&frames[start..end], group, modes, pool)
+            self.run_and_decode(&frames[start..end], group, modes, pool, None)
         };
         if self.lanes.len() < 2 || groups.len() < 2 {
             let mut out = Vec::with_capacity(frames.len());
@@ -649,6 +689,7 @@ impl Predictor {
         pres: Vec<Preprocessed>,
         modes: usize,
         pool: &[Mutex<Session>],
+        times: Option<&mut PhaseTimes>,
     ) -> Result<Vec<Prediction>> {
         // The single-threaded lanes run concurrently; the sessions' calls, one at a time, decode on `threads`.
         let threads = if std::ptr::eq(pool, self.lanes.as_slice()) { 1 } else { self.threads };
@@ -674,14 +715,20 @@ impl Predictor {
         let decoded = if n == 0 {
             None
         } else {
+            let started = Instant::now();
             let outputs = self.run_on(pool, inputs)?;
+            let ran = started.elapsed();
             let prior = if priors.len() == 1 {
                 priors.pop().ok_or_else(|| DganError::Inference("no prior".into()))?
             } else {
                 let views: Vec<_> = priors.iter().map(|p| p.view()).collect();
                 ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?
             };
-            Some(self.decode_outputs(&outputs, prior.view(), &poses, modes, threads)?)
+            let decoded = self.decode_outputs(&outputs, prior.view(), &poses, modes, threads)?;
+            if let Some(times) = times {
+                (times.network, times.decode) = (ran, started.elapsed().saturating_sub(ran));
+            }
+            Some(decoded)
         };
         let decoded = match (frames, decoded) {
             // One frame: its prediction is the whole decode, moved rather than sliced and copied.

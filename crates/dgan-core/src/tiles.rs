@@ -9,7 +9,7 @@
 //! at world `(col · r, −row · r)` for the tiles' resolution `r`): a tile is the same whichever crop or thread asked
 //! for it first, so crops do not depend on the order of the agents, the calls or the threads.
 
-use crate::canvas::Canvas;
+use crate::canvas::{world_bounds, Canvas, UNIT};
 use crate::error::{DganError, Result};
 use crate::limits::on_threads;
 use crate::map::VectorMap;
@@ -23,6 +23,8 @@ use std::sync::Arc;
 /// Tile side, pixels (a power of two: tile indices by shifts).
 pub const TILE_PX: usize = 128;
 const TILE_SHIFT: u32 = 7;
+/// A tile pixel's column (row) within its tile: `c & MASK`.
+const MASK: i64 = TILE_PX as i64 - 1;
 /// Tile pixels per crop pixel along each axis.
 pub const SUPERSAMPLE: f64 = 2.0;
 
@@ -166,62 +168,60 @@ impl Overlay {
     }
 }
 
-/// Fills `canvas` (an agent's crop) from the tiles `fetch(i, j)` gives, opaque: each crop pixel the mean of the 2 × 2
-/// tile pixels around its centre.
-pub(crate) fn resample(canvas: &mut Canvas<'_>, fetch: impl Fn(i64, i64) -> Arc<[u8]>) {
-    let spec = canvas.spec;
+/// Writes the crop of the agent at `pose` into `out` (`(3, H, W)` channel-major, in [0, 1], every value written) from
+/// the tiles `fetch(i, j)` gives: each crop pixel the mean of the 2 × 2 tile pixels around its centre, opaque.
+pub(crate) fn resample_chw(spec: &MapSpec, pose: &AgentPose, fetch: impl Fn(i64, i64) -> Arc<[u8]>, out: &mut [f32]) {
     let res = tile_resolution(spec);
     // The tiles under the crop (its world bounds in tile pixels, one pixel more each side for the taps).
-    let ([c0, c1, r0, r1], [i0, i1, j0, j1]) = span(canvas.view, res);
+    let ([c0, c1, r0, r1], [i0, i1, j0, j1]) = span(world_bounds(spec, pose), res);
     let across = (i1 - i0 + 1) as usize;
     let grid: Vec<Arc<[u8]>> =
         (j0..=j1).flat_map(|j| (i0..=i1).map(move |i| (i, j))).map(|(i, j)| fetch(i, j)).collect();
     // The crop's bounds as one patch of tile pixels, rows (r0..=r1) by columns (c0..=c1), copied row by row from the
-    // tiles: the taps below then read one array, whatever tile they fall in.
+    // tiles (every byte written, none zeroed first): the taps below then read one array, whatever tile they fall in.
     let (ph, pw) = ((r1 - r0 + 1) as usize, (c1 - c0 + 1) as usize);
-    let mut patch = vec![0u8; ph * pw * 3];
-    for (pr, line) in patch.chunks_exact_mut(pw * 3).enumerate() {
-        let r = r0 + pr as i64;
-        let (j, tr) = (r >> TILE_SHIFT, (r & (TILE_PX as i64 - 1)) as usize);
+    let mut patch: Vec<u8> = Vec::with_capacity(ph * pw * 3);
+    for r in r0..=r1 {
+        let (j, tr) = (r >> TILE_SHIFT, (r & MASK) as usize);
         let mut c = c0;
         while c <= c1 {
-            let i = c >> TILE_SHIFT;
-            let tc = (c & (TILE_PX as i64 - 1)) as usize;
+            let (i, tc) = (c >> TILE_SHIFT, (c & MASK) as usize);
             let n = (TILE_PX - tc).min((c1 - c + 1) as usize);
             let t = &grid[(j - j0) as usize * across + (i - i0) as usize];
             let from = (tr * TILE_PX + tc) * 3;
-            let to = (c - c0) as usize * 3;
-            line[to..to + n * 3].copy_from_slice(&t[from..from + n * 3]);
+            patch.extend_from_slice(&t[from..from + n * 3]);
             c += n as i64;
         }
     }
     // World position of pixel (0, 0) and its steps along a row and down a column, in patch pixels.
     let at = |row: usize, col: usize| {
-        let w = canvas.pose.to_world(spec.pixel_to_local(row, col));
+        let w = pose.to_world(spec.pixel_to_local(row, col));
         [w[0] / res - c0 as f64, -w[1] / res - r0 as f64]
     };
     let (o, right, down) = (at(0, 0), at(0, 1), at(1, 0));
     let (dc, dr) = ([right[0] - o[0], right[1] - o[1]], [down[0] - o[0], down[1] - o[1]]);
-    let (w, stride) = (spec.width_px, pw * 3);
+    let (w, stride, plane) = (spec.width_px, pw * 3, spec.width_px * spec.height_px);
     // Within the patch by construction (its bounds hold every pixel centre, one pixel to spare); clamped so that a
     // rounding at its edge cannot read outside it.
     let (last_c, last_r) = (pw as f64 - 2.0, ph as f64 - 2.0);
-    let data = canvas.pixmap.data_mut();
-    for (row, out) in data.chunks_exact_mut(w * 4).enumerate() {
+    let (red, rest) = out.split_at_mut(plane);
+    let (green, blue) = rest.split_at_mut(plane);
+    let rows = red.chunks_exact_mut(w).zip(green.chunks_exact_mut(w)).zip(blue.chunks_exact_mut(w));
+    for (row, ((red, green), blue)) in rows.enumerate() {
         let fr = row as f64;
         let (mut gc, mut gr) = (o[0] + fr * dr[0], o[1] + fr * dr[1]);
-        for px in out.chunks_exact_mut(4) {
+        for ((r, g), b) in red.iter_mut().zip(green.iter_mut()).zip(blue.iter_mut()) {
             // The 2 × 2 tile pixels around the crop pixel's centre (non-negative: truncation is the floor), averaged:
             // a box one crop pixel wide, as a crop drawn per agent covers its pixels.
             let (cc, rr) = (gc.clamp(0.0, last_c) as usize, gr.clamp(0.0, last_r) as usize);
             let k = (rr * pw + cc) * 3;
             let (top, bottom) = (six(&patch[k..k + 6]), six(&patch[k + stride..k + stride + 6]));
-            for ch in 0..3 {
+            let mean = |ch: usize| {
                 let sum =
                     u16::from(top[ch]) + u16::from(top[ch + 3]) + u16::from(bottom[ch]) + u16::from(bottom[ch + 3]);
-                px[ch] = ((sum + 2) >> 2) as u8;
-            }
-            px[3] = 255;
+                UNIT[usize::from((sum + 2) >> 2)]
+            };
+            (*r, *g, *b) = (mean(0), mean(1), mean(2));
             gc += dc[0];
             gr += dc[1];
         }

@@ -115,6 +115,23 @@ impl PyPredictor {
         self.inner.path().to_path_buf()
     }
 
+    /// The latest predict call's phase times in milliseconds (`preprocess`, `crops`, `network`, `decode`, `parts`,
+    /// `total`), or None before the first.
+    #[getter]
+    fn last_timings(&self) -> Option<Vec<(&'static str, f64)>> {
+        self.inner.last_times().map(|t| {
+            let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+            vec![
+                ("preprocess", ms(t.preprocess)),
+                ("crops", ms(t.crops)),
+                ("network", ms(t.network)),
+                ("decode", ms(t.decode)),
+                ("parts", ms(t.parts)),
+                ("total", ms(t.total)),
+            ]
+        })
+    }
+
     /// Predicts several frames in as few network calls as fit; one prediction per frame (each with its frame's
     /// heading check when `check_headings`).
     #[pyo3(signature = (frames, modes, check_headings = false))]

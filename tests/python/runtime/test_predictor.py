@@ -279,6 +279,39 @@ def test_the_crops_memory_kept_between_calls_leaves_nothing_behind() -> None:
         np.testing.assert_array_equal(got.probabilities, want.probabilities)
 
 
+def test_last_timings_split_each_call_into_its_phases() -> None:
+    from dgan.demo import scene_for
+
+    keys = {"preprocess", "crops", "network", "decode", "parts", "total"}
+    for name, threads in (("zara1", 1), ("apolloscape", 1), ("hdmap", 2)):
+        predictor = dgan.Predictor(name, threads=threads)
+        assert predictor.last_timings is None
+        frame = scene_for(predictor.spec).frame
+        predictor.predict_batch([frame])
+        assert predictor.last_timings is None, "predict_batch is not timed"
+        predictor.predict(frame)
+        t = predictor.last_timings
+        assert t is not None
+        assert set(t) == keys
+        assert all(v >= 0.0 for v in t.values())
+        phases = sum(v for k, v in t.items() if k != "total")
+        assert t["total"] > 0.0
+        assert 0.9 * t["total"] <= phases <= t["total"] + 1e-3, t
+        drawn = predictor.spec.map is not None and t["parts"] == 0.0
+        assert (t["crops"] > 0.0) == drawn, t
+        assert t["network"] > 0.0 or t["parts"] > 0.0, t
+    # The latest call's: an empty frame then a real one.
+    predictor = dgan.Predictor("zara1")
+    predictor.predict(dgan.Frame(np.zeros((0, predictor.spec.t_obs, 2))))
+    empty = predictor.last_timings
+    assert empty is not None
+    assert empty["network"] == 0.0
+    predictor.predict(scene_for(predictor.spec).frame)
+    latest = predictor.last_timings
+    assert latest is not None
+    assert latest["network"] > 0.0
+
+
 @pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="threads=2 needs two cores")
 def test_two_threads_split_frames_and_batches_with_the_one_thread_results() -> None:
     from dgan.demo import scene_for
