@@ -315,6 +315,41 @@ def cuda_table(models: list[str], agents: list[int], repeat: int, library: str) 
             print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
 
 
+def phases_ms(predictor: dgan.Predictor, frame: dgan.Frame, repeat: int) -> dict[str, float]:
+    """Median of each phase of ``Predictor.last_timings`` (and of the whole ``predict`` seen from Python, ``predict``)
+    over ``repeat`` calls after three of warm-up."""
+    for _ in range(3):
+        predictor.predict(frame)
+    seen: dict[str, list[float]] = {}
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        predictor.predict(frame)
+        seen.setdefault("predict", []).append(1e3 * (time.perf_counter() - t0))
+        for key, ms in (predictor.last_timings or {}).items():
+            seen.setdefault(key, []).append(ms)
+    return {key: statistics.median(v) for key, v in seen.items()}
+
+
+def phase_table(
+    models: list[str], agents: list[int], threads: list[int], repeat: int, library: str | None, provider: str
+) -> None:
+    """Where ``predict``'s time goes (``Predictor.last_timings``) on ``provider``, per model, N and thread count:
+    medians over ``repeat`` calls; ``rest`` is the Python side (the frame handed over, the prediction wrapped)."""
+    print(f"\nWhere the time goes ({provider}; medians of {repeat} calls; ms)")
+    print("\n| model | N | threads | predict | preprocess | crops | network | decode | split parts | rest |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name in models:
+        for t in threads:
+            predictor = large(name, library, provider, t) if library else dgan.Predictor(name, threads=t)
+            frame = scene_for(predictor.spec).frame
+            for n in agents:
+                m = phases_ms(predictor, tiled(frame, n), repeat)
+                cells = [name, str(n), str(t)] + [f"{m[k]:.2f}" for k in ("predict", "preprocess", "crops")]
+                cells += [f"{m[k]:.2f}" for k in ("network", "decode", "parts")]
+                cells.append(f"{m['predict'] - m['total']:.2f}")
+                print("| " + " | ".join(cells) + " |", flush=True)
+
+
 def real_frames(predictor: dgan.Predictor, count: int) -> list[dgan.Frame]:
     """``count`` real frames of the bundled scene at successive times (cycling when the scene is shorter)."""
     first = scene_for(predictor.spec)
@@ -399,6 +434,11 @@ def main() -> None:
     ap.add_argument("--latency", action="store_true", help="only one predict on 1 and 2 threads")
     ap.add_argument("--session-options", action="store_true", help="only ONNX Runtime's options against the engine's")
     ap.add_argument(
+        "--phases",
+        action="store_true",
+        help="only where predict's time goes, on 1 and 2 threads (with --cuda: on CUDA, 1 to every core)",
+    )
+    ap.add_argument(
         "--cuda",
         metavar="LIBONNXRUNTIME",
         help="only the CUDA provider (absolute path of onnxruntime-gpu's libonnxruntime.so) against eager PyTorch on "
@@ -407,11 +447,18 @@ def main() -> None:
     a = ap.parse_args()
     if a.cuda:
         print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
-        cuda_table(a.models, a.agents, a.repeat, a.cuda)
+        if not a.phases:
+            cuda_table(a.models, a.agents, a.repeat, a.cuda)
+        phase_table(a.models, a.agents, sorted({1, 2, 4, 8, os.cpu_count() or 1}), a.repeat, a.cuda, "cuda")
         print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
         return
     if a.flops:
         flops_table(a.models, a.agents)
+        return
+    if a.phases:
+        print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
+        phase_table(a.models, a.agents, [1, 2], a.repeat, None, "cpu")
+        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
         return
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
     print(f"single-thread sgemm (numpy float32, 1024²): {sgemm_gflops():.1f} GFLOP/s")

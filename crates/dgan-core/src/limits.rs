@@ -29,6 +29,27 @@ pub fn on_threads<T: Send, R: Send>(items: Vec<T>, work: impl Fn(T) -> R + Sync,
     })
 }
 
+/// `work` on every job on `threads` threads ([`on_threads`]: the calling one included), each thread taking the next
+/// job as it finishes one, so that uneven jobs share out evenly (the crops of a scene's busy part beside blank ones,
+/// which contiguous shares left on one thread). Every thread's error or panic (as `panicked()`) is returned, the
+/// first thread's first.
+pub fn share_jobs<T: Send, E: Send>(
+    jobs: Vec<T>,
+    threads: usize,
+    work: impl Fn(T) -> Result<(), E> + Sync,
+    panicked: impl Fn() -> E + Sync,
+) -> Result<(), E> {
+    let queue = std::sync::Mutex::new(jobs.into_iter());
+    let next = || queue.lock().unwrap_or_else(std::sync::PoisonError::into_inner).next();
+    let run = |_| -> Result<(), E> {
+        while let Some(job) = next() {
+            work(job)?;
+        }
+        Ok(())
+    };
+    on_threads((0..threads.max(1)).collect(), run, || Err(panicked())).into_iter().collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -42,5 +63,33 @@ mod tests {
         );
         assert_eq!(out, vec![Err(()), Ok(20), Err(()), Ok(40), Ok(50)]);
         assert!(on_threads(Vec::<i32>::new(), |x| x, || 0).is_empty());
+    }
+
+    #[test]
+    fn shared_jobs_run_once_each_whatever_the_threads() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        for threads in [1, 2, 5] {
+            let mut out = vec![0usize; 37];
+            let runs = AtomicUsize::new(0);
+            let jobs: Vec<(usize, &mut usize)> = out.iter_mut().enumerate().collect();
+            let done = share_jobs(
+                jobs,
+                threads,
+                |(i, slot): (usize, &mut usize)| {
+                    runs.fetch_add(1, Ordering::Relaxed);
+                    *slot = i * i;
+                    Ok::<(), ()>(())
+                },
+                || (),
+            );
+            assert_eq!(done, Ok(()));
+            assert_eq!(runs.load(Ordering::Relaxed), 37);
+            assert!(out.iter().enumerate().all(|(i, v)| *v == i * i));
+        }
+        let failed = share_jobs((0..20).collect(), 3, |i: i32| if i == 7 { Err("seven") } else { Ok(()) }, || "panic");
+        assert_eq!(failed, Err("seven"));
+        let panicked =
+            share_jobs((0..20).collect(), 3, |i: i32| if i == 7 { panic!("at 7") } else { Ok(()) }, || "panic");
+        assert_eq!(panicked, Err("panic"));
     }
 }

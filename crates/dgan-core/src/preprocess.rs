@@ -4,7 +4,8 @@
 use crate::error::{invalid_frame, DganError, Result};
 use crate::frame::Frame;
 use crate::graph::{attention_radius, attention_zone_edges_within};
-use crate::raster::rasterize_on;
+use crate::limits::share_jobs;
+use crate::raster::{rasterize_on, threads_in_flight};
 use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
 use crate::state::{traffic_states_with, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
@@ -63,11 +64,14 @@ impl Neighbors {
         let mut mask = Array2::<f32>::zeros((n, d));
         let mut features = Array3::<f32>::zeros((n, d, f));
         let mut slot = vec![0usize; n];
+        let standard = edge_features.as_standard_layout();
+        let from = standard.as_slice().ok_or_else(|| invalid_frame("edge features are not contiguous"))?;
+        let to = features.as_slice_mut().ok_or_else(|| invalid_frame("neighbour features are not contiguous"))?;
         for (e, row) in edge_index.rows().into_iter().enumerate() {
             let (r, k) = (row[0] as usize, slot[row[0] as usize]);
             index[[r, k]] = row[1];
             mask[[r, k]] = 1.0;
-            features.slice_mut(ndarray::s![r, k, ..]).assign(&edge_features.row(e));
+            to[(r * d + k) * f..(r * d + k + 1) * f].copy_from_slice(&from[e * f..(e + 1) * f]);
             slot[r] += 1;
         }
         Ok(Self { index, mask, features })
@@ -139,25 +143,136 @@ pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Re
     preprocess_on(frame, spec, limits, crate::limits::cores())
 }
 
-/// [`preprocess_within`] with the map crops drawn on at most `threads` threads ([`crate::raster::rasterize_on`]);
-/// the tensors are the same whatever the threads.
+/// [`preprocess_within`] on at most `threads` threads, shared with the other predictions in flight: the map crops
+/// ([`crate::raster::rasterize_on`]) and a large frame's edge rows. The tensors are the same whatever the threads.
 pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: usize) -> Result<Preprocessed> {
-    build(frame, spec, limits, Some(threads)).map(|(pre, _)| pre)
+    build(frame, spec, limits, threads, true).map(|(pre, _)| pre)
 }
 
 /// [`preprocess_on`] with the map crops of a frame that has a map left for the caller to draw
 /// ([`crate::raster::rasterize_rows`]; `inputs.map` is then `None`), e.g. on the threads of the parts of a frame that
-/// run as separate network calls. The flag says whether the crops were left out.
-pub fn preprocess_without_crops(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Result<(Preprocessed, bool)> {
-    build(frame, spec, limits, None)
+/// run as separate network calls; a large frame's edge rows on up to `threads` threads. The flag says whether the
+/// crops were left out.
+pub fn preprocess_without_crops(
+    frame: &Frame,
+    spec: &InputSpec,
+    limits: &Limits,
+    threads: usize,
+) -> Result<(Preprocessed, bool)> {
+    build(frame, spec, limits, threads, false)
 }
 
-/// The inputs, the map crops drawn on `crop_threads` threads, or left out (flag true) when that is None.
+/// Receivers a thread takes at a time when the edge rows are shared out.
+const RECEIVERS_PER_JOB: usize = 256;
+/// The fewest directed edges worth sharing out: below, one thread writes them.
+const PARALLEL_EDGES_FROM: usize = 20_000;
+
+/// Each agent's senders, itself included, as one list of sender rows cut by `offsets` (`N + 1`; receiver `i`'s senders
+/// are `senders[offsets[i]..offsets[i + 1]]`, unsorted): built from the undirected edges without a list per agent.
+struct Senders {
+    senders: Vec<u32>,
+    offsets: Vec<usize>,
+}
+
+impl Senders {
+    fn of(n: usize, edges: &[[u32; 2]]) -> Self {
+        let mut degree = vec![1usize; n];
+        for [i, j] in edges {
+            degree[*i as usize] += 1;
+            degree[*j as usize] += 1;
+        }
+        let mut offsets = Vec::with_capacity(n + 1);
+        offsets.push(0);
+        for d in &degree {
+            offsets.push(offsets[offsets.len() - 1] + d);
+        }
+        let mut senders = vec![0u32; offsets[n]];
+        let mut next: Vec<usize> = offsets[..n].to_vec();
+        for (i, slot) in next.iter_mut().enumerate() {
+            senders[*slot] = i as u32;
+            *slot += 1;
+        }
+        for [i, j] in edges {
+            senders[next[*i as usize]] = *j;
+            next[*i as usize] += 1;
+            senders[next[*j as usize]] = *i;
+            next[*j as usize] += 1;
+        }
+        Self { senders, offsets }
+    }
+
+    /// The largest number of senders of one agent (0 without agents).
+    fn degree(&self) -> usize {
+        self.offsets.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0)
+    }
+}
+
+/// `(E, 2)` directed edges `[receiver, sender]` and their `(E, 6)` features, receivers in order and each one's senders
+/// ascending (sorted here), written on up to `threads` threads in jobs of [`RECEIVERS_PER_JOB`] receivers: the same
+/// rows whatever the threads.
+fn edge_rows(
+    mut graph: Senders,
+    states: &[TrafficState],
+    poses: &[AgentPose],
+    threads: usize,
+) -> Result<(Array2<i64>, Array2<f32>)> {
+    let f = EDGE_FEATURES.len();
+    let (e, n) = (graph.senders.len(), graph.offsets.len() - 1);
+    let mut edge_index = Array2::<i64>::zeros((e, 2));
+    let mut edge_features = Array2::<f32>::zeros((e, f));
+    let offsets = &graph.offsets;
+    // Receivers `first..last` whose senders are `senders`, their rows `index` and `features`.
+    let write = |(first, last, senders, index, features): (usize, usize, &mut [u32], &mut [i64], &mut [f32])| {
+        let base = offsets[first];
+        let mut row = 0;
+        for i in first..last {
+            let mine = &mut senders[offsets[i] - base..offsets[i + 1] - base];
+            mine.sort_unstable();
+            let (pi, si) = (poses[i], states[i]);
+            for &j in mine.iter() {
+                let sj = states[j as usize];
+                let d = pi.to_local(sj.position);
+                let dv = pi.vector_to_local([sj.velocity[0] - si.velocity[0], sj.velocity[1] - si.velocity[1]]);
+                let dh = wrap_angle(sj.heading - si.heading);
+                index[2 * row] = i as i64;
+                index[2 * row + 1] = i64::from(j);
+                for (k, v) in [d[0], d[1], dv[0], dv[1], dh.cos(), dh.sin()].iter().enumerate() {
+                    features[f * row + k] = *v as f32;
+                }
+                row += 1;
+            }
+        }
+        Ok(())
+    };
+    let index = edge_index.as_slice_mut().ok_or_else(|| invalid_frame("edge index is not contiguous"))?;
+    let features = edge_features.as_slice_mut().ok_or_else(|| invalid_frame("edge features are not contiguous"))?;
+    if threads <= 1 || e < PARALLEL_EDGES_FROM {
+        write((0, n, &mut graph.senders, index, features))?;
+    } else {
+        // Each job's receivers with their senders and the rows they write, cut from the arrays in order.
+        let mut jobs = Vec::with_capacity(n.div_ceil(RECEIVERS_PER_JOB));
+        let (mut senders, mut index, mut features) = (graph.senders.as_mut_slice(), index, features);
+        for first in (0..n).step_by(RECEIVERS_PER_JOB) {
+            let last = (first + RECEIVERS_PER_JOB).min(n);
+            let rows = offsets[last] - offsets[first];
+            let (mine_s, rest_s) = std::mem::take(&mut senders).split_at_mut(rows);
+            let (mine_i, rest_i) = std::mem::take(&mut index).split_at_mut(2 * rows);
+            let (mine_f, rest_f) = std::mem::take(&mut features).split_at_mut(f * rows);
+            (senders, index, features) = (rest_s, rest_i, rest_f);
+            jobs.push((first, last, mine_s, mine_i, mine_f));
+        }
+        share_jobs(jobs, threads, write, || DganError::InvalidFrame("an edge-writing thread panicked".into()))?;
+    }
+    Ok((edge_index, edge_features))
+}
+
+/// The inputs on up to `threads` threads, with the map crops when `crops`, or without them (flag true).
 fn build(
     frame: &Frame,
     spec: &InputSpec,
     limits: &Limits,
-    crop_threads: Option<usize>,
+    threads: usize,
+    crops: bool,
 ) -> Result<(Preprocessed, bool)> {
     spec.validate()?;
     frame.check_dt(spec.dt_s)?;
@@ -204,12 +319,8 @@ fn build(
         states.iter().map(|s| attention_radius(s.speed, spec.horizon_s(), spec.attention_lambda, s.length)).collect();
     let edges = attention_zone_edges_within(&centres, &radii, limits.max_edges)?;
 
-    let mut neighbours: Vec<Vec<usize>> = (0..n).map(|i| vec![i]).collect();
-    for [i, j] in &edges {
-        neighbours[*i as usize].push(*j as usize);
-        neighbours[*j as usize].push(*i as usize);
-    }
-    let degree = neighbours.iter().map(Vec::len).max().unwrap_or(0);
+    let graph = Senders::of(n, &edges);
+    let degree = graph.degree();
     let bytes = Limits::input_bytes(spec, n, degree);
     if bytes > limits.max_input_bytes {
         return Err(DganError::SceneTooLarge(format!(
@@ -220,26 +331,7 @@ fn build(
             human_bytes(limits.max_input_bytes)
         )));
     }
-    let e = n + 2 * edges.len();
-    let mut edge_index = Array2::<i64>::zeros((e, 2));
-    let mut edge_features = Array2::<f32>::zeros((e, EDGE_FEATURES.len()));
-    let mut row = 0;
-    for (i, senders) in neighbours.iter_mut().enumerate() {
-        senders.sort_unstable();
-        let (pi, si) = (poses[i], states[i]);
-        for &j in senders.iter() {
-            let sj = states[j];
-            let d = pi.to_local(sj.position);
-            let dv = pi.vector_to_local([sj.velocity[0] - si.velocity[0], sj.velocity[1] - si.velocity[1]]);
-            let dh = wrap_angle(sj.heading - si.heading);
-            edge_index[[row, 0]] = i as i64;
-            edge_index[[row, 1]] = j as i64;
-            for (k, v) in [d[0], d[1], dv[0], dv[1], dh.cos(), dh.sin()].iter().enumerate() {
-                edge_features[[row, k]] = *v as f32;
-            }
-            row += 1;
-        }
-    }
+    let (edge_index, edge_features) = edge_rows(graph, &states, &poses, threads_in_flight(threads))?;
 
     let prior = spec.prior.rollout(
         trajectory.view(),
@@ -252,8 +344,8 @@ fn build(
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
         (Some(m), Some(_)) => {
-            let crops = crop_threads.map(|threads| rasterize_on(frame, &states, m, threads)).transpose()?;
-            (crops, m.optional.then(|| Array1::ones(n)))
+            let drawn = crops.then(|| rasterize_on(frame, &states, m, threads)).transpose()?;
+            (drawn, m.optional.then(|| Array1::ones(n)))
         }
         (Some(m), None) if m.optional || n == 0 => {
             (Some(Array4::zeros((n, 3, m.height_px, m.width_px))), m.optional.then(|| Array1::zeros(n)))
@@ -366,6 +458,30 @@ mod tests {
         assert_eq!(nb.features.slice(ndarray::s![0, 1, ..]).to_vec(), x.edge_features.row(1).to_vec());
         // A map that is not optional is required.
         assert!(matches!(preprocess(&f, &spec(true)), Err(DganError::MapRequired(_))));
+    }
+
+    #[test]
+    fn edge_rows_are_the_same_whatever_the_threads() {
+        // 300 agents within a few metres of each other, walking every way: 89,700 directed edges, shared out.
+        let p = Array3::from_shape_fn((300, 3, 2), |(i, t, d)| {
+            let a = i as f64 * 0.7;
+            let start = if d == 0 { (i % 17) as f64 * 0.3 } else { (i / 17) as f64 * 0.3 };
+            start + t as f64 * 0.4 * if d == 0 { a.cos() } else { a.sin() }
+        });
+        let f = Frame::new(p, None, vec![AgentClass::Pedestrian; 300]).unwrap();
+        let one = preprocess_on(&f, &spec(false), &Limits::default(), 1).unwrap();
+        assert!(one.inputs.edge_index.nrows() > PARALLEL_EDGES_FROM, "{}", one.inputs.edge_index.nrows());
+        for threads in [2, 3, 8] {
+            let many = preprocess_on(&f, &spec(false), &Limits::default(), threads).unwrap();
+            assert_eq!(many.inputs.edge_index, one.inputs.edge_index, "{threads} threads");
+            assert_eq!(many.inputs.edge_features, one.inputs.edge_features, "{threads} threads");
+            let (a, b) = (many.inputs.neighbors.unwrap(), one.inputs.neighbors.as_ref().unwrap().clone());
+            assert_eq!((a.index, a.mask, a.features), (b.index, b.mask, b.features), "{threads} threads");
+        }
+        // Receivers in order, each one's senders ascending, itself among them.
+        let ei = &one.inputs.edge_index;
+        assert!(ei.rows().into_iter().zip(ei.rows().into_iter().skip(1)).all(|(a, b)| (a[0], a[1]) < (b[0], b[1])));
+        assert_eq!(ei.nrows(), 300 + 2 * one.edges.len());
     }
 
     #[test]

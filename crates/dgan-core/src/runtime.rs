@@ -493,7 +493,7 @@ impl Predictor {
         let spec = &self.contract.input;
         // The crops wait until the frame's parts are known (a split frame's are drawn on its parts' threads); a whole
         // frame's are drawn into the memory of the last call's.
-        let (mut pre, later) = preprocess_without_crops(frame, spec, &self.limits)?;
+        let (mut pre, later) = preprocess_without_crops(frame, spec, &self.limits, self.threads)?;
         times.preprocess = started.elapsed();
         if self.lanes.len() >= 2 {
             if let Some(parts) = self.split(&pre) {
