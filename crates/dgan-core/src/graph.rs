@@ -5,7 +5,6 @@
 //! from an R-tree of the circles' bounding boxes: O(N log N + E).
 
 use crate::error::{DganError, Result};
-use rayon::prelude::*;
 use rstar::primitives::{GeomWithData, Rectangle};
 use rstar::{RTree, AABB};
 
@@ -46,6 +45,18 @@ pub fn attention_zone_edges(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[
 /// found: the work stays bounded by about `max_edges + N` whatever the scene (1,000 agents on one point would make
 /// 499,500 edges).
 pub fn attention_zone_edges_within(centres: &[[f64; 2]], radii: &[f64], max_edges: usize) -> Result<Vec<[u32; 2]>> {
+    attention_zone_edges_on(centres, radii, max_edges, crate::limits::cores())
+}
+
+/// [`attention_zone_edges_within`] with the queries of a frame of [`PARALLEL_FROM_AGENTS`] or more shared out over up
+/// to `threads` threads ([`crate::limits::share_jobs`]), in jobs of [`AGENTS_PER_JOB`] agents. The same edges
+/// whatever the threads.
+pub fn attention_zone_edges_on(
+    centres: &[[f64; 2]],
+    radii: &[f64],
+    max_edges: usize,
+    threads: usize,
+) -> Result<Vec<[u32; 2]>> {
     use std::sync::atomic::{AtomicUsize, Ordering};
     check(centres, radii)?;
     let boxes: Vec<GeomWithData<Rectangle<[f64; 2]>, u32>> = centres
@@ -74,13 +85,20 @@ pub fn attention_zone_edges_within(centres: &[[f64; 2]], radii: &[f64], max_edge
         found.fetch_add(out.len(), Ordering::Relaxed);
         out
     };
-    // Below a few thousand agents the queries take well under a millisecond: a sequential loop leaves no idle pool
-    // workers spinning on the cores that ONNX Runtime uses next.
-    let per_agent: Vec<Vec<[u32; 2]>> = if centres.len() < PARALLEL_FROM_AGENTS {
-        (0..centres.len()).map(edges_of).collect()
+    // Below a few thousand agents the queries take well under a millisecond: one thread.
+    let mut per_agent: Vec<Vec<[u32; 2]>> = vec![Vec::new(); centres.len()];
+    if centres.len() < PARALLEL_FROM_AGENTS || threads <= 1 {
+        per_agent.iter_mut().enumerate().for_each(|(i, slot)| *slot = edges_of(i));
     } else {
-        (0..centres.len()).into_par_iter().map(edges_of).collect()
-    };
+        let jobs: Vec<(usize, &mut [Vec<[u32; 2]>])> =
+            per_agent.chunks_mut(AGENTS_PER_JOB).enumerate().map(|(k, slots)| (k * AGENTS_PER_JOB, slots)).collect();
+        let one = |(first, slots): (usize, &mut [Vec<[u32; 2]>])| {
+            slots.iter_mut().enumerate().for_each(|(k, slot)| *slot = edges_of(first + k));
+            Ok(())
+        };
+        let panicked = || DganError::InvalidFrame("an attention-graph thread panicked".into());
+        crate::limits::share_jobs(jobs, threads, one, panicked)?;
+    }
     let total = found.into_inner();
     if total > max_edges {
         return Err(DganError::SceneTooLarge(format!(
@@ -93,8 +111,10 @@ pub fn attention_zone_edges_within(centres: &[[f64; 2]], radii: &[f64], max_edge
     Ok(per_agent.concat())
 }
 
-/// From this many agents on, the attention graph's queries run on rayon's pool.
+/// From this many agents on, the attention graph's queries are shared out over the threads a call may use.
 pub const PARALLEL_FROM_AGENTS: usize = 2000;
+/// Agents a thread queries at a time.
+const AGENTS_PER_JOB: usize = 256;
 
 /// The O(N²) definition, for tests and benchmarks.
 pub fn attention_zone_edges_brute_force(centres: &[[f64; 2]], radii: &[f64]) -> Result<Vec<[u32; 2]>> {

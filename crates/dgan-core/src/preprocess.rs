@@ -3,7 +3,7 @@
 
 use crate::error::{invalid_frame, DganError, Result};
 use crate::frame::Frame;
-use crate::graph::{attention_radius, attention_zone_edges_within};
+use crate::graph::{attention_radius, attention_zone_edges_on};
 use crate::limits::share_jobs;
 use crate::raster::{rasterize_on, threads_in_flight};
 use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
@@ -359,7 +359,7 @@ fn build(
     let centres: Vec<[f64; 2]> = states.iter().map(|s| s.position).collect();
     let radii: Vec<f64> =
         states.iter().map(|s| attention_radius(s.speed, spec.horizon_s(), spec.attention_lambda, s.length)).collect();
-    let edges = attention_zone_edges_within(&centres, &radii, limits.max_edges)?;
+    let edges = attention_zone_edges_on(&centres, &radii, limits.max_edges, threads_in_flight(threads))?;
 
     let graph = Senders::of(n, &edges);
     let degree = graph.degree();

@@ -1,6 +1,6 @@
 //! The attention-zone graph equals the O(N²) definition on random scenes up to 10,000 agents.
 
-use dgan_core::graph::{attention_zone_edges, attention_zone_edges_brute_force};
+use dgan_core::graph::{attention_zone_edges, attention_zone_edges_brute_force, attention_zone_edges_on};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -30,6 +30,18 @@ fn ten_thousand_agents_match_brute_force() {
         assert!(!fast.is_empty());
         assert_eq!(fast, slow, "seed {seed}");
     }
+}
+
+#[test]
+fn the_edges_are_the_same_whatever_the_threads() {
+    let (c, r) = scene(6_000, 4, 300.0);
+    let slow = attention_zone_edges_brute_force(&c, &r).unwrap();
+    for threads in [1, 2, 3, 16] {
+        assert_eq!(attention_zone_edges_on(&c, &r, usize::MAX, threads).unwrap(), slow, "{threads} threads");
+    }
+    // The edge budget holds on threads too.
+    let err = attention_zone_edges_on(&vec![[0.0, 0.0]; 3000], &vec![1.0; 3000], 50_000, 4).unwrap_err();
+    assert!(err.to_string().contains("more than 50000 edges"), "{err}");
 }
 
 #[test]
