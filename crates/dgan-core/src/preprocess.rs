@@ -49,10 +49,25 @@ pub struct Neighbors {
     pub features: Array3<f32>,
 }
 
+/// A job of [`Neighbors::padded_on`]: its number and the rows of `index`, `mask` and `features` it writes.
+type PaddedRows<'a> = (usize, &'a mut [i64], &'a mut [f32], &'a mut [f32]);
+
 impl Neighbors {
     /// The padded layout of a directed edge list sorted by receiver (`edge_index (E, 2)`, `edge_features (E, F)`)
     /// over `n` agents.
     pub fn from_edges(n: usize, edge_index: &Array2<i64>, edge_features: &Array2<f32>) -> Result<Self> {
+        Self::from_edges_on(n, edge_index, edge_features, 1)
+    }
+
+    /// [`Neighbors::from_edges`], the agents of a large frame whose edges are sorted by receiver shared out over up to
+    /// `threads` threads in jobs of [`RECEIVERS_PER_JOB`] (each writes its agents' rows, padding included, so that the
+    /// pages of the tensors are first touched in parallel too). The same tensors whatever the threads.
+    pub fn from_edges_on(
+        n: usize,
+        edge_index: &Array2<i64>,
+        edge_features: &Array2<f32>,
+        threads: usize,
+    ) -> Result<Self> {
         let mut degree = vec![0usize; n];
         for r in edge_index.column(0) {
             let r = usize::try_from(*r).ok().filter(|r| *r < n).ok_or_else(|| invalid_frame("edge out of range"))?;
@@ -60,6 +75,10 @@ impl Neighbors {
         }
         let d = degree.iter().copied().max().unwrap_or(0).max(1);
         let f = edge_features.ncols();
+        let sorted = edge_index.column(0).iter().zip(edge_index.column(0).iter().skip(1)).all(|(a, b)| a <= b);
+        if threads >= 2 && sorted && edge_index.nrows() >= PARALLEL_EDGES_FROM {
+            return Self::padded_on(&degree, d, edge_index, edge_features, threads);
+        }
         let mut index = Array2::from_shape_fn((n, d), |(i, _)| i as i64);
         let mut mask = Array2::<f32>::zeros((n, d));
         let mut features = Array3::<f32>::zeros((n, d, f));
@@ -74,6 +93,55 @@ impl Neighbors {
             to[(r * d + k) * f..(r * d + k + 1) * f].copy_from_slice(&from[e * f..(e + 1) * f]);
             slot[r] += 1;
         }
+        Ok(Self { index, mask, features })
+    }
+
+    /// The padded layout of edges sorted by receiver, each agent's `degree` senders then padding, on `threads`.
+    fn padded_on(
+        degree: &[usize],
+        d: usize,
+        edge_index: &Array2<i64>,
+        edge_features: &Array2<f32>,
+        threads: usize,
+    ) -> Result<Self> {
+        let (n, f) = (degree.len(), edge_features.ncols());
+        let mut start = Vec::with_capacity(n + 1);
+        start.push(0);
+        for g in degree {
+            start.push(start[start.len() - 1] + g);
+        }
+        let standard = edge_features.as_standard_layout();
+        let from = standard.as_slice().ok_or_else(|| invalid_frame("edge features are not contiguous"))?;
+        let senders = edge_index.column(1);
+        let mut index = Array2::<i64>::zeros((n, d));
+        let mut mask = Array2::<f32>::zeros((n, d));
+        let mut features = Array3::<f32>::zeros((n, d, f));
+        let not_contiguous = || invalid_frame("neighbour tensors are not contiguous");
+        let index_rows = index.as_slice_mut().ok_or_else(not_contiguous)?.chunks_mut(d * RECEIVERS_PER_JOB);
+        let mask_rows = mask.as_slice_mut().ok_or_else(not_contiguous)?.chunks_mut(d * RECEIVERS_PER_JOB);
+        let feature_rows = features.as_slice_mut().ok_or_else(not_contiguous)?.chunks_mut(d * f * RECEIVERS_PER_JOB);
+        let jobs: Vec<PaddedRows<'_>> =
+            index_rows.zip(mask_rows).zip(feature_rows).enumerate().map(|(job, ((i, m), f))| (job, i, m, f)).collect();
+        let one = |(job, index, mask, features): PaddedRows<'_>| {
+            let first = job * RECEIVERS_PER_JOB;
+            for (k, r) in (first..first + index.len() / d).enumerate() {
+                for slot in 0..d {
+                    let at = k * d + slot;
+                    if slot < degree[r] {
+                        let e = start[r] + slot;
+                        index[at] = senders[e];
+                        mask[at] = 1.0;
+                        features[at * f..(at + 1) * f].copy_from_slice(&from[e * f..(e + 1) * f]);
+                    } else {
+                        index[at] = r as i64;
+                        mask[at] = 0.0;
+                        features[at * f..(at + 1) * f].fill(0.0);
+                    }
+                }
+            }
+            Ok(())
+        };
+        share_jobs(jobs, threads, one, || DganError::InvalidFrame("a neighbour-writing thread panicked".into()))?;
         Ok(Self { index, mask, features })
     }
 }
@@ -396,7 +464,9 @@ fn build(
     };
     let neighbors = match spec.graph {
         GraphLayout::EdgeList => None,
-        GraphLayout::Padded => Some(Neighbors::from_edges(n, &edge_index, &edge_features)?),
+        GraphLayout::Padded => {
+            Some(Neighbors::from_edges_on(n, &edge_index, &edge_features, threads_in_flight(threads))?)
+        }
     };
     let later = spec.map.is_some() && map.is_none();
     let pre = Preprocessed {
@@ -513,6 +583,15 @@ mod tests {
             let (a, b) = (many.inputs.neighbors.unwrap(), one.inputs.neighbors.as_ref().unwrap().clone());
             assert_eq!((a.index, a.mask, a.features), (b.index, b.mask, b.features), "{threads} threads");
         }
+        // Edges not sorted by receiver are laid out one by one, whatever the threads.
+        let rev: Vec<usize> = (0..one.inputs.edge_index.nrows()).rev().collect();
+        let (ei, ef) = (
+            one.inputs.edge_index.select(ndarray::Axis(0), &rev),
+            one.inputs.edge_features.select(ndarray::Axis(0), &rev),
+        );
+        let (a, b) =
+            (Neighbors::from_edges_on(300, &ei, &ef, 4).unwrap(), Neighbors::from_edges(300, &ei, &ef).unwrap());
+        assert_eq!((a.index, a.mask, a.features), (b.index, b.mask, b.features));
         // Receivers in order, each one's senders ascending, itself among them.
         let ei = &one.inputs.edge_index;
         assert!(ei.rows().into_iter().zip(ei.rows().into_iter().skip(1)).all(|(a, b)| (a[0], a[1]) < (b[0], b[1])));
