@@ -39,7 +39,13 @@ def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[s
     out = capsys.readouterr().out
     assert out.startswith("18 agents at time 5500")
     assert "(steps of 0.4 s, horizon 4.8 s)" in out
-    assert len(out.strip().splitlines()) == 19
+    lines = out.strip().splitlines()
+    assert len(lines) == 20
+    # The engine's phases of the call (no map: no crops).
+    assert lines[1].startswith("engine: preprocess ")
+    assert "network " in lines[1]
+    assert lines[1].endswith(" ms")
+    assert "crops" not in lines[1]
 
 
 def test_predict_json_and_csv(nomap_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
