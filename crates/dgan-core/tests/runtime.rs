@@ -186,3 +186,23 @@ fn predict_batch_on_lanes_equals_predict_per_frame() {
     assert!(matches!(err, DganError::InvalidFrame(_)), "{err}");
     assert!(err.to_string().contains("frame 4 of the batch"), "{err}");
 }
+
+#[test]
+fn each_predict_is_timed_by_phase() {
+    let lane = VectorMap::new(vec![
+        MapElement::new(MapElementKind::LaneCenterline, vec![[-50.0, 0.0], [50.0, 0.0]]).expect("a valid line")
+    ]);
+    for (name, map) in [("contract_nomap.onnx", false), ("contract_map.onnx", true)] {
+        let p = load(name).unwrap();
+        assert_eq!(p.last_times(), None, "no call yet");
+        let frame = walkers(5).with_map(Arc::new(SceneMap::Vector(lane.clone())));
+        p.predict_batch(std::slice::from_ref(&frame), 7).unwrap();
+        assert_eq!(p.last_times(), None, "predict_batch is not timed");
+        p.predict(&frame).unwrap();
+        let t = p.last_times().expect("the call's times");
+        let phases = t.preprocess + t.crops + t.network + t.decode + t.parts;
+        assert!(phases <= t.total && t.network > std::time::Duration::ZERO, "{t:?}");
+        assert_eq!(t.crops > std::time::Duration::ZERO, map, "{t:?}");
+        assert_eq!(t.parts, std::time::Duration::ZERO, "{t:?}");
+    }
+}
