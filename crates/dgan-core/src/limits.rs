@@ -31,8 +31,8 @@ pub fn on_threads<T: Send, R: Send>(items: Vec<T>, work: impl Fn(T) -> R + Sync,
 
 /// `work` on every job on `threads` threads ([`on_threads`]: the calling one included), each thread taking the next
 /// job as it finishes one, so that uneven jobs share out evenly (the crops of a scene's busy part beside blank ones,
-/// which contiguous shares left on one thread). Every thread's error or panic (as `panicked()`) is returned, the
-/// first thread's first.
+/// which contiguous shares left on one thread). Once every thread has stopped, the first error in thread order is
+/// returned (a thread's panic as `panicked()`); a thread stops at its first error, the others finish the queue.
 pub fn share_jobs<T: Send, E: Send>(
     jobs: Vec<T>,
     threads: usize,
