@@ -11,7 +11,7 @@
 
 use crate::canvas::{world_bounds, Canvas, UNIT};
 use crate::error::{DganError, Result};
-use crate::limits::on_threads;
+use crate::limits::share_jobs;
 use crate::map::VectorMap;
 use crate::spec::{MapRender, MapSpec};
 use crate::state::TrafficState;
@@ -145,19 +145,19 @@ impl Overlay {
             canvas.draw_boxes(near.into_iter());
             ((i, j), rgb_of(&canvas).into())
         };
-        let per_thread = wanted.len().div_ceil(threads.max(1)).max(1);
-        let tiles = if per_thread >= wanted.len() {
+        let tiles = if threads <= 1 || wanted.len() < 2 {
             wanted.iter().map(one).collect()
         } else {
-            let panicked = || Err(DganError::InvalidSpec("a tile-drawing thread panicked".into()));
-            let drawn =
-                on_threads(wanted.chunks(per_thread).collect(), |part| Ok(part.iter().map(&one).collect()), panicked);
-            let mut tiles = HashMap::with_capacity(wanted.len());
-            for part in drawn {
-                let part: Vec<_> = part?;
-                tiles.extend(part);
-            }
-            tiles
+            // One tile at a time, taken by each thread as it finishes one: tiles under many boxes cost many times
+            // those under none, which contiguous shares left on one thread.
+            let mut drawn: Vec<Option<Arc<[u8]>>> = vec![None; wanted.len()];
+            let jobs: Vec<_> = wanted.iter().zip(drawn.iter_mut()).collect();
+            let draw = |(key, slot): (&(i64, i64), &mut Option<Arc<[u8]>>)| {
+                *slot = Some(one(key).1);
+                Ok(())
+            };
+            share_jobs(jobs, threads, draw, || DganError::InvalidSpec("a tile-drawing thread panicked".into()))?;
+            wanted.iter().zip(drawn).filter_map(|(key, tile)| tile.map(|t| (*key, t))).collect()
         };
         Ok(Self { tiles })
     }
