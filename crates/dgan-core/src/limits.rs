@@ -39,6 +39,8 @@ pub fn share_jobs<T: Send, E: Send>(
     work: impl Fn(T) -> Result<(), E> + Sync,
     panicked: impl Fn() -> E + Sync,
 ) -> Result<(), E> {
+    // No more threads than jobs: a thread with nothing to take would only cost its start.
+    let threads = threads.min(jobs.len()).max(1);
     let queue = std::sync::Mutex::new(jobs.into_iter());
     let next = || queue.lock().unwrap_or_else(std::sync::PoisonError::into_inner).next();
     let run = |_| -> Result<(), E> {
@@ -47,7 +49,7 @@ pub fn share_jobs<T: Send, E: Send>(
         }
         Ok(())
     };
-    on_threads((0..threads.max(1)).collect(), run, || Err(panicked())).into_iter().collect()
+    on_threads((0..threads).collect(), run, || Err(panicked())).into_iter().collect()
 }
 
 #[cfg(test)]
