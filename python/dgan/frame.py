@@ -15,6 +15,10 @@ from dgan.exceptions import InvalidFrameError, InvalidMapError, UnknownClassErro
 from dgan.maps import RasterMap, VectorMap
 from dgan.records import Names, from_records
 
+#: :meth:`Frame.denoised`'s default gate, metres: chosen on the ETH/UCY validation windows (0.08, 0.10 and 0.12 m
+#: tried; 0.10 the lowest that kept clean top-1 ADE within 0.5% on every fold).
+DENOISE_GATE_M = 0.1
+
 
 def _classes(classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int) -> list[Any]:
     if classes is None:
@@ -293,6 +297,22 @@ class Frame:
         """The same agents, histories and states without a map: how a model with an optional map is run on a scene
         whose map is unknown (a model whose map is required raises :class:`~dgan.exceptions.MapRequiredError`)."""
         return Frame._wrap(self._frame.without_map(), self._labels, None, self._source)
+
+    def denoised(self, gate_m: float = DENOISE_GATE_M) -> Frame:
+        """The same frame with tracker noise taken out of its histories, for tracks from a detector and tracker.
+
+        Each agent whose observed positions (four steps or more) lie off their least-squares parabola by ``gate_m``
+        metres or more (root mean square) has them replaced by that parabola; the other agents, the given headings,
+        velocities and sizes, the ids and the map are kept. Real tracks follow a parabola within a few centimetres
+        over a few seconds, so clean histories pass as they are. The default was chosen on the ETH/UCY validation
+        windows with the bundled models: 0.4–0.5% higher top-1 ADE on clean tracks, and with 0.1 m of Gaussian noise
+        (10% of steps dropped) 14–28% below constant velocity instead of up to 17% above it (docs/results.md).
+
+        Raises:
+            InvalidFrameError: ``gate_m`` is negative or not finite.
+        """
+        native, _ = self._frame.denoised(float(gate_m))
+        return Frame._wrap(native, self._labels, self._map, self._source)
 
     def with_map(self, map: RasterMap | VectorMap | None) -> Frame:
         """The same agents with ``map`` (None: :meth:`without_map`)."""

@@ -412,6 +412,25 @@ fn quadratic_fit(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) 
     Some(([fit.coef[0][2], fit.coef[1][2]], rss, fit.inv_cc))
 }
 
+/// The least-squares parabola through the positions `p(t, c)` at the steps `valid` (at least three distinct), as its
+/// value at every one of them, and the root mean square of the distances to it; `None` if the normal equations are
+/// singular.
+pub(crate) fn parabola_points(valid: &[usize], p: impl Fn(usize, usize) -> f64) -> Option<(Vec<[f64; 2]>, f64)> {
+    let last = *valid.last()?;
+    let fit = parabola(valid, last, &p);
+    if fit.det.abs().partial_cmp(&1e-12) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let at = |t: usize, c: usize| {
+        let tau = t as f64 - last as f64;
+        let [a, b, cc] = fit.coef[c];
+        a + b * tau + cc * tau * tau
+    };
+    let points: Vec<[f64; 2]> = valid.iter().map(|&t| [at(t, 0), at(t, 1)]).collect();
+    let rss: f64 = valid.iter().zip(&points).map(|(&t, q)| (p(t, 0) - q[0]).powi(2) + (p(t, 1) - q[1]).powi(2)).sum();
+    Some((points, (rss / valid.len() as f64).sqrt()))
+}
+
 fn det3(m: [[f64; 3]; 3]) -> f64 {
     m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])

@@ -110,6 +110,13 @@ impl PyFrame {
         Self { inner: self.inner.without_map() }
     }
 
+    /// The same frame with noisy tracks replaced by their least-squares parabola (`dgan_core::Frame::denoised`), and
+    /// how many were.
+    fn denoised(&self, gate_m: f64) -> PyResult<(Self, usize)> {
+        let (inner, smoothed) = self.inner.denoised(gate_m).py()?;
+        Ok((Self { inner }, smoothed))
+    }
+
     /// The same agents with another map.
     fn with_map(&self, map: &Bound<'_, PyAny>) -> PyResult<Self> {
         Ok(Self { inner: self.inner.clone().with_map(scene_map(map)?) })

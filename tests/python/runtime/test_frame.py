@@ -134,3 +134,31 @@ def test_from_records_errors() -> None:
         dgan.Frame.from_records(zara1_records(), t_obs=0)
     with pytest.raises(exc.InvalidFrameError, match="time column"):
         dgan.Frame.from_records({"agent_id": [1], "time": [np.nan], "x": [0.0], "y": [0.0]}, t_obs=2)
+
+
+def test_denoised_smooths_noisy_tracks_and_keeps_the_rest() -> None:
+    from dgan.demo import scene_for
+
+    scene = scene_for(dgan.Predictor("zara1").spec)
+    clean = scene.frame
+    rng = np.random.default_rng(3)
+    noisy_positions = clean.positions + rng.normal(0.0, 0.15, clean.positions.shape)
+    noisy = dgan.Frame(noisy_positions, mask=clean.mask, classes=clean.classes, ids=clean.agent_ids, map=clean.map)
+    # The real, clean tracks pass as they are; the noisy ones come closer to the clean ones.
+    np.testing.assert_array_equal(clean.denoised().positions, clean.positions)
+    out = noisy.denoised()
+    valid = clean.mask
+    before = np.abs(noisy.positions - clean.positions)[valid].mean()
+    after = np.abs(out.positions - clean.positions)[valid].mean()
+    assert after < 0.8 * before, (before, after)
+    assert out.map is noisy.map
+    np.testing.assert_array_equal(out.agent_ids, noisy.agent_ids)
+    np.testing.assert_array_equal(out.mask, noisy.mask)
+    assert out.classes == noisy.classes
+    # A gate above the noise leaves it; a string id survives; bad gates are typed errors.
+    np.testing.assert_array_equal(noisy.denoised(gate_m=5.0).positions, noisy.positions)
+    labelled = dgan.Frame(noisy_positions[:2], ids=["a", "b"]).denoised()
+    assert list(labelled.agent_ids) == ["a", "b"]
+    for gate in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(exc.InvalidFrameError, match="denoising gate"):
+            noisy.denoised(gate_m=gate)
