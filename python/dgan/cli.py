@@ -26,6 +26,7 @@ import numpy as np
 
 import dgan
 from dgan.exceptions import DganError, InvalidFrameError
+from dgan.frame import DENOISE_GATE_M
 from dgan.records import DUPLICATES
 from dgan.scenefiles import read_map, read_scene, scene_files
 
@@ -175,6 +176,8 @@ def _frame_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> tuple
         upsample=args.upsample,
     )
     now = float(args.time) if args.time is not None else float(np.max(cols["time"]))
+    if args.denoise is not None:
+        frame = frame.denoised(args.denoise)
     return frame, now
 
 
@@ -309,6 +312,16 @@ def _predict_parser(sub: Any) -> None:
         choices=("error", "ignore"),
         default="error",
         help="agents of classes the model does not know: refuse (default) or leave them out",
+    )
+    pred.add_argument(
+        "--denoise",
+        type=float,
+        nargs="?",
+        const=DENOISE_GATE_M,
+        default=None,
+        metavar="GATE_M",
+        help="smooth tracks whose positions lie GATE_M metres (RMS) or more off their least-squares parabola, for a "
+        f"noisy tracker's data (Frame.denoised; {DENOISE_GATE_M} m if no value is given)",
     )
     pred.add_argument("--json", action="store_true", help="print JSON (times, classes, probabilities) to stdout")
     pred.add_argument("--out", default=None, help="write the long table of modes: .csv, .parquet or .jsonl")

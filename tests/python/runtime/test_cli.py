@@ -48,6 +48,28 @@ def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[s
     assert "crops" not in lines[1]
 
 
+def test_predict_denoise_smooths_a_noisy_scene_only(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["predict", "zara1", str(SCENE), "--time", "5500", "--json", "--modes", "1"]
+
+    def first_modes(extra: list[str], scene: Path = SCENE) -> np.ndarray:
+        assert main([*args[:2], str(scene), *args[3:], *extra]) == 0
+        agents = json.loads(capsys.readouterr().out)["agents"]
+        return np.array([a["modes"][0]["trajectory"] for a in agents])
+
+    # The real scene's tracks are clean: --denoise leaves them and the prediction as they were.
+    np.testing.assert_array_equal(first_modes(["--denoise"]), first_modes([]))
+    # The same scene with 0.3 m of jitter on every position: smoothed, so the prediction changes.
+    rows = [line.split() for line in SCENE.read_text().splitlines() if line.strip()]
+    rng = np.random.default_rng(0)
+    noisy = tmp_path / "noisy.txt"
+    noisy.write_text(
+        "\n".join(f"{r[0]} {r[1]} {float(r[2]) + rng.normal(0, 0.3)} {float(r[3]) + rng.normal(0, 0.3)}" for r in rows)
+    )
+    assert not np.array_equal(first_modes(["--denoise", "0.1"], noisy), first_modes([], noisy))
+    assert main([*args, "--denoise", "-1"]) == 2
+    assert "denoising gate" in capsys.readouterr().err
+
+
 def test_predict_json_and_csv(nomap_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     csv = tmp_path / "scene.csv"
     rows = ["agent_id,time,x,y,class"] + [
