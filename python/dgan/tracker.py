@@ -40,6 +40,8 @@ class Tracker:
         map: the scene's map, attached to every frame.
         max_gap: the longest gap in seconds between two detections of an agent that is interpolated (1.5 · dt).
         default_class: the class of detections that give none.
+        denoise: a gate in metres: every frame is :meth:`Frame.denoised` with it (tracks that far or farther off
+            their least-squares parabola smoothed), for a detector's noisy positions; None (the default) keeps them.
 
     >>> tracker = dgan.Tracker(dgan.Predictor("zara1"))  # doctest: +SKIP
     >>> tracker.update(12.4, ids=["a", "b"], positions=[[1.0, 2.0], [3.0, 4.0]])  # doctest: +SKIP
@@ -53,11 +55,15 @@ class Tracker:
         map: RasterMap | VectorMap | None = None,
         max_gap: float | None = None,
         default_class: ClassLike = "pedestrian",
+        denoise: float | None = None,
     ) -> None:
         if not isinstance(predictor, Predictor):
             raise InvalidFrameError(f"Tracker needs a dgan.Predictor, got {typename(predictor)}")
+        if denoise is not None and not (isinstance(denoise, (int, float)) and np.isfinite(denoise) and denoise >= 0):
+            raise InvalidFrameError(f"denoise must be a non-negative number of metres or None, got {denoise!r}")
         self._predictor = predictor
         self._map = map
+        self._denoise = None if denoise is None else float(denoise)
         spec = predictor.spec
         self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, max_gap, default_class)
         # Signed integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids
@@ -147,14 +153,15 @@ class Tracker:
 
     def frame(self) -> Frame:
         """The frame at the latest tick: the agents detected then, by increasing integer id (other ids: by first
-        appearance)."""
+        appearance); denoised when the tracker was made with ``denoise``."""
         native = self._native.frame()
         labels = None
         if not self._integer_ids:
             labels = np.empty(len(native), dtype=object)
             labels[:] = [self._labels[c] for c in native.ids]
         out = Frame._wrap(native, labels, None)
-        return out if self._map is None else out.with_map(self._map)
+        out = out if self._map is None else out.with_map(self._map)
+        return out if self._denoise is None else out.denoised(self._denoise)
 
     def predict(self, *, modes: int | None = None, unknown_classes: str = "error") -> Prediction:
         """The predictions of every agent detected at the latest tick (``unknown_classes`` as

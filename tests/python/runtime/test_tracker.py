@@ -73,5 +73,23 @@ def test_tracker_errors() -> None:
         tracker.update(1.4, ids=["x"], positions=[[0, 0]])
     with pytest.raises(exc.InvalidFrameError, match="Predictor"):
         dgan.Tracker("zara1")  # type: ignore[arg-type]
+    for gate in (-0.1, float("nan"), "0.1"):
+        with pytest.raises(exc.InvalidFrameError, match="denoise"):
+            dgan.Tracker(p, denoise=gate)  # type: ignore[arg-type]
     # An error loses nothing: the tracker still holds both agents at 1.0 s.
     assert len(tracker.frame()) == 2
+
+
+def test_a_denoising_tracker_gives_the_denoised_frame() -> None:
+    p = dgan.Predictor("zara1")
+    plain, smoothing = dgan.Tracker(p), dgan.Tracker(p, denoise=0.1)
+    rng = np.random.default_rng(1)
+    for k in range(8):
+        t = 10.0 + 0.4 * k
+        positions = np.array([[0.5 * k, 0.0], [3.0, 0.4 * k]]) + rng.normal(0.0, 0.2, (2, 2))
+        for tracker in (plain, smoothing):
+            tracker.update(t, ids=[4, 9], positions=positions)
+    want = plain.frame().denoised(0.1)
+    np.testing.assert_array_equal(smoothing.frame().positions, want.positions)
+    assert not np.array_equal(want.positions, plain.frame().positions)
+    np.testing.assert_array_equal(smoothing.predict().trajectories, p.predict(want).trajectories)
