@@ -306,8 +306,9 @@ class Frame:
         velocities and sizes, the ids and the map are kept. Smooth annotated tracks (ETH/UCY's pedestrians) follow a
         parabola within a few centimetres over 3.2 s, so they pass as they are. The default was chosen on the ETH/UCY
         validation windows with the bundled models: 0.4–0.5% higher top-1 ADE on clean tracks, and with 0.1 m of
-        Gaussian noise (10% of steps dropped) 14–28% below constant velocity instead of up to 17% above it; on
-        ApolloScape's noisier LiDAR tracks the same gate is mixed (docs/results.md).
+        Gaussian noise (10% of steps dropped) 14–28% below constant velocity instead of up to 17% above it. It is for
+        models trained on clean tracks: on ApolloScape's noisier LiDAR tracks the same gate is mixed, and ``hdmap``,
+        trained on noisy copies, is worse with it (docs/results.md).
 
         Raises:
             InvalidFrameError: ``gate_m`` is negative or not finite.
