@@ -241,10 +241,8 @@ def _predict(args: argparse.Namespace) -> int:
     return 0
 
 
-def _timings_text(timings: dict[str, float] | None) -> str:
+def _timings_text(timings: dict[str, float]) -> str:
     """The engine's phases of a call (``Predictor.last_timings``) as ``"preprocess 0.1, crops 0.9, ... ms"``."""
-    if not timings:
-        return ""
     shown = [k for k in ("preprocess", "crops", "network", "decode", "parts") if timings[k] > 0.0]
     return ", ".join(f"{k} {timings[k]:.1f}" for k in shown) + " ms"
 
@@ -254,8 +252,9 @@ def _print_prediction(pred: dgan.Prediction, frame: dgan.Frame, p: dgan.Predicto
         f"{len(frame)} agents at time {now:g}, {len(pred.edges)} attention edges, predicted in {ms:.1f} ms "
         f"(steps of {p.spec.dt_s:g} s, horizon {p.spec.t_f * p.spec.dt_s:g} s)"
     )
-    if p.last_timings:
-        print(f"engine: {_timings_text(p.last_timings)}")
+    timings = p.last_timings
+    if timings:
+        print(f"engine: {_timings_text(timings)}")
     for i, agent in enumerate(pred.agent_ids):
         ends = pred.trajectories[i, :, -1]
         modes = "  ".join(

@@ -105,11 +105,7 @@ impl Neighbors {
         threads: usize,
     ) -> Result<Self> {
         let (n, f) = (degree.len(), edge_features.ncols());
-        let mut start = Vec::with_capacity(n + 1);
-        start.push(0);
-        for g in degree {
-            start.push(start[start.len() - 1] + g);
-        }
+        let start = offsets_of(degree);
         let standard = edge_features.as_standard_layout();
         let from = standard.as_slice().ok_or_else(|| invalid_frame("edge features are not contiguous"))?;
         let senders = edge_index.column(1);
@@ -236,6 +232,17 @@ const RECEIVERS_PER_JOB: usize = 256;
 /// The fewest directed edges worth sharing out: below, one thread writes them.
 const PARALLEL_EDGES_FROM: usize = 20_000;
 
+/// Where each agent's rows start in rows grouped by agent, `counts[i]` rows for agent `i`, and their total last
+/// (`N + 1` values).
+fn offsets_of(counts: &[usize]) -> Vec<usize> {
+    let mut offsets = Vec::with_capacity(counts.len() + 1);
+    offsets.push(0);
+    for c in counts {
+        offsets.push(offsets[offsets.len() - 1] + c);
+    }
+    offsets
+}
+
 /// Each agent's senders, itself included, as one list of sender rows cut by `offsets` (`N + 1`; receiver `i`'s senders
 /// are `senders[offsets[i]..offsets[i + 1]]`, unsorted): built from the undirected edges without a list per agent.
 struct Senders {
@@ -250,11 +257,7 @@ impl Senders {
             degree[*i as usize] += 1;
             degree[*j as usize] += 1;
         }
-        let mut offsets = Vec::with_capacity(n + 1);
-        offsets.push(0);
-        for d in &degree {
-            offsets.push(offsets[offsets.len() - 1] + d);
-        }
+        let offsets = offsets_of(&degree);
         let mut senders = vec![0u32; offsets[n]];
         let mut next: Vec<usize> = offsets[..n].to_vec();
         for (i, slot) in next.iter_mut().enumerate() {
@@ -427,7 +430,9 @@ fn build(
     let centres: Vec<[f64; 2]> = states.iter().map(|s| s.position).collect();
     let radii: Vec<f64> =
         states.iter().map(|s| attention_radius(s.speed, spec.horizon_s(), spec.attention_lambda, s.length)).collect();
-    let edges = attention_zone_edges_on(&centres, &radii, limits.max_edges, threads_in_flight(threads))?;
+    // The threads of this call, shared with the other predictions in flight (the crops share theirs themselves).
+    let shared = threads_in_flight(threads);
+    let edges = attention_zone_edges_on(&centres, &radii, limits.max_edges, shared)?;
 
     let graph = Senders::of(n, &edges);
     let degree = graph.degree();
@@ -441,9 +446,9 @@ fn build(
             human_bytes(limits.max_input_bytes)
         )));
     }
-    let (edge_index, edge_features) = edge_rows(graph, &states, &poses, threads_in_flight(threads))?;
+    let (edge_index, edge_features) = edge_rows(graph, &states, &poses, shared)?;
 
-    let prior = prior_rows(spec, &trajectory, &trajectory_mask, &state, threads_in_flight(threads))?;
+    let prior = prior_rows(spec, &trajectory, &trajectory_mask, &state, shared)?;
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
         (Some(m), Some(_)) => {
@@ -464,9 +469,7 @@ fn build(
     };
     let neighbors = match spec.graph {
         GraphLayout::EdgeList => None,
-        GraphLayout::Padded => {
-            Some(Neighbors::from_edges_on(n, &edge_index, &edge_features, threads_in_flight(threads))?)
-        }
+        GraphLayout::Padded => Some(Neighbors::from_edges_on(n, &edge_index, &edge_features, shared)?),
     };
     let later = spec.map.is_some() && map.is_none();
     let pre = Preprocessed {

@@ -395,13 +395,16 @@ fn parabola(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> Pa
     Parabola { coef, det, inv_cc: (s0 * s2 - s1 * s1) / det }
 }
 
+/// [`parabola`], or `None` if its normal equations are singular.
+fn solved_parabola(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> Option<Parabola> {
+    let fit = parabola(valid, last, p);
+    (fit.det.abs().partial_cmp(&1e-12) == Some(std::cmp::Ordering::Greater)).then_some(fit)
+}
+
 /// The parabola through `valid` ([`parabola`]): `c` of both coordinates, the residual sum of squares over both and
 /// `[(XᵀX)⁻¹]₂₂` (`None` if the normal equations are singular).
 fn quadratic_fit(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> Option<([f64; 2], f64, f64)> {
-    let fit = parabola(valid, last, &p);
-    if fit.det.abs().partial_cmp(&1e-12) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
+    let fit = solved_parabola(valid, last, &p)?;
     let tau = |t: usize| t as f64 - last as f64;
     let rss = (0..2)
         .map(|c| {
@@ -417,10 +420,7 @@ fn quadratic_fit(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) 
 /// singular.
 pub(crate) fn parabola_points(valid: &[usize], p: impl Fn(usize, usize) -> f64) -> Option<(Vec<[f64; 2]>, f64)> {
     let last = *valid.last()?;
-    let fit = parabola(valid, last, &p);
-    if fit.det.abs().partial_cmp(&1e-12) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
+    let fit = solved_parabola(valid, last, &p)?;
     let at = |t: usize, c: usize| {
         let tau = t as f64 - last as f64;
         let [a, b, cc] = fit.coef[c];
