@@ -36,6 +36,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
             d.prior, d.prior_window_s, d.prior_fit, d.prior_standing_mps, class_priors(d.prior_by_class)
         ),
         heading=d.heading,
+        denoise_gate_m=d.denoise_gate_m,
     )
 
 

@@ -42,6 +42,9 @@ class DataConfig:
     prior_by_class: str = ""
     # Where agents' headings come from (dgan.InputSpec.heading): "measured", "motion_when_moving" or "motion".
     heading: str = "measured"
+    # Contract 10 (dgan.InputSpec.denoise_gate_m): histories off their least-squares parabola by this many metres or
+    # more (RMS) are smoothed onto it before any input is built, in training and at inference alike; 0 = as given.
+    denoise_gate_m: float = 0.0
     # ETH/UCY only: pedestrians of other sources added to the training windows
     # (training.data.datasets.PEDESTRIAN_SOURCES, comma-separated; their training splits only, resampled to 0.4 s,
     # without maps), at windows ending at every extra_stride-th step.

@@ -57,6 +57,8 @@ def _info(args: argparse.Namespace) -> int:
     else:
         how = f"mean velocity over {prior.window_s:g} s" if prior.window_s else "velocity of the last two steps"
         print(f"prior      {prior.kind} ({how})")
+    if spec.denoise_gate_m:
+        print(f"denoising  tracks off their parabola by >= {spec.denoise_gate_m:g} m are smoothed first (contract 10)")
     temp = f"temperature {c.get('temperature', 1.0):g} (of the anchor logits"
     if c.get("temperature_speed_exponent"):
         temp += f", x (1 + speed in m/s)^{c['temperature_speed_exponent']:g}"
@@ -320,7 +322,8 @@ def _predict_parser(sub: Any) -> None:
         default=None,
         metavar="GATE_M",
         help="smooth tracks whose positions lie GATE_M metres (RMS) or more off their least-squares parabola, for a "
-        f"noisy tracker's data (Frame.denoised; {DENOISE_GATE_M} m if no value is given)",
+        f"noisy tracker's data (Frame.denoised; {DENOISE_GATE_M} m if no value is given); a model that declares "
+        "denoise_gate_m (dgan info) does this itself",
     )
     pred.add_argument("--json", action="store_true", help="print JSON (times, classes, probabilities) to stdout")
     pred.add_argument("--out", default=None, help="write the long table of modes: .csv, .parquet or .jsonl")

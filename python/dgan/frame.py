@@ -308,7 +308,8 @@ class Frame:
         validation windows with the bundled models: 0.4–0.5% higher top-1 ADE on clean tracks, and with 0.1 m of
         Gaussian noise (10% of steps dropped) 14–28% below constant velocity instead of up to 17% above it. It is for
         models trained on clean tracks: on ApolloScape's noisier LiDAR tracks the same gate is mixed, and ``hdmap``,
-        trained on noisy copies, is worse with it (docs/results.md).
+        trained on noisy copies, is worse with it (docs/results.md). A model that declares ``denoise_gate_m``
+        (contract 10; the five ETH/UCY models, 0.1 m) has the engine do this itself on every frame it predicts.
 
         Raises:
             InvalidFrameError: ``gate_m`` is negative or not finite.

@@ -111,12 +111,15 @@ class InputSpec:
     #: ``"motion_when_moving"``, the direction of motion for agents moving at least 1 m/s and the measured heading
     #: only for slower ones; ``"motion"``, measured headings ignored.
     heading: str = "measured"
+    #: Contract 10: tracker noise taken out of the histories before any input is built, as
+    #: :meth:`dgan.Frame.denoised` does with this gate (metres); 0, the histories as given.
+    denoise_gate_m: float = 0.0
 
     def __post_init__(self) -> None:
         if isinstance(self.classes, str) or not hasattr(self.classes, "__iter__"):
             raise InvalidSpecError(f"classes must be a sequence of class names, got {self.classes!r}")
         object.__setattr__(self, "classes", tuple(self.classes))
-        numbers = {"dt_s": self.dt_s, "attention_lambda": self.attention_lambda}
+        numbers = {"dt_s": self.dt_s, "attention_lambda": self.attention_lambda, "denoise_gate_m": self.denoise_gate_m}
         if self.map is not None:
             numbers["map.resolution_m"] = self.map.resolution_m
         numbers["prior.window_s"] = self.prior.window_s
@@ -133,6 +136,8 @@ class InputSpec:
         d = asdict(self)
         d["classes"] = list(self.classes)
         d["prior"] = self.prior.to_dict()
+        if d["denoise_gate_m"] == 0:  # as the contract writes it: contracts 1-9 have no gate
+            del d["denoise_gate_m"]
         return json.dumps(d)
 
     @classmethod
@@ -148,6 +153,7 @@ class InputSpec:
             prior=PriorSpec(**d.get("prior", {})),
             graph=str(d.get("graph", "edge_list")),
             heading=str(d.get("heading", "measured")),
+            denoise_gate_m=float(d.get("denoise_gate_m", 0.0)),
         )
 
     @property

@@ -41,7 +41,8 @@ class Tracker:
         max_gap: the longest gap in seconds between two detections of an agent that is interpolated (1.5 · dt).
         default_class: the class of detections that give none.
         denoise: a gate in metres: every frame is :meth:`Frame.denoised` with it (tracks that far or farther off
-            their least-squares parabola smoothed), for a detector's noisy positions; None (the default) keeps them.
+            their least-squares parabola smoothed), for a detector's noisy positions; None (the default) keeps them
+            (a model that declares ``denoise_gate_m``, contract 10, smooths them in the engine all the same).
 
     >>> tracker = dgan.Tracker(dgan.Predictor("zara1"))  # doctest: +SKIP
     >>> tracker.update(12.4, ids=["a", "b"], positions=[[1.0, 2.0], [3.0, 4.0]])  # doctest: +SKIP

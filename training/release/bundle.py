@@ -6,12 +6,15 @@ for the parity test in ``training/checkpoints/<name>.pt``, evaluate it with the 
     python -m training.release.bundle runs/apollo_s0 runs/apollo_s1 --name apolloscape \
         --calibration-fold runs/fold1_s0 runs/fold1_s1 --calibration-fold ...   # a cross-fitted temperature
     python -m training.release.bundle --reexport zara1 sdd      # the kept checkpoints, exported again (a new contract)
+    python -m training.release.bundle --denoise zara1 0.1       # histories denoised first (contract 10), exported again
+    python -m training.release.bundle --restate zara1           # its card's test metrics measured again
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -28,6 +31,7 @@ from training.release.cards import (
     declared_folds,
     ensemble_line,
     multiclass_card,
+    restated,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -153,6 +157,41 @@ def rerender(name: str, render: str) -> Path:
     return reexport(name)
 
 
+def redenoise(name: str, gate_m: float) -> Path:
+    """Sets the bundled model ``name``'s denoising gate (``data.denoise_gate_m``, ``dgan.InputSpec.denoise_gate_m``,
+    contract 10) in its kept checkpoint and exports it again (:func:`reexport`); its weights and temperature are
+    unchanged. The gate is chosen on validation before bundling (``docs/results.md``, noisy tracks)."""
+    from training.checkpoint import update_checkpoint
+
+    if not (math.isfinite(gate_m) and gate_m >= 0):
+        raise ValueError(f"the denoising gate must be a non-negative number of metres, got {gate_m}")
+    ckpt = CHECKPOINTS / f"{name}.pt"
+    loaded = torch.load(ckpt, weights_only=False)
+    # A consensus keeps a config in each member (training.ensemble), a single network one of its own.
+    for holder in [loaded, *loaded.get("members", [])]:
+        if "config" in holder:
+            holder["config"]["data"]["denoise_gate_m"] = gate_m
+    update_checkpoint(ckpt, **{k: loaded[k] for k in ("config", "members") if k in loaded})
+    return reexport(name)
+
+
+def restate(name: str, data_root: Path) -> dict[str, Any]:
+    """Evaluates the bundled ETH/UCY model ``name`` again with the engine on its test scene and rewrites its card's
+    test metrics and denoising sentence (:func:`training.release.cards.restated`): after :func:`redenoise`, when the
+    run it was trained in is no longer at hand."""
+    ckpt = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=False)
+    cfg = ckpt["config"] if "config" in ckpt else ckpt["members"][0]["config"]
+    if cfg["data"].get("dataset", "ethucy") != "ethucy":
+        raise ValueError(f"{name}: restate rewrites ETH/UCY cards; bundle a multi-class model again instead")
+    predictor = dgan.Predictor(MODELS / f"{name}.onnx")
+    metrics = evaluate(predictor, "ethucy", data_root, cfg["data"]["scene"])
+    if predictor.spec.map is not None and predictor.spec.map.optional:
+        metrics["without_map"] = evaluate(predictor, "ethucy", data_root, cfg["data"]["scene"], with_map=False)
+    card_path = MODELS / f"{name}.md"
+    card_path.write_text(restated(card_path.read_text(), metrics, cfg))
+    return metrics
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
@@ -172,7 +211,23 @@ def main() -> None:
     ap.add_argument(
         "--render", nargs=2, metavar=("MODEL", "RENDER"), help="set a bundled model's map.render and export it again"
     )
+    ap.add_argument(
+        "--denoise",
+        nargs=2,
+        metavar=("MODEL", "GATE_M"),
+        help="set a bundled model's denoise_gate_m (contract 10) and export it again",
+    )
+    ap.add_argument(
+        "--restate", nargs="+", metavar="MODEL", help="evaluate bundled ETH/UCY models again and rewrite their cards"
+    )
     a = ap.parse_args()
+    if a.denoise:
+        print(redenoise(a.denoise[0], float(a.denoise[1])))
+        return
+    if a.restate:
+        for name in a.restate:
+            print(json.dumps({name: restate(name, a.data_root.expanduser())}, indent=2))
+        return
     if a.render:
         print(rerender(*a.render))
         return

@@ -90,8 +90,44 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             "Agents' headings come from their direction of motion"
             + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
         )
+    if denoise_words(cfg):
+        parts.append(denoise_words(cfg))
     parts.append(f"Mode probabilities at {temperature_words(metrics)} {fitted_where(cfg)}.")
     return " ".join(parts)
+
+
+def denoise_words(cfg: dict[str, Any]) -> str:
+    """The card's sentence on a declared denoising gate (contract 10), or "" without one."""
+    gate = float(cfg["data"].get("denoise_gate_m", 0.0))
+    if not gate:
+        return ""
+    return (
+        f"The engine first smooths histories that lie off their least-squares parabola by {gate:g} m or more (RMS) "
+        "onto it (contract 10, `denoise_gate_m`; chosen on validation for noisy trackers, `docs/results.md`)."
+    )
+
+
+def restated(text: str, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
+    """An ETH/UCY card (:func:`card`) with its test metrics replaced by ``metrics`` and its denoising sentence as
+    ``cfg`` declares it: for a bundled model exported again with new inference-time keys."""
+    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
+    header = f"- **Test metrics** (engine, world metres, {metrics['windows']} windows, {metrics['agents']} agents):"
+    lines = []
+    for line in text.splitlines():
+        if line.startswith("- **Test metrics** (engine, world metres"):
+            line = header
+        elif line.startswith("| DGAN |"):
+            line = "| DGAN | " + " | ".join(f"{metrics[k]:.3f}" for k in keys) + " |"
+        elif line.startswith("| DGAN without the map |"):
+            line = nomap_row(metrics).rstrip("\n")
+        elif line.startswith("| constant velocity ("):
+            line = cv_row(metrics)
+        lines.append(line)
+    out = "\n".join(lines) + "\n"
+    words = denoise_words(cfg)
+    if words and words not in out:
+        out = out.replace(" Mode probabilities at ", f" {words} Mode probabilities at ", 1)
+    return out
 
 
 def temperature_words(metrics: dict[str, Any]) -> str:

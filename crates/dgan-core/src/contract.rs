@@ -15,11 +15,12 @@ use std::collections::BTreeMap;
 /// sealed weights (`weights_sha256`); version 5 where headings come from (`heading`); version 6 how the prior's
 /// velocity is fitted (`prior.fit`) and its standing threshold (`prior.standing_mps`); version 7 the tiled map
 /// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`); version 9 a temperature that grows
-/// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`).
-pub const CONTRACT_VERSION: u32 = 9;
+/// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`);
+/// version 10 histories denoised before preprocessing (`denoise_gate_m`).
+pub const CONTRACT_VERSION: u32 = 10;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 9] = [1, 2, 3, 4, 5, 6, 7, 8, 9];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 10] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -256,6 +257,11 @@ impl ModelContract {
         if self.contract_version < 8 && prior.fit == VelocityFit::Adaptive {
             return Err(DganError::Contract(
                 "prior.fit \"adaptive\" is contract 8; versions 6 and 7 fit endpoints, a line or a parabola".into(),
+            ));
+        }
+        if self.contract_version < 10 && self.input.denoise_gate_m != 0.0 {
+            return Err(DganError::Contract(
+                "denoise_gate_m is a contract-10 key; versions 1 to 9 take the histories as given".into(),
             ));
         }
         let render = self.input.map.as_ref().map_or(MapRender::Agent, |m| m.render);
@@ -582,6 +588,20 @@ mod tests {
         assert!(err.contains("declares none"), "{err}");
         // Version 8's single temperature is version 9's with exponent 0 and class temperature 1.
         assert_eq!(ModelContract::from_json(&v8).unwrap().calibration(), Calibration::single(1.5));
+        // Version 10 denoises the histories first; version 9 cannot, and the gate is a sane number of metres.
+        let gated = "\"denoise_gate_m\": 0.1, \"units\"";
+        let v10 = v9.replace("\"contract_version\": 9", "\"contract_version\": 10").replace("\"units\"", gated);
+        let c = ModelContract::from_json(&v10).unwrap();
+        assert_eq!(c.input.denoise_gate_m, 0.1);
+        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+        assert_eq!(ModelContract::from_json(&v9).unwrap().input.denoise_gate_m, 0.0);
+        assert!(!ModelContract::from_json(&v9).unwrap().to_json().unwrap().contains("denoise_gate_m"));
+        let err = ModelContract::from_json(&v9.replace("\"units\"", gated)).unwrap_err().to_string();
+        assert!(err.contains("denoise_gate_m is a contract-10 key"), "{err}");
+        for bad in ["-0.1", "1000.0", "\"x\""] {
+            let err = ModelContract::from_json(&v10.replace("0.1, \"units\"", &format!("{bad}, \"units\"")));
+            assert!(err.unwrap_err().to_string().contains("denoise_gate_m"), "{bad}");
+        }
     }
 
     #[test]

@@ -398,6 +398,14 @@ fn build(
         )));
     }
     let class_idx: Vec<usize> = frame.classes().iter().map(|c| spec.class_index(*c)).collect::<Result<_>>()?;
+    // Contract 10: every input from the denoised histories (the map and given states are kept).
+    let denoised;
+    let frame = if spec.denoise_gate_m > 0.0 {
+        denoised = frame.denoised(spec.denoise_gate_m)?.0;
+        &denoised
+    } else {
+        frame
+    };
     let states = traffic_states_with(frame, spec.dt_s, spec.heading);
     let poses: Vec<AgentPose> = states.iter().map(TrafficState::pose).collect();
 
@@ -525,6 +533,7 @@ mod tests {
             prior: PriorSpec::constant_velocity(0.0),
             graph: GraphLayout::Padded,
             heading: HeadingSource::Measured,
+            denoise_gate_m: 0.0,
         }
     }
 
@@ -630,6 +639,34 @@ mod tests {
             &spec.classes,
         );
         assert_eq!(direct.unwrap(), one.prior);
+    }
+
+    #[test]
+    fn a_denoising_spec_builds_every_input_from_the_denoised_frame() {
+        // Agent 0 walks with 0.2 m jitter, agent 1 walks smoothly beside it.
+        let p = Array3::from_shape_fn((2, 6, 2), |(i, t, d)| {
+            let jitter = if i == 0 { [0.2, -0.2][t % 2] } else { 0.0 };
+            [t as f64 * 0.5 + jitter, i as f64 * 1.5][d]
+        });
+        let spec3 = |gate: f64| InputSpec { t_obs: 6, denoise_gate_m: gate, ..spec(false) };
+        let f = Frame::new(p, None, vec![AgentClass::Pedestrian; 2]).unwrap();
+        let (smoothed, count) = f.denoised(0.05).unwrap();
+        assert_eq!(count, 1);
+        let (with, direct, without) = (
+            preprocess(&f, &spec3(0.05)).unwrap(),
+            preprocess(&smoothed, &spec3(0.0)).unwrap(),
+            preprocess(&f, &spec3(0.0)).unwrap(),
+        );
+        assert_eq!(with.inputs.trajectory, direct.inputs.trajectory);
+        assert_eq!(with.inputs.state, direct.inputs.state);
+        assert_eq!(with.inputs.edge_features, direct.inputs.edge_features);
+        assert_eq!(with.prior, direct.prior);
+        assert_ne!(with.inputs.trajectory, without.inputs.trajectory);
+        // A gate above the jitter keeps the histories as given.
+        assert_eq!(preprocess(&f, &spec3(5.0)).unwrap().inputs.trajectory, without.inputs.trajectory);
+        for bad in [-0.1, f64::NAN, f64::INFINITY, 1e3] {
+            assert!(matches!(preprocess(&f, &spec3(bad)), Err(DganError::InvalidSpec(_))), "{bad}");
+        }
     }
 
     #[test]

@@ -128,7 +128,19 @@ pub struct InputSpec {
     /// Where each agent's heading comes from (contract 5; older models take measured headings).
     #[serde(default)]
     pub heading: HeadingSource,
+    /// Contract 10: preprocessing first takes tracker noise out of the histories as
+    /// [`Frame::denoised`](crate::frame::Frame::denoised) does with this gate (metres), so that every input (positions,
+    /// states, graph, prior, crops) is built from the smoothed tracks; 0 (the default) = the histories as given.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub denoise_gate_m: f64,
 }
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+/// The largest denoising gate a model may declare, metres: beyond it every track would be kept as given anyway.
+pub const MAX_DENOISE_GATE_M: f64 = 100.0;
 
 /// How the attention-zone graph is given to the network.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -178,6 +190,10 @@ impl InputSpec {
         self.prior.validate()?;
         if let Some((c, _)) = self.prior.by_class.iter().find(|(c, _)| !self.classes.contains(c)) {
             return bad(format!("prior.by_class names {c}, which is not among the model's classes {:?}", self.classes));
+        }
+        let gate = self.denoise_gate_m;
+        if !(gate.is_finite() && (0.0..=MAX_DENOISE_GATE_M).contains(&gate)) {
+            return bad(format!("denoise_gate_m must be a number of metres in [0, {MAX_DENOISE_GATE_M}], got {gate}"));
         }
         Ok(())
     }
@@ -240,6 +256,7 @@ mod tests {
             prior: PriorSpec::NONE,
             graph: GraphLayout::EdgeList,
             heading: HeadingSource::Measured,
+            denoise_gate_m: 0.0,
         }
     }
 

@@ -67,6 +67,7 @@ fn spec(rng: &mut ChaCha8Rng, t_obs: usize) -> InputSpec {
         graph: if rng.random() { dgan_core::GraphLayout::Padded } else { dgan_core::GraphLayout::EdgeList },
         heading: [HeadingSource::Measured, HeadingSource::MotionWhenMoving, HeadingSource::Motion]
             [rng.random_range(0..3)],
+        denoise_gate_m: [0.0, 0.0, 0.1, 1.0][rng.random_range(0..4)],
     }
 }
 

@@ -42,7 +42,12 @@ fn frame(angle: f64, shift: [f64; 2]) -> Frame {
         let a = [rng.random_range(-1.0..1.0), rng.random_range(-0.5..0.5)];
         for t in 0..8 {
             let tt = t as f64 * 0.2;
-            let q = [start[0] + v[0] * tt + 0.5 * a[0] * tt * tt, start[1] + v[1] * tt + 0.5 * a[1] * tt * tt];
+            // Every fifth agent tracked with jitter, which the spec's denoising smooths out.
+            let jitter = if i % 5 == 2 { 0.15 * ((t * 7 % 5) as f64 - 2.0) } else { 0.0 };
+            let q = [
+                start[0] + v[0] * tt + 0.5 * a[0] * tt * tt + jitter,
+                start[1] + v[1] * tt + 0.5 * a[1] * tt * tt - jitter,
+            ];
             let w = rigid(q, angle, shift);
             p[[i, t, 0]] = w[0];
             p[[i, t, 1]] = w[1];
@@ -96,6 +101,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
         prior: PriorSpec::constant_velocity(0.8),
         graph: GraphLayout::Padded,
         heading: HeadingSource::Measured,
+        denoise_gate_m: 0.05,
     };
     let base = preprocess(&frame(0.0, [0.0, 0.0]), &spec).unwrap();
     for (angle, shift) in [(1.0, [100.0, -50.0]), (-2.5, [3000.0, 4000.0]), (std::f64::consts::PI, [0.0, 0.0])] {

@@ -30,8 +30,13 @@ def test_info_names_contract_9s_temperatures(capsys: pytest.CaptureFixture[str])
     assert "class logits" in line
     assert line.endswith("contract 9)")
     assert main(["info", "zara1"]) == 0  # one temperature
-    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("temperature"))
+    out = capsys.readouterr().out.splitlines()
+    line = next(x for x in out if x.startswith("temperature"))
     assert "speed" not in line
+    # Contract 10: zara1 declares a denoising gate, sdd none.
+    assert any(x.startswith("denoising  ") and ">= 0.1 m" in x for x in out)
+    assert main(["info", "sdd"]) == 0
+    assert "denoising" not in capsys.readouterr().out
 
 
 def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -48,11 +53,13 @@ def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[s
     assert "crops" not in lines[1]
 
 
-def test_predict_denoise_smooths_a_noisy_scene_only(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    args = ["predict", "zara1", str(SCENE), "--time", "5500", "--json", "--modes", "1"]
+def test_predict_denoise_smooths_a_noisy_scene_only(
+    nomap_model: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["predict", str(nomap_model), str(SCENE), "--time", "5500", "--json", "--modes", "1"]
 
-    def first_modes(extra: list[str], scene: Path = SCENE) -> np.ndarray:
-        assert main([*args[:2], str(scene), *args[3:], *extra]) == 0
+    def first_modes(extra: list[str], scene: Path = SCENE, model: str = str(nomap_model)) -> np.ndarray:
+        assert main([args[0], model, str(scene), *args[3:], *extra]) == 0
         agents = json.loads(capsys.readouterr().out)["agents"]
         return np.array([a["modes"][0]["trajectory"] for a in agents])
 
@@ -66,6 +73,10 @@ def test_predict_denoise_smooths_a_noisy_scene_only(tmp_path: Path, capsys: pyte
         "\n".join(f"{r[0]} {r[1]} {float(r[2]) + rng.normal(0, 0.3)} {float(r[3]) + rng.normal(0, 0.3)}" for r in rows)
     )
     assert not np.array_equal(first_modes(["--denoise", "0.1"], noisy), first_modes([], noisy))
+    # zara1 declares the gate (contract 10): it smooths the noisy scene itself, --denoise adds nothing.
+    np.testing.assert_allclose(
+        first_modes(["--denoise", "0.1"], noisy, "zara1"), first_modes([], noisy, "zara1"), atol=1e-6
+    )
     assert main([*args, "--denoise", "-1"]) == 2
     assert "denoising gate" in capsys.readouterr().err
 

@@ -487,9 +487,15 @@ def contract_cases(tmp: Path) -> list[Case]:
             {"height_px": 10},
             {**meta["map"], "height_px": 0},
             {**meta["map"], "resolution_m": -1},
-            {"render": "tile", **meta["map"]},
-            {"render": "tiles", **meta["map"]},  # zara1 is a contract-6 model
+            {"render": "tile", **{k: v for k, v in meta["map"].items() if k != "render"}},
+            # tiles serve crops of at most 256 px
+            {
+                "render": "tiles",
+                "height_px": 300,
+                **{k: v for k, v in meta["map"].items() if k not in ("render", "height_px")},
+            },
         ],
+        "denoise_gate_m": [-0.1, 1e3, "x", float("inf")],
         "prior": [
             "cv",
             {"kind": "magic"},
@@ -501,7 +507,7 @@ def contract_cases(tmp: Path) -> list[Case]:
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 10, 99, "4", None, -1],
+        "contract_version": [0, 11, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",

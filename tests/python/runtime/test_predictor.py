@@ -62,6 +62,47 @@ def test_engine_inputs_equal_the_reference(nomap_model: Path) -> None:
     np.testing.assert_array_equal(got["edge_index"], want["edge_index"])
 
 
+def test_a_denoising_spec_equals_the_reference(nomap_model: Path) -> None:
+    # Contract 10: the engine's inputs from the denoised histories, against numpy's least-squares parabolas.
+    from dataclasses import replace
+
+    predictor = dgan.Predictor(nomap_model)
+    positions, mask, classes = mixed_frame()
+    frame = dgan.Frame(positions, mask=mask, classes=classes)
+    spec = replace(predictor.spec, denoise_gate_m=0.1)
+    got = dgan.preprocess(frame, spec)
+    want = reference.preprocess(positions, mask, classes, {**predictor.contract, "denoise_gate_m": 0.1})
+    smoothed = reference.denoise(positions, mask, 0.1)
+    changed = np.any(np.abs(smoothed - positions) > 1e-9, axis=(1, 2))
+    assert 0 < changed.sum() < len(positions), changed  # some agents smoothed, some kept
+    for key in ("trajectory", "trajectory_mask", "state", "edge_features", "origin", "heading"):
+        np.testing.assert_allclose(got[key], want[key], atol=1e-5, err_msg=key)
+    np.testing.assert_array_equal(got["edge_index"], want["edge_index"])
+    as_frame = dgan.preprocess(frame.denoised(0.1), predictor.spec)
+    for key in ("trajectory", "state", "edge_features", "prior"):
+        np.testing.assert_array_equal(got[key], as_frame[key], err_msg=key)
+
+
+def test_a_bundled_model_with_a_gate_predicts_from_the_denoised_frame(zara1_frame: dgan.Frame) -> None:
+    # zara1 declares denoise_gate_m (contract 10): a noisy frame predicts as its denoised copy does, whose tracks now
+    # lie on their parabolas (so the engine's own pass leaves them), and unlike the noisy histories taken as given.
+    predictor = dgan.Predictor("zara1")
+    rng = np.random.default_rng(5)
+    noisy = dgan.Frame(
+        zara1_frame.positions + rng.normal(0.0, 0.15, zara1_frame.positions.shape),
+        mask=zara1_frame.mask,
+        classes=zara1_frame.classes,
+        map=zara1_frame.map,
+    )
+    got = predictor.predict(noisy)
+    smoothed = predictor.predict(noisy.denoised(predictor.spec.denoise_gate_m))
+    np.testing.assert_allclose(got.trajectories, smoothed.trajectories, atol=1e-5)
+    from dataclasses import replace
+
+    as_given = dgan.preprocess(noisy, replace(predictor.spec, denoise_gate_m=0.0))
+    assert np.abs(dgan.preprocess(noisy, predictor.spec)["trajectory"] - as_given["trajectory"]).max() > 0.05
+
+
 def test_map_model_uses_the_engine_raster(map_model: Path) -> None:
     predictor = dgan.Predictor(map_model)
     positions, mask, classes = mixed_frame()
@@ -218,8 +259,9 @@ def test_bundled_map_models_also_serve_frames_without_a_map(zara1_frame: dgan.Fr
 def test_the_prior_and_temperature_are_declared(zara1_frame: dgan.Frame) -> None:
     predictor = dgan.Predictor("zara1")
     c = predictor.contract
-    assert dgan._dgan.CONTRACT_VERSION == 9
-    assert c["contract_version"] in (5, 6, 7)
+    assert dgan._dgan.CONTRACT_VERSION == 10
+    assert c["contract_version"] == 10  # re-exported with the denoising gate chosen on validation
+    assert c["denoise_gate_m"] == predictor.spec.denoise_gate_m == 0.1
     assert c["graph"] == "padded"
     assert c["prior"]["kind"] == "constant_velocity"
     assert 0.001 <= c["temperature"] <= 1000

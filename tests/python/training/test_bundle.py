@@ -13,11 +13,13 @@ pytest.importorskip("torch")
 from training.release.bundle import check_folds
 from training.release.cards import (
     classification_words,
+    denoise_words,
     distill_words,
     extra_data_line,
     extra_licence_line,
     fitted_where,
     joint_words,
+    restated,
     temperature_words,
 )
 
@@ -99,3 +101,30 @@ def test_the_card_names_contract_9s_temperatures() -> None:
     words = temperature_words({"temperature": 0.733, "temperature_speed_exponent": 0.956, "class_temperature": 7.104})
     assert words.startswith("the temperature 0.73 × (1 + speed in m/s)^0.96 with a class temperature of 7.10")
     assert "`train.calibration" in words
+
+
+def test_a_card_restated_with_a_denoising_gate() -> None:
+    assert denoise_words(cfg()) == ""
+    assert "0.1 m or more" in denoise_words(cfg(denoise_gate_m=0.1))
+    card = (
+        "  One class. The network refines a rollout. Mode probabilities at the temperature 1.73 fitted on validation.\n"
+        "- **Test metrics** (engine, world metres, 602 windows, 2253 agents):\n\n"
+        "| | top-1 ADE | top-1 FDE | minADE5 | minFDE5 | minADE20 | minFDE20 | Brier-minFDE20 |\n"
+        "|---|---|---|---|---|---|---|---|\n"
+        "| DGAN | 0.365 | 0.790 | 0.257 | 0.526 | 0.224 | 0.435 | 1.031 |\n"
+        "| DGAN without the map | 0.395 | 0.854 | 0.273 | 0.558 | 0.231 | 0.451 | 1.066 |\n"
+        "| constant velocity (last2) | 0.431 | 0.960 | | | | | |\n"
+    )
+    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
+    metrics: dict[str, Any] = {k: 0.1 * i for i, k in enumerate(keys, 1)}
+    metrics.update(windows=600, agents=2000, cv_variant="mean1s", cv_ade=0.5, cv_fde=1.0)
+    metrics["without_map"] = {k: 1.0 + 0.1 * i for i, k in enumerate(keys, 1)}
+    out = restated(card, metrics, cfg(denoise_gate_m=0.1))
+    assert "(engine, world metres, 600 windows, 2000 agents):" in out
+    assert "| DGAN | 0.100 | 0.200 | 0.300 | 0.400 | 0.500 | 0.600 | 0.700 |" in out
+    assert "| DGAN without the map | 1.100 | 1.200 |" in out
+    assert "| constant velocity (mean1s) | 0.500 | 1.000 |" in out
+    assert "rollout. The engine first smooths histories" in out
+    assert "`denoise_gate_m`" in out
+    assert restated(out, metrics, cfg(denoise_gate_m=0.1)) == out  # the sentence once
+    assert "smooths" not in restated(card, metrics, cfg())
