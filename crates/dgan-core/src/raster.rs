@@ -139,7 +139,7 @@ fn rasterize_rows_into(
         // From tiles, straight into the crop: the boxes, if drawn, are on the overlay's tiles already.
         match (frame.map(), &overlay) {
             (Some(SceneMap::Vector(m)), Some(o)) => {
-                resample_chw(spec, &s.pose(), |i, j| o.get(i, j).unwrap_or_else(|| tile(m, spec, i, j)), crop);
+                o.resample_chw(m, spec, &s.pose(), crop);
                 return Ok(());
             }
             (Some(SceneMap::Vector(m)), None) if spec.render == MapRender::Tiles => {
@@ -409,6 +409,32 @@ mod tests {
             rasterize_on(&f, &s, &MapSpec { draw_agents: false, ..road(MapRender::Tiles).2 }, 1).unwrap(),
             plain
         );
+    }
+
+    #[test]
+    fn crops_read_from_the_mosaic_equal_those_from_their_own_patches() {
+        // The road's 40 agents read their tiles from one mosaic; with a 41st agent 5 km away the tiles spread too far
+        // for one, and each crop copies its own patch: the 40 crops are the same either way, on 1 or 3 threads.
+        let (f, s, spec) = road(MapRender::Tiles);
+        let Some(SceneMap::Vector(m)) = f.map() else { unreachable!() };
+        let views = |states: &[TrafficState]| -> Vec<[f64; 4]> {
+            states.iter().map(|s| world_bounds(&spec, &s.pose())).collect()
+        };
+        let near: Vec<&TrafficState> = vec![];
+        assert!(Overlay::new(m, &spec, &views(&s), |_| near.clone(), 1).unwrap().has_mosaic());
+        let mut p = Array3::zeros((41, 2, 2));
+        p.slice_mut(ndarray::s![..40, .., ..]).assign(f.positions());
+        p.slice_mut(ndarray::s![40, .., ..]).assign(&ndarray::array![[5000.0, 49.0], [5000.0, 50.0]]);
+        let far =
+            Frame::new(p, None, vec![AgentClass::Vehicle; 41]).unwrap().with_map(Arc::new(f.map().unwrap().clone()));
+        let s_far = traffic_states(&far, 1.0);
+        assert!(!Overlay::new(m, &spec, &views(&s_far), |_| near.clone(), 1).unwrap().has_mosaic());
+        for threads in [1, 3] {
+            let from_mosaic = rasterize_on(&f, &s, &spec, threads).unwrap();
+            let from_patches = rasterize_on(&far, &s_far, &spec, threads).unwrap();
+            assert_eq!(from_patches.slice(ndarray::s![..40, .., .., ..]), from_mosaic, "{threads} threads");
+            assert!(from_mosaic.iter().any(|v| *v > 0.5));
+        }
     }
 
     #[test]

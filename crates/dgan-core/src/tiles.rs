@@ -98,6 +98,72 @@ fn span(view: [f64; 4], res: f64) -> ([i64; 4], [i64; 4]) {
 /// without them): boxes are drawn once per tile rather than once per crop.
 pub(crate) struct Overlay {
     tiles: HashMap<(i64, i64), Arc<[u8]>>,
+    /// The same tiles laid side by side in one array, when the frame's tiles are close enough together
+    /// ([`MOSAIC_MAX_SPREAD`]): each crop then reads its taps from it instead of first copying its own patch.
+    mosaic: Option<Mosaic>,
+}
+
+/// Tile pixels a crop reads, as one row-major RGB array of `width` pixels a row whose pixel `(0, 0)` is the world's
+/// tile pixel `(r_base, c_base)`.
+struct Source<'a> {
+    bytes: &'a [u8],
+    width: usize,
+    c_base: i64,
+    r_base: i64,
+}
+
+/// The tiles `[i0, i0 + across) × [j0, j0 + down)` in one array (black where no crop reads).
+struct Mosaic {
+    bytes: Vec<u8>,
+    i0: i64,
+    j0: i64,
+    across: usize,
+    down: usize,
+}
+
+/// The largest mosaic, in tiles, as a multiple of the tiles the crops read: a frame spread over a wide area with
+/// few tiles under its crops copies a patch per crop instead.
+const MOSAIC_MAX_SPREAD: usize = 4;
+
+impl Mosaic {
+    /// The tiles `tiles` (keys sorted by `(i, j)`) in one array, written on up to `threads` threads a band of tiles at
+    /// a time; None when they spread too far ([`MOSAIC_MAX_SPREAD`]).
+    fn new(tiles: &HashMap<(i64, i64), Arc<[u8]>>, threads: usize) -> Result<Option<Self>> {
+        let Some(i0) = tiles.keys().map(|k| k.0).min() else { return Ok(None) };
+        let (i1, j0, j1) = (
+            tiles.keys().map(|k| k.0).max().unwrap_or(i0),
+            tiles.keys().map(|k| k.1).min().unwrap_or(0),
+            tiles.keys().map(|k| k.1).max().unwrap_or(0),
+        );
+        let (across, down) = ((i1 - i0 + 1) as usize, (j1 - j0 + 1) as usize);
+        if across.saturating_mul(down) > MOSAIC_MAX_SPREAD * tiles.len() {
+            return Ok(None);
+        }
+        let band = TILE_PX * across * TILE_PX * 3;
+        let mut bytes = vec![0u8; band * down];
+        let row_bytes = TILE_PX * 3;
+        let fill = |(j, out): (usize, &mut [u8])| -> Result<()> {
+            for i in 0..across {
+                let Some(t) = tiles.get(&(i0 + i as i64, j0 + j as i64)) else { continue };
+                for (r, src) in t.chunks_exact(row_bytes).enumerate() {
+                    let at = (r * across + i) * row_bytes;
+                    out[at..at + row_bytes].copy_from_slice(src);
+                }
+            }
+            Ok(())
+        };
+        let jobs: Vec<(usize, &mut [u8])> = bytes.chunks_mut(band).enumerate().collect();
+        share_jobs(jobs, threads, fill, || DganError::InvalidSpec("a tile-copying thread panicked".into()))?;
+        Ok(Some(Self { bytes, i0, j0, across, down }))
+    }
+
+    /// The mosaic as a source, if it holds every tile pixel of `[c0, c1] × [r0, r1]`.
+    fn holding(&self, [c0, c1, r0, r1]: [i64; 4]) -> Option<Source<'_>> {
+        let (c_base, r_base) = (self.i0 * TILE_PX as i64, self.j0 * TILE_PX as i64);
+        let (width, height) = ((self.across * TILE_PX) as i64, (self.down * TILE_PX) as i64);
+        let inside = c0 >= c_base && c1 < c_base + width && r0 >= r_base && r1 < r_base + height;
+        inside.then_some(Source { bytes: &self.bytes, width: width as usize, c_base, r_base })
+    }
 }
 
 impl Overlay {
@@ -159,12 +225,30 @@ impl Overlay {
             share_jobs(jobs, threads, draw, || DganError::InvalidSpec("a tile-drawing thread panicked".into()))?;
             wanted.iter().zip(drawn).filter_map(|(key, tile)| tile.map(|t| (*key, t))).collect()
         };
-        Ok(Self { tiles })
+        let mosaic = Mosaic::new(&tiles, threads)?;
+        Ok(Self { tiles, mosaic })
+    }
+
+    /// Whether the crops read the overlay's tiles from one mosaic.
+    #[cfg(test)]
+    pub(crate) fn has_mosaic(&self) -> bool {
+        self.mosaic.is_some()
     }
 
     /// Tile `(i, j)`, if the overlay holds it.
     pub(crate) fn get(&self, i: i64, j: i64) -> Option<Arc<[u8]>> {
         self.tiles.get(&(i, j)).cloned()
+    }
+
+    /// [`resample_chw`] from the overlay's tiles (from its mosaic when that holds the crop; `map`'s own tiles for
+    /// any the overlay lacks): the same values either way.
+    pub(crate) fn resample_chw(&self, map: &VectorMap, spec: &MapSpec, pose: &AgentPose, out: &mut [f32]) {
+        let res = tile_resolution(spec);
+        let (px, _) = span(world_bounds(spec, pose), res);
+        match self.mosaic.as_ref().and_then(|m| m.holding(px)) {
+            Some(source) => sample_chw(spec, pose, px, &source, out),
+            None => resample_chw(spec, pose, |i, j| self.get(i, j).unwrap_or_else(|| tile(map, spec, i, j)), out),
+        }
     }
 }
 
@@ -193,6 +277,18 @@ pub(crate) fn resample_chw(spec: &MapSpec, pose: &AgentPose, fetch: impl Fn(i64,
             c += n as i64;
         }
     }
+    sample_chw(spec, pose, [c0, c1, r0, r1], &Source { bytes: &patch, width: pw, c_base: c0, r_base: r0 }, out);
+}
+
+/// The crop of the agent at `pose` into `out` from `source`, which holds its tile pixels `[c0, c1] × [r0, r1]`
+/// ([`span`]): each crop pixel the mean of the 2 × 2 tile pixels around its centre.
+fn sample_chw(spec: &MapSpec, pose: &AgentPose, [c0, c1, r0, r1]: [i64; 4], source: &Source<'_>, out: &mut [f32]) {
+    let res = tile_resolution(spec);
+    let (ph, pw) = ((r1 - r0 + 1) as usize, (c1 - c0 + 1) as usize);
+    // Where the crop's patch starts in the source, and the source's rows.
+    let (first, stride) =
+        (((r0 - source.r_base) as usize * source.width + (c0 - source.c_base) as usize) * 3, source.width * 3);
+    let patch = &source.bytes[first..];
     // World position of pixel (0, 0) and its steps along a row and down a column, in patch pixels.
     let at = |row: usize, col: usize| {
         let w = pose.to_world(spec.pixel_to_local(row, col));
@@ -200,7 +296,7 @@ pub(crate) fn resample_chw(spec: &MapSpec, pose: &AgentPose, fetch: impl Fn(i64,
     };
     let (o, right, down) = (at(0, 0), at(0, 1), at(1, 0));
     let (dc, dr) = ([right[0] - o[0], right[1] - o[1]], [down[0] - o[0], down[1] - o[1]]);
-    let (w, stride, plane) = (spec.width_px, pw * 3, spec.width_px * spec.height_px);
+    let (w, plane) = (spec.width_px, spec.width_px * spec.height_px);
     // Within the patch by construction (its bounds hold every pixel centre, one pixel to spare); clamped so that a
     // rounding at its edge cannot read outside it.
     let (last_c, last_r) = (pw as f64 - 2.0, ph as f64 - 2.0);
@@ -214,7 +310,7 @@ pub(crate) fn resample_chw(spec: &MapSpec, pose: &AgentPose, fetch: impl Fn(i64,
             // The 2 × 2 tile pixels around the crop pixel's centre (non-negative: truncation is the floor), averaged:
             // a box one crop pixel wide, as a crop drawn per agent covers its pixels.
             let (cc, rr) = (gc.clamp(0.0, last_c) as usize, gr.clamp(0.0, last_r) as usize);
-            let k = (rr * pw + cc) * 3;
+            let k = rr * stride + cc * 3;
             let (top, bottom) = (six(&patch[k..k + 6]), six(&patch[k + stride..k + stride + 6]));
             let mean = |ch: usize| {
                 let sum =
