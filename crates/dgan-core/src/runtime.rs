@@ -320,6 +320,25 @@ fn open_session(path: &Path, bytes: &[u8], options: &PredictorOptions) -> Result
     builder.commit_from_memory(bytes).map_err(load_err)
 }
 
+/// Which of a predictor's session pools a network call runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pool {
+    /// The sessions of `threads` intra-op threads, one call at a time each.
+    Sessions,
+    /// The single-threaded lanes, whose calls run concurrently (a split frame's parts, `predict_batch`'s calls).
+    Lanes,
+}
+
+impl Pool {
+    /// The threads a call on this pool decodes on: a lane's call keeps to its own thread beside the others.
+    fn decode_threads(self, threads: usize) -> usize {
+        match self {
+            Pool::Sessions => threads,
+            Pool::Lanes => 1,
+        }
+    }
+}
+
 impl Predictor {
     /// Loads a model with default options.
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
@@ -448,7 +467,8 @@ impl Predictor {
     /// The first free session of `pool`, else one in turn, waited for. A lone caller keeps the same session, whose
     /// buffers stay in the caches (taking them in turn made one thread's `apolloscape` predict at N = 256 16% slower
     /// with two sessions than with one: docs/speed.md).
-    fn session<'a>(&self, pool: &'a [Mutex<Session>]) -> Result<MutexGuard<'a, Session>> {
+    fn session(&self, pool: Pool) -> Result<MutexGuard<'_, Session>> {
+        let pool = self.pool(pool);
         let poisoned = || DganError::Inference("session lock poisoned".into());
         for session in pool {
             match session.try_lock() {
@@ -459,6 +479,14 @@ impl Predictor {
         }
         let start = self.next.fetch_add(1, Ordering::Relaxed) % pool.len().max(1);
         pool.get(start).ok_or_else(|| DganError::Inference("no session".into()))?.lock().map_err(|_| poisoned())
+    }
+
+    /// The sessions of `pool`.
+    fn pool(&self, pool: Pool) -> &[Mutex<Session>] {
+        match pool {
+            Pool::Sessions => &self.sessions,
+            Pool::Lanes => &self.lanes,
+        }
     }
 
     /// The model's contract (input specification, anchors, provenance).
@@ -511,7 +539,7 @@ impl Predictor {
         }
         // A small frame on a lane: waking intra-op workers costs more than they give there.
         let pool =
-            if pre.poses.len() < INTRA_MIN_AGENTS && !self.lanes.is_empty() { &self.lanes } else { &self.sessions };
+            if pre.poses.len() < INTRA_MIN_AGENTS && !self.lanes.is_empty() { Pool::Lanes } else { Pool::Sessions };
         let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes, pool, Some(&mut times))?;
         times.total = started.elapsed();
         *self.last_times.lock().unwrap_or_else(|e| e.into_inner()) = Some(times);
@@ -554,7 +582,7 @@ impl Predictor {
             if let (true, Some(m)) = (crops_later, &self.contract.input.map) {
                 inputs.map = Some(rasterize_rows(frame, &pre.states, m, rows, 1)?);
             }
-            let outputs = self.run_on(&self.lanes, inputs)?;
+            let outputs = self.run_on(Pool::Lanes, inputs)?;
             let prior = pre.prior.select(Axis(0), rows);
             let poses: Vec<_> = rows.iter().map(|&i| pre.poses[i]).collect();
             self.decode_outputs(&outputs, prior.view(), &poses, modes, 1)
@@ -645,14 +673,14 @@ impl Predictor {
             groups.push((start, group));
             start += len;
         }
-        let call = |(start, group): Call, pool: &[Mutex<Session>]| {
+        let call = |(start, group): Call, pool: Pool| {
             let end = start + group.len();
             self.run_and_decode(&frames[start..end], group, modes, pool, None)
         };
         if self.lanes.len() < 2 || groups.len() < 2 {
             let mut out = Vec::with_capacity(frames.len());
             for g in groups {
-                out.extend(call(g, &self.sessions)?);
+                out.extend(call(g, Pool::Sessions)?);
             }
             return Ok(out);
         }
@@ -665,7 +693,7 @@ impl Predictor {
             per_lane[lane].1.push(g);
         }
         let work = |calls: Vec<Call>| -> Result<Vec<(usize, Vec<Prediction>)>> {
-            calls.into_iter().map(|g| Ok((g.0, call(g, &self.lanes)?))).collect()
+            calls.into_iter().map(|g| Ok((g.0, call(g, Pool::Lanes)?))).collect()
         };
         let panicked = || Err(DganError::Inference("a network thread panicked".into()));
         let mut by_start: Vec<(usize, Vec<Prediction>)> = vec![];
@@ -688,11 +716,10 @@ impl Predictor {
         frames: &[Frame],
         pres: Vec<Preprocessed>,
         modes: usize,
-        pool: &[Mutex<Session>],
+        pool: Pool,
         times: Option<&mut PhaseTimes>,
     ) -> Result<Vec<Prediction>> {
-        // The single-threaded lanes run concurrently; the sessions' calls, one at a time, decode on `threads`.
-        let threads = if std::ptr::eq(pool, self.lanes.as_slice()) { 1 } else { self.threads };
+        let threads = pool.decode_threads(self.threads);
         let spec = &self.contract.input;
         let (c, k, t_f) = (spec.classes.len(), self.anchors.total(), spec.t_f);
         let m = modes.min(k);
@@ -766,15 +793,11 @@ impl Predictor {
 
     /// Runs the network on preprocessed inputs; returns class logits, anchor logits and offsets.
     pub fn run(&self, inputs: NetworkInputs) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
-        self.run_on(&self.sessions, inputs)
+        self.run_on(Pool::Sessions, inputs)
     }
 
     /// [`Predictor::run`] on the first free session of `pool`.
-    fn run_on(
-        &self,
-        pool: &[Mutex<Session>],
-        inputs: NetworkInputs,
-    ) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
+    fn run_on(&self, pool: Pool, inputs: NetworkInputs) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
         let infer = |e: ort::Error| DganError::Inference(e.to_string());
         let mut feed: Vec<(&str, SessionInputValue<'_>)> = vec![
             (INPUT_TRAJECTORY, Tensor::from_array(inputs.trajectory).map_err(infer)?.into()),
