@@ -104,15 +104,18 @@ pub(crate) struct Overlay {
 }
 
 /// Tile pixels a crop reads, as one row-major RGB array of `width` pixels a row whose pixel `(0, 0)` is the world's
-/// tile pixel `(r_base, c_base)`.
+/// tile pixel `(r_base, c_base)`: the pixels themselves, or (`averaged`) at each pixel the rounded mean of the 2 × 2
+/// pixels from it rightwards and down, the value a crop pixel takes (one read instead of four).
 struct Source<'a> {
     bytes: &'a [u8],
     width: usize,
     c_base: i64,
     r_base: i64,
+    averaged: bool,
 }
 
-/// The tiles `[i0, i0 + across) × [j0, j0 + down)` in one array (black where no crop reads).
+/// The tiles `[i0, i0 + across) × [j0, j0 + down)` in one array (black where no crop reads), as the rounded means of
+/// each pixel's 2 × 2 block ([`Source::averaged`]; the last row and column, which no crop reads, left black).
 struct Mosaic {
     bytes: Vec<u8>,
     i0: i64,
@@ -124,6 +127,8 @@ struct Mosaic {
 /// The largest mosaic, in tiles, as a multiple of the tiles the crops read: a frame spread over a wide area with
 /// few tiles under its crops copies a patch per crop instead.
 const MOSAIC_MAX_SPREAD: usize = 4;
+/// Mosaic rows a thread averages at a time.
+const ROWS_PER_JOB: usize = 64;
 
 impl Mosaic {
     /// The tiles `tiles` (keys sorted by `(i, j)`) in one array, written on up to `threads` threads a band of tiles at
@@ -154,7 +159,30 @@ impl Mosaic {
         };
         let jobs: Vec<(usize, &mut [u8])> = bytes.chunks_mut(band).enumerate().collect();
         share_jobs(jobs, threads, fill, || DganError::InvalidSpec("a tile-copying thread panicked".into()))?;
-        Ok(Some(Self { bytes, i0, j0, across, down }))
+        // Each row's 2 × 2 means from it and the next, a band of rows at a time: the taps every crop pixel reads,
+        // summed once for the call in order through memory rather than per crop pixel along a rotated walk.
+        let stride = across * row_bytes;
+        let rows = TILE_PX * down;
+        let mut averaged = vec![0u8; bytes.len()];
+        let mean = |(first, out): (usize, &mut [u8])| -> Result<()> {
+            for (k, dst) in out.chunks_exact_mut(stride).enumerate() {
+                let r = first + k;
+                if r + 1 >= rows {
+                    break;
+                }
+                let (top, bottom) = (&bytes[r * stride..(r + 1) * stride], &bytes[(r + 1) * stride..(r + 2) * stride]);
+                let taps = top.iter().zip(&top[3..]).zip(bottom.iter().zip(&bottom[3..]));
+                for (d, ((a, b), (c, e))) in dst.iter_mut().zip(taps) {
+                    let sum = u16::from(*a) + u16::from(*b) + u16::from(*c) + u16::from(*e);
+                    *d = ((sum + 2) >> 2) as u8;
+                }
+            }
+            Ok(())
+        };
+        let jobs: Vec<(usize, &mut [u8])> =
+            averaged.chunks_mut(stride * ROWS_PER_JOB).enumerate().map(|(k, c)| (k * ROWS_PER_JOB, c)).collect();
+        share_jobs(jobs, threads, mean, || DganError::InvalidSpec("a tile-averaging thread panicked".into()))?;
+        Ok(Some(Self { bytes: averaged, i0, j0, across, down }))
     }
 
     /// The mosaic as a source, if it holds every tile pixel of `[c0, c1] × [r0, r1]`.
@@ -162,7 +190,7 @@ impl Mosaic {
         let (c_base, r_base) = (self.i0 * TILE_PX as i64, self.j0 * TILE_PX as i64);
         let (width, height) = ((self.across * TILE_PX) as i64, (self.down * TILE_PX) as i64);
         let inside = c0 >= c_base && c1 < c_base + width && r0 >= r_base && r1 < r_base + height;
-        inside.then_some(Source { bytes: &self.bytes, width: width as usize, c_base, r_base })
+        inside.then_some(Source { bytes: &self.bytes, width: width as usize, c_base, r_base, averaged: true })
     }
 }
 
@@ -277,7 +305,8 @@ pub(crate) fn resample_chw(spec: &MapSpec, pose: &AgentPose, fetch: impl Fn(i64,
             c += n as i64;
         }
     }
-    sample_chw(spec, pose, [c0, c1, r0, r1], &Source { bytes: &patch, width: pw, c_base: c0, r_base: r0 }, out);
+    let source = Source { bytes: &patch, width: pw, c_base: c0, r_base: r0, averaged: false };
+    sample_chw(spec, pose, [c0, c1, r0, r1], &source, out);
 }
 
 /// The crop of the agent at `pose` into `out` from `source`, which holds its tile pixels `[c0, c1] × [r0, r1]`
@@ -311,13 +340,18 @@ fn sample_chw(spec: &MapSpec, pose: &AgentPose, [c0, c1, r0, r1]: [i64; 4], sour
             // a box one crop pixel wide, as a crop drawn per agent covers its pixels.
             let (cc, rr) = (gc.clamp(0.0, last_c) as usize, gr.clamp(0.0, last_r) as usize);
             let k = rr * stride + cc * 3;
-            let (top, bottom) = (six(&patch[k..k + 6]), six(&patch[k + stride..k + stride + 6]));
-            let mean = |ch: usize| {
-                let sum =
-                    u16::from(top[ch]) + u16::from(top[ch + 3]) + u16::from(bottom[ch]) + u16::from(bottom[ch + 3]);
-                UNIT[usize::from((sum + 2) >> 2)]
-            };
-            (*r, *g, *b) = (mean(0), mean(1), mean(2));
+            if source.averaged {
+                let px = &patch[k..k + 3];
+                (*r, *g, *b) = (UNIT[usize::from(px[0])], UNIT[usize::from(px[1])], UNIT[usize::from(px[2])]);
+            } else {
+                let (top, bottom) = (six(&patch[k..k + 6]), six(&patch[k + stride..k + stride + 6]));
+                let mean = |ch: usize| {
+                    let sum =
+                        u16::from(top[ch]) + u16::from(top[ch + 3]) + u16::from(bottom[ch]) + u16::from(bottom[ch + 3]);
+                    UNIT[usize::from((sum + 2) >> 2)]
+                };
+                (*r, *g, *b) = (mean(0), mean(1), mean(2));
+            }
             gc += dc[0];
             gr += dc[1];
         }
