@@ -398,11 +398,14 @@ fn build(
         )));
     }
     let class_idx: Vec<usize> = frame.classes().iter().map(|c| spec.class_index(*c)).collect::<Result<_>>()?;
-    // Contract 10: every input from the denoised histories (the map and given states are kept).
+    // The threads of this call, shared with the other predictions in flight (the crops share theirs themselves).
+    let shared = threads_in_flight(threads);
+    // Contract 10: every input from the denoised histories (the map and given states are kept; the frame itself when
+    // no track is smoothed), fitted on the call's threads for a large frame.
     let denoised;
     let frame = if spec.denoise_gate_m > 0.0 {
-        denoised = frame.denoised(spec.denoise_gate_m)?.0;
-        &denoised
+        denoised = frame.denoised_on(spec.denoise_gate_m, shared)?.0;
+        &*denoised
     } else {
         frame
     };
@@ -438,8 +441,6 @@ fn build(
     let centres: Vec<[f64; 2]> = states.iter().map(|s| s.position).collect();
     let radii: Vec<f64> =
         states.iter().map(|s| attention_radius(s.speed, spec.horizon_s(), spec.attention_lambda, s.length)).collect();
-    // The threads of this call, shared with the other predictions in flight (the crops share theirs themselves).
-    let shared = threads_in_flight(threads);
     let edges = attention_zone_edges_on(&centres, &radii, limits.max_edges, shared)?;
 
     let graph = Senders::of(n, &edges);
