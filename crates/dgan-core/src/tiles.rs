@@ -98,8 +98,8 @@ fn span(view: [f64; 4], res: f64) -> ([i64; 4], [i64; 4]) {
 /// without them): boxes are drawn once per tile rather than once per crop.
 pub(crate) struct Overlay {
     tiles: HashMap<(i64, i64), Arc<[u8]>>,
-    /// The same tiles laid side by side in one array, when the frame's tiles are close enough together
-    /// ([`MOSAIC_MAX_SPREAD`]): each crop then reads its taps from it instead of first copying its own patch.
+    /// The same tiles laid side by side in one array of 2 × 2 means, when the frame's tiles are close enough together
+    /// and few enough ([`Mosaic::new`]): each crop then reads it instead of copying its own patch and averaging it.
     mosaic: Option<Mosaic>,
 }
 
@@ -127,12 +127,16 @@ struct Mosaic {
 /// The largest mosaic, in tiles, as a multiple of the tiles the crops read: a frame spread over a wide area with
 /// few tiles under its crops copies a patch per crop instead.
 const MOSAIC_MAX_SPREAD: usize = 4;
+/// The largest mosaic, in tiles (24 MB, built from as much again): a frame whose crops cover more copies a patch per
+/// crop instead, so that the memory of a call stays bounded whatever the frame's extent.
+const MOSAIC_MAX_TILES: usize = 512;
 /// Mosaic rows a thread averages at a time.
 const ROWS_PER_JOB: usize = 64;
 
 impl Mosaic {
-    /// The tiles `tiles` (keys sorted by `(i, j)`) in one array, written on up to `threads` threads a band of tiles at
-    /// a time; None when they spread too far ([`MOSAIC_MAX_SPREAD`]).
+    /// The tiles `tiles` in one array, written on up to `threads` threads a band of tiles at a time, then averaged in
+    /// bands of [`ROWS_PER_JOB`] rows; None when they spread too far ([`MOSAIC_MAX_SPREAD`]) or would take more than
+    /// [`MOSAIC_MAX_TILES`].
     fn new(tiles: &HashMap<(i64, i64), Arc<[u8]>>, threads: usize) -> Result<Option<Self>> {
         let Some(i0) = tiles.keys().map(|k| k.0).min() else { return Ok(None) };
         let (i1, j0, j1) = (
@@ -141,7 +145,8 @@ impl Mosaic {
             tiles.keys().map(|k| k.1).max().unwrap_or(0),
         );
         let (across, down) = ((i1 - i0 + 1) as usize, (j1 - j0 + 1) as usize);
-        if across.saturating_mul(down) > MOSAIC_MAX_SPREAD * tiles.len() {
+        let cells = across.saturating_mul(down);
+        if cells > MOSAIC_MAX_SPREAD * tiles.len() || cells > MOSAIC_MAX_TILES {
             return Ok(None);
         }
         let band = TILE_PX * across * TILE_PX * 3;
@@ -364,4 +369,26 @@ fn six(s: &[u8]) -> [u8; 6] {
     let mut out = [0u8; 6];
     out.copy_from_slice(s);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_mosaic_stays_within_its_bounds() {
+        let blank: Arc<[u8]> = vec![0u8; TILE_PX * TILE_PX * 3].into();
+        let grid = |across: i64, down: i64| -> HashMap<(i64, i64), Arc<[u8]>> {
+            (0..across).flat_map(|i| (0..down).map(move |j| (i, j))).map(|k| (k, blank.clone())).collect()
+        };
+        // A 4 × 2 block of tiles: one mosaic of eight tiles, rows of 4 × 128 pixels.
+        let m = Mosaic::new(&grid(4, 2), 2).unwrap().unwrap();
+        assert_eq!((m.across, m.down, m.bytes.len()), (4, 2, 8 * TILE_PX * TILE_PX * 3));
+        // Two tiles far apart: their bounding rectangle is mostly empty, so no mosaic.
+        let apart: HashMap<_, _> = [((0, 0), blank.clone()), ((40, 0), blank.clone())].into_iter().collect();
+        assert!(Mosaic::new(&apart, 1).unwrap().is_none());
+        // More tiles than the cap, however close: no mosaic either.
+        assert!(Mosaic::new(&grid(32, 17), 1).unwrap().is_none());
+        assert!(Mosaic::new(&HashMap::new(), 1).unwrap().is_none());
+    }
 }
