@@ -180,6 +180,13 @@ def _frame_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> tuple
     now = float(args.time) if args.time is not None else float(np.max(cols["time"]))
     if args.denoise is not None:
         frame = frame.denoised(args.denoise)
+        gate = p.spec.denoise_gate_m
+        if gate and args.denoise > gate:
+            print(
+                f"note: the model smooths tracks {gate:g} m or more off their parabola itself (contract 10), so "
+                f"--denoise {args.denoise:g} leaves no track between {gate:g} and {args.denoise:g} m as given",
+                file=sys.stderr,
+            )
     return frame, now
 
 
