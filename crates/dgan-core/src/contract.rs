@@ -5,7 +5,7 @@ use crate::class::AgentClass;
 use crate::decode::{Anchors, Calibration};
 use crate::error::{DganError, Result};
 use crate::prior::{PriorKind, PriorSpec, VelocityFit};
-use crate::spec::{GraphLayout, HeadingSource, InputSpec, MapRender, EDGE_FEATURES};
+use crate::spec::{is_zero, GraphLayout, HeadingSource, InputSpec, MapRender, EDGE_FEATURES};
 use ndarray::Array3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -173,10 +173,6 @@ fn keyed(path: &str, msg: &str) -> String {
 
 fn unit_temperature() -> f64 {
     1.0
-}
-
-fn is_zero(v: &f64) -> bool {
-    *v == 0.0
 }
 
 fn is_one(v: &f64) -> bool {

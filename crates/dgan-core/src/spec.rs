@@ -135,7 +135,8 @@ pub struct InputSpec {
     pub denoise_gate_m: f64,
 }
 
-fn is_zero(v: &f64) -> bool {
+/// Whether a contract number is 0, its default (serde's `skip_serializing_if`: a default key is not written).
+pub(crate) fn is_zero(v: &f64) -> bool {
     *v == 0.0
 }
 
