@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -83,6 +83,15 @@ def check_folds(cfg: dict[str, Any], folds: list[list[Path]]) -> None:
         )
 
 
+def test_metrics(predictor: dgan.Predictor, dataset: str, data_root: Path, fold: str) -> dict[str, Any]:
+    """A bundled model's card metrics on its test split (``training.evaluate``), for an ETH/UCY model whose map is
+    optional also on the same frames without their map (``without_map``)."""
+    metrics = evaluate(predictor, dataset, data_root, fold)
+    if dataset == "ethucy" and predictor.spec.map is not None and predictor.spec.map.optional:
+        metrics["without_map"] = evaluate(predictor, dataset, data_root, fold, with_map=False)
+    return metrics
+
+
 def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]] | None = None) -> dict[str, Any]:
     """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
     weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card.
@@ -121,9 +130,7 @@ def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]]
     onnx_path = export_checkpoint(CHECKPOINTS / f"{name}.pt", MODELS / f"{name}.onnx", model_name, description)
     predictor = dgan.Predictor(onnx_path)
     fold = cfg["data"]["scene"] if dataset == "ethucy" else ""
-    metrics = evaluate(predictor, dataset, data_root, fold)
-    if dataset == "ethucy" and predictor.spec.map is not None and predictor.spec.map.optional:
-        metrics["without_map"] = evaluate(predictor, dataset, data_root, fold, with_map=False)
+    metrics = test_metrics(predictor, dataset, data_root, fold)
     text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
     if len(runs) > 1:
         text = text.replace("- **Test metrics**", ensemble_line(runs, predictor, cfg, scale) + "- **Test metrics**", 1)
@@ -146,31 +153,30 @@ def rerender(name: str, render: str) -> Path:
     in its kept checkpoint and exports it again (:func:`reexport`); its weights and temperature are unchanged. Whether
     a network trained on one way's crops keeps its accuracy on the other's is measured on validation before
     bundling (``python -m training.evaluate MODEL --dataset D --split val``)."""
-    from training.checkpoint import update_checkpoint
-
     if render not in ("agent", "tiles"):
         raise ValueError(f"render must be 'agent' or 'tiles', got {render!r}")
-    ckpt = CHECKPOINTS / f"{name}.pt"
-    cfg = torch.load(ckpt, weights_only=False)["config"]
-    cfg["data"]["map_render"] = render
-    update_checkpoint(ckpt, config=cfg)
-    return reexport(name)
+    return _reexport_with(name, "map_render", render)
 
 
 def redenoise(name: str, gate_m: float) -> Path:
     """Sets the bundled model ``name``'s denoising gate (``data.denoise_gate_m``, ``dgan.InputSpec.denoise_gate_m``,
     contract 10) in its kept checkpoint and exports it again (:func:`reexport`); its weights and temperature are
-    unchanged. The gate is chosen on validation before bundling (``docs/results.md``, noisy tracks)."""
+    unchanged. The gate is chosen on validation before bundling (``docs/results.md``, noisy tracks); the engine checks
+    it (:class:`dgan.exceptions.InvalidSpecError`) before the checkpoint is touched."""
+    replace(dgan.Predictor(name).spec, denoise_gate_m=gate_m)
+    return _reexport_with(name, "denoise_gate_m", gate_m)
+
+
+def _reexport_with(name: str, key: str, value: Any) -> Path:
+    """Sets ``data.<key>`` in the bundled model ``name``'s kept checkpoint (in each member's config too, for a
+    consensus: ``training.ensemble``) and exports it again (:func:`reexport`)."""
     from training.checkpoint import update_checkpoint
 
-    if not (math.isfinite(gate_m) and gate_m >= 0):
-        raise ValueError(f"the denoising gate must be a non-negative number of metres, got {gate_m}")
     ckpt = CHECKPOINTS / f"{name}.pt"
     loaded = torch.load(ckpt, weights_only=False)
-    # A consensus keeps a config in each member (training.ensemble), a single network one of its own.
     for holder in [loaded, *loaded.get("members", [])]:
         if "config" in holder:
-            holder["config"]["data"]["denoise_gate_m"] = gate_m
+            holder["config"]["data"][key] = value
     update_checkpoint(ckpt, **{k: loaded[k] for k in ("config", "members") if k in loaded})
     return reexport(name)
 
@@ -184,9 +190,7 @@ def restate(name: str, data_root: Path) -> dict[str, Any]:
     if cfg["data"].get("dataset", "ethucy") != "ethucy":
         raise ValueError(f"{name}: restate rewrites ETH/UCY cards; bundle a multi-class model again instead")
     predictor = dgan.Predictor(MODELS / f"{name}.onnx")
-    metrics = evaluate(predictor, "ethucy", data_root, cfg["data"]["scene"])
-    if predictor.spec.map is not None and predictor.spec.map.optional:
-        metrics["without_map"] = evaluate(predictor, "ethucy", data_root, cfg["data"]["scene"], with_map=False)
+    metrics = test_metrics(predictor, "ethucy", data_root, cfg["data"]["scene"])
     card_path = MODELS / f"{name}.md"
     card_path.write_text(restated(card_path.read_text(), metrics, cfg))
     return metrics

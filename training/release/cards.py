@@ -39,13 +39,19 @@ def cv_row(metrics: dict[str, Any]) -> str:
     )
 
 
+#: The columns of an ETH/UCY card's test metrics, in order.
+CARD_METRICS = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
+
+
+def dgan_row(metrics: dict[str, Any], label: str = "DGAN") -> str:
+    """An ETH/UCY card's table row of ``metrics`` (:data:`CARD_METRICS`), without a line break."""
+    return f"| {label} | " + " | ".join(f"{metrics[k]:.3f}" for k in CARD_METRICS) + " |"
+
+
 def nomap_row(metrics: dict[str, Any]) -> str:
     """The card's row of the same model on the same frames without their map, if it was measured."""
     n = metrics.get("without_map")
-    if not n:
-        return ""
-    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
-    return "| DGAN without the map | " + " | ".join(f"{n[k]:.3f}" for k in keys) + " |\n"
+    return dgan_row(n, "DGAN without the map") + "\n" if n else ""
 
 
 def estimate(fit: str, window: float, standing: float) -> str:
@@ -90,8 +96,8 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             "Agents' headings come from their direction of motion"
             + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
         )
-    if denoise_words(cfg):
-        parts.append(denoise_words(cfg))
+    if words := denoise_words(cfg):
+        parts.append(words)
     parts.append(f"Mode probabilities at {temperature_words(metrics)} {fitted_where(cfg)}.")
     return " ".join(parts)
 
@@ -110,14 +116,13 @@ def denoise_words(cfg: dict[str, Any]) -> str:
 def restated(text: str, metrics: dict[str, Any], cfg: dict[str, Any]) -> str:
     """An ETH/UCY card (:func:`card`) with its test metrics replaced by ``metrics`` and its denoising sentence as
     ``cfg`` declares it: for a bundled model exported again with new inference-time keys."""
-    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
     header = f"- **Test metrics** (engine, world metres, {metrics['windows']} windows, {metrics['agents']} agents):"
     lines = []
     for line in text.splitlines():
         if line.startswith("- **Test metrics** (engine, world metres"):
             line = header
         elif line.startswith("| DGAN |"):
-            line = "| DGAN | " + " | ".join(f"{metrics[k]:.3f}" for k in keys) + " |"
+            line = dgan_row(metrics)
         elif line.startswith("| DGAN without the map |"):
             line = nomap_row(metrics).rstrip("\n")
         elif line.startswith("| constant velocity ("):
@@ -205,8 +210,6 @@ def card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str, Any]) -> 
     scene = cfg["data"]["scene"]
     others = ", ".join(s for s in ("eth", "hotel", "univ", "zara1", "zara2") if s != scene)
     m = cfg["model"]
-    keys = ("ade", "fde", "min_ade5", "min_fde5", "min_ade20", "min_fde20", "brier_min_fde20")
-    row = " | ".join(f"{metrics[k]:.3f}" for k in keys)
     return f"""# Model card: `{name}`
 
 DGAN (Dong et al. 2020) for pedestrians, trained leave-one-scene-out on ETH/UCY: **test scene {scene}**, never seen in
@@ -230,7 +233,7 @@ training.
 
 | | top-1 ADE | top-1 FDE | minADE5 | minFDE5 | minADE20 | minFDE20 | Brier-minFDE20 |
 |---|---|---|---|---|---|---|---|
-| DGAN | {row} |
+{dgan_row(metrics)}
 {nomap_row(metrics)}{cv_row(metrics)}
 
 - **Licence**: the weights are derived from ETH (BIWI) and UCY data, which are for **non-commercial research use

@@ -128,3 +128,14 @@ def test_a_card_restated_with_a_denoising_gate() -> None:
     assert "`denoise_gate_m`" in out
     assert restated(out, metrics, cfg(denoise_gate_m=0.1)) == out  # the sentence once
     assert "smooths" not in restated(card, metrics, cfg())
+
+
+def test_a_bad_denoising_gate_is_refused_before_the_checkpoint_is_touched() -> None:
+    from dgan.exceptions import InvalidSpecError
+    from training.release.bundle import CHECKPOINTS, redenoise
+
+    before = (CHECKPOINTS / "zara1.pt").read_bytes()
+    for bad in (-0.1, float("nan"), 1e3):
+        with pytest.raises(InvalidSpecError, match="denoise_gate_m"):
+            redenoise("zara1", bad)
+    assert (CHECKPOINTS / "zara1.pt").read_bytes() == before
