@@ -242,8 +242,19 @@ class Frame:
 
     def select(self, rows: npt.ArrayLike) -> Frame:
         """The frame of the agents at ``rows`` (integer indices or a boolean mask), in that order, with their ids,
-        states and the map."""
-        index = np.arange(len(self))[np.asarray(rows)] if len(self) else np.zeros(0, dtype=np.int64)
+        states and the map; an empty list selects none. Other rows raise :class:`~dgan.exceptions.InvalidFrameError`.
+        """
+        r = np.asarray(rows)
+        if r.size == 0 and r.dtype != bool:
+            r = r.astype(np.int64)  # np.asarray([]) is float64
+        if r.ndim != 1 or r.dtype.kind not in "biu":
+            raise InvalidFrameError(
+                f"rows must be a 1-D array of integer indices or a boolean mask, got {r.ndim}-D {r.dtype}"
+            )
+        try:
+            index = np.arange(len(self))[r]
+        except IndexError as e:
+            raise InvalidFrameError(f"rows of a frame of {len(self)} agents: {e}") from None
         labels = None if self._labels is None else self._labels[index]
         return _unpickle_frame(self._state(index), labels, self._map, self._source)
 

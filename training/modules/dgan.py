@@ -119,13 +119,18 @@ class GATLayer(nn.Module):
         return out
 
     def forward_padded(self, h: Tensor, index: Tensor, bias: Tensor, features: Tensor) -> Tensor:
-        """The same attention over padded senders ``index (N, D)`` with ``features (N, D, 6)``; ``bias (N, 1, D)`` is
-        0 for a real sender and -10⁴ for padding (:func:`padding_bias`, computed once for every layer).
+        """The same attention over padded senders ``index (N, D)`` with ``features (N, D, 7)`` (the edge features and a
+        column of ones, :meth:`DGAN.forward_padded`); ``bias (N, 1, D)`` is 0 for a real sender and -10⁴ for padding
+        (:func:`padding_bias`, computed once for every layer).
 
         Arranged for ONNX Runtime, equal in arithmetic (every agent hears at least itself, so each softmax row has a
         real sender; the edge-list form's 1e-9 in the denominator is the only difference):
-        - scores in ``(N, H, D)``, normalised by one Softmax over the senders;
+        - scores in ``(H, N, D)``, normalised by one Softmax over the senders, then the weights in ``(N, H, D)``;
+          both layouts reached without a batched ``(N, D, H) -> (N, H, D)`` Transpose, which ONNX Runtime 1.23 runs
+          8-15 times slower on two threads than on one for these shapes (docs/speed.md);
         - receiver and sender scores from one matrix product with W folded into a_recv and a_send;
+        - the edge MLP's first layer with its bias as the last row of one product against the features' column of
+          ones (no pass of its own over the ``(N, D, dim)`` result: the same sums, the bias their last term);
         - the edge MLP's second linear layer W2 applied after the sum over senders (Σ α (W2 e + b2) = W2 (Σ α e) +
           b2, as Σ α = 1), as one product with the block-diagonal of the heads' W2, and its part of the score as the
           hidden edge vector times W2ᵀ a_send;
@@ -150,10 +155,13 @@ class GATLayer(nn.Module):
         own = eye.repeat_interleave(dh, dim=1)  # (H, dim): head k keeps its own dh columns
         wh = h @ w_t  # (N, dim)
         s = h @ a_both  # (N, 2H)
-        hidden = torch.relu(lin1(features))  # (N, D, dim)
-        score = (s[:, heads:][index] + hidden @ v).transpose(1, 2) + (s[:, :heads] + c).unsqueeze(-1)  # (N, H, D)
-        score = torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0) + bias
-        alpha = torch.softmax(score, dim=-1)  # (N, H, D)
+        hidden = torch.relu(features @ torch.cat([lin1.weight.t(), lin1.bias.unsqueeze(0)]))  # (N, D, dim)
+        # (N, D, H) turned as the 2-D (N·D, H), and the weights back to (N, H, D) by moving the outer axis: two
+        # Transposes that run on two threads as fast as on one.
+        send = (s[:, heads:][index] + hidden @ v).reshape(-1, heads).t().reshape(heads, n, -1)  # (H, N, D)
+        score = send + (s[:, :heads] + c).t().unsqueeze(-1)
+        score = torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0) + bias.reshape(1, n, -1)
+        alpha = torch.softmax(score, dim=-1).transpose(0, 1)  # (N, H, D)
         from_nodes = ((alpha @ wh[index]) * own).sum(1)  # (N, dim)
         from_edges = (alpha @ hidden).reshape(n, -1) @ w2_blocks  # (N, dim)
         agg = from_nodes + from_edges + lin2.bias
@@ -274,6 +282,8 @@ class DGAN(nn.Module):
             neighbor_features = neighbor_features * 0.0
         p = v
         bias = padding_bias(neighbor_mask)
+        # A column of ones: each layer's first edge product carries its bias (GATLayer.forward_padded).
+        neighbor_features = torch.cat([neighbor_features, torch.ones_like(neighbor_features[..., :1])], dim=-1)
         for layer in self.gat:
             assert isinstance(layer, GATLayer)
             p = layer.forward_padded(p, neighbor_index, bias, neighbor_features)

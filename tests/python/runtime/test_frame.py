@@ -23,6 +23,22 @@ def test_defaults() -> None:
     assert dgan.Frame(np.zeros((2, 8, 2))).classes == ["pedestrian", "pedestrian"]
 
 
+def test_select_rows_a_mask_or_none() -> None:
+    f = dgan.Frame(np.arange(24.0).reshape(3, 4, 2), classes=[0, 1, 2], ids=[7, 8, 9])
+    np.testing.assert_array_equal(f.select([2, 0]).ids, [9, 7])
+    assert f.select([2, 0]).classes == [f.classes[2], f.classes[0]]
+    np.testing.assert_array_equal(f.select(np.array([False, True, False])).positions, f.positions[1:2])
+    nothing: tuple[Any, ...] = ([], np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64))
+    for none in nothing:
+        empty = f.select(none)
+        assert len(empty) == 0
+        assert empty.positions.shape == (0, 4, 2)
+    assert len(f.select([]).select([])) == 0
+    for bad in ([3], [-4], [0.0, 1.0], [[0, 1]], np.array([True, False]), ["a"]):
+        with pytest.raises(exc.InvalidFrameError, match="rows"):
+            f.select(bad)
+
+
 def test_optional_values_with_nan_for_unknown() -> None:
     f = dgan.Frame(
         np.zeros((2, 4, 2)),
