@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
+from training.modules.attention import GATLayer, NeighborGroups, neighbor_groups, padding_bias
+
 
 @dataclass(frozen=True)
 class ModelConfig:
@@ -37,6 +39,11 @@ class ModelConfig:
     use_map: bool = True
     use_gat: bool = True
     use_edge_features: bool = True  # False: the attention sees no neighbour geometry (ablation)
+    #: How the exported network arranges its attention, not what it computes (the same outputs, bit for bit on the
+    #: bundled scenes): true splits the padded neighbours into two groups by degree inside the graph
+    #: (:func:`neighbor_groups`), which pays where few agents have many senders (`hdmap`: -7 to -12% at 128-256 agents,
+    #: +60 µs a call for its fixed cost; docs/speed.md).
+    neighbor_groups: bool = False
 
 
 class ResBlock(nn.Module):
@@ -86,92 +93,6 @@ class MapEncoder(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         out: Tensor = self.proj(self.net(x))
         return out
-
-
-class GATLayer(nn.Module):
-    """Multi-head graph attention over directed edges ``[receiver, sender]`` with edge features."""
-
-    def __init__(self, dim: int, heads: int, edge_dim: int) -> None:
-        super().__init__()
-        self.heads, self.dh = heads, dim // heads
-        self.w = nn.Linear(dim, dim, bias=False)
-        self.we = nn.Sequential(nn.Linear(edge_dim, dim), nn.ReLU(), nn.Linear(dim, dim))
-        self.a_recv = nn.Parameter(torch.randn(heads, self.dh) * 0.1)
-        self.a_send = nn.Parameter(torch.randn(heads, self.dh) * 0.1)
-        self.out = nn.Linear(dim, dim)
-        self.norm = nn.LayerNorm(dim)
-
-    def forward(self, h: Tensor, edge_index: Tensor, edge_features: Tensor) -> Tensor:
-        n = h.shape[0]
-        recv, send = edge_index[:, 0], edge_index[:, 1]
-        wh = self.w(h).view(n, self.heads, self.dh)
-        msg = wh[send] + self.we(edge_features).view(-1, self.heads, self.dh)
-        score = nn.functional.leaky_relu((wh[recv] * self.a_recv).sum(-1) + (msg * self.a_send).sum(-1), 0.2)
-        weight = torch.exp(torch.clamp(score, -20.0, 20.0))  # (E, H)
-        # scatter_add, not index_add: the ONNX export of index_add mishandles repeated receivers.
-        r2 = recv.unsqueeze(-1).expand(-1, self.heads)
-        denom = torch.zeros(n, self.heads, dtype=h.dtype, device=h.device).scatter_add(0, r2, weight)
-        alpha = weight / (torch.gather(denom, 0, r2) + 1e-9)
-        r3 = recv.view(-1, 1, 1).expand(-1, self.heads, self.dh)
-        agg = torch.zeros(n, self.heads, self.dh, dtype=h.dtype, device=h.device)
-        agg = agg.scatter_add(0, r3, alpha.unsqueeze(-1) * msg)
-        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg.reshape(n, -1))))
-        return out
-
-    def forward_padded(self, h: Tensor, index: Tensor, bias: Tensor, features: Tensor) -> Tensor:
-        """The same attention over padded senders ``index (N, D)`` with ``features (N, D, 7)`` (the edge features and a
-        column of ones, :meth:`DGAN.forward_padded`); ``bias (N, 1, D)`` is 0 for a real sender and -10⁴ for padding
-        (:func:`padding_bias`, computed once for every layer).
-
-        Arranged for ONNX Runtime, equal in arithmetic (every agent hears at least itself, so each softmax row has a
-        real sender; the edge-list form's 1e-9 in the denominator is the only difference):
-        - scores in ``(H, N, D)``, normalised by one Softmax over the senders, then the weights in ``(N, H, D)``;
-          both layouts reached without a batched ``(N, D, H) -> (N, H, D)`` Transpose, which ONNX Runtime 1.23 runs
-          8-15 times slower on two threads than on one for these shapes (docs/speed.md);
-        - receiver and sender scores from one matrix product with W folded into a_recv and a_send;
-        - the edge MLP's first layer with its bias as the last row of one product against the features' column of
-          ones (no pass of its own over the ``(N, D, dim)`` result: the same sums, the bias their last term);
-        - the edge MLP's second linear layer W2 applied after the sum over senders (Σ α (W2 e + b2) = W2 (Σ α e) +
-          b2, as Σ α = 1), as one product with the block-diagonal of the heads' W2, and its part of the score as the
-          hidden edge vector times W2ᵀ a_send;
-        - the messages of the senders' nodes as one batched product α (N, H, D) @ (N, D, dim), of which each head
-          keeps its own dh columns.
-        The weights-only products are constants that the exporter folds.
-        """
-        n = index.shape[0]
-        heads, dh = self.heads, self.dh
-        lin1, lin2 = self.we[0], self.we[2]
-        assert isinstance(lin1, nn.Linear)
-        assert isinstance(lin2, nn.Linear)
-        w_t = self.w.weight.t()  # (dim, dim)
-        w_heads = w_t.reshape(-1, heads, dh)
-        a_both = torch.cat([(w_heads * self.a_recv).sum(-1), (w_heads * self.a_send).sum(-1)], dim=1)  # (dim, 2H)
-        w2 = lin2.weight.view(heads, dh, -1)  # (H, dh, dim)
-        v = (w2 * self.a_send.unsqueeze(-1)).sum(1).t()  # (dim, H)
-        c = (lin2.bias.view(heads, dh) * self.a_send).sum(-1)  # (H,)
-        eye = torch.eye(heads, dtype=h.dtype, device=h.device)
-        # The block-diagonal (H·dim, H·dh) of the heads' W2ᵀ (torch.block_diag has no ONNX export).
-        w2_blocks = (w2.transpose(1, 2).unsqueeze(2) * eye.view(heads, 1, heads, 1)).reshape(-1, heads * dh)
-        own = eye.repeat_interleave(dh, dim=1)  # (H, dim): head k keeps its own dh columns
-        wh = h @ w_t  # (N, dim)
-        s = h @ a_both  # (N, 2H)
-        hidden = torch.relu(features @ torch.cat([lin1.weight.t(), lin1.bias.unsqueeze(0)]))  # (N, D, dim)
-        # (N, D, H) turned as the 2-D (N·D, H), and the weights back to (N, H, D) by moving the outer axis: two
-        # Transposes that run on two threads as fast as on one.
-        send = (s[:, heads:][index] + hidden @ v).reshape(-1, heads).t().reshape(heads, n, -1)  # (H, N, D)
-        score = send + (s[:, :heads] + c).t().unsqueeze(-1)
-        score = torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0) + bias.reshape(1, n, -1)
-        alpha = torch.softmax(score, dim=-1).transpose(0, 1)  # (N, H, D)
-        from_nodes = ((alpha @ wh[index]) * own).sum(1)  # (N, dim)
-        from_edges = (alpha @ hidden).reshape(n, -1) @ w2_blocks  # (N, dim)
-        agg = from_nodes + from_edges + lin2.bias
-        out: Tensor = self.norm(h + nn.functional.elu(self.out(agg)))
-        return out
-
-
-def padding_bias(mask: Tensor) -> Tensor:
-    """``(N, D)`` sender mask → the ``(N, 1, D)`` additive score bias of :meth:`GATLayer.forward_padded`."""
-    return ((mask - 1.0) * 1e4).unsqueeze(1)
 
 
 class DGAN(nn.Module):
@@ -281,12 +202,17 @@ class DGAN(nn.Module):
         if not self.cfg.use_edge_features:
             neighbor_features = neighbor_features * 0.0
         p = v
-        bias = padding_bias(neighbor_mask)
         # A column of ones: each layer's first edge product carries its bias (GATLayer.forward_padded).
-        neighbor_features = torch.cat([neighbor_features, torch.ones_like(neighbor_features[..., :1])], dim=-1)
+        ones = torch.ones_like(neighbor_features[..., :1])
+        features = torch.cat([neighbor_features, ones], dim=-1)
+        groups = (
+            neighbor_groups(neighbor_index, neighbor_mask, features)
+            if self.cfg.neighbor_groups
+            else NeighborGroups((neighbor_index, padding_bias(neighbor_mask), features))
+        )
         for layer in self.gat:
             assert isinstance(layer, GATLayer)
-            p = layer.forward_padded(p, neighbor_index, bias, neighbor_features)
+            p = layer.forward_padded(p, groups)
         if not self.cfg.use_gat:
             unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
             p = unused * 0.0

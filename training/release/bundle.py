@@ -167,8 +167,15 @@ def redenoise(name: str, gate_m: float) -> Path:
     return _reexport_with(name, "denoise_gate_m", gate_m)
 
 
-def _reexport_with(name: str, key: str, value: Any) -> Path:
-    """Sets ``data.<key>`` in the bundled model ``name``'s kept checkpoint (in each member's config too, for a
+def regroup(name: str, groups: bool) -> Path:
+    """Sets whether the bundled model ``name``'s exported attention splits its neighbours in two groups by degree
+    (``model.neighbor_groups``: the same outputs, another cost; chosen by measurement, docs/speed.md) in its kept
+    checkpoint and exports it again (:func:`reexport`)."""
+    return _reexport_with(name, "neighbor_groups", groups, section="model")
+
+
+def _reexport_with(name: str, key: str, value: Any, section: str = "data") -> Path:
+    """Sets ``<section>.<key>`` in the bundled model ``name``'s kept checkpoint (in each member's config too, for a
     consensus: ``training.ensemble``) and exports it again (:func:`reexport`)."""
     from training.checkpoint import update_checkpoint
 
@@ -176,7 +183,7 @@ def _reexport_with(name: str, key: str, value: Any) -> Path:
     loaded = torch.load(ckpt, weights_only=False)
     for holder in [loaded, *loaded.get("members", [])]:
         if "config" in holder:
-            holder["config"]["data"][key] = value
+            holder["config"][section][key] = value
     update_checkpoint(ckpt, **{k: loaded[k] for k in ("config", "members") if k in loaded})
     return reexport(name)
 
@@ -224,7 +231,19 @@ def main() -> None:
     ap.add_argument(
         "--restate", nargs="+", metavar="MODEL", help="evaluate bundled ETH/UCY models again and rewrite their cards"
     )
+    ap.add_argument(
+        "--neighbor-groups",
+        nargs=2,
+        metavar=("MODEL", "ON"),
+        help="export a bundled model again with its attention in two degree groups (on) or one (off); same outputs",
+    )
     a = ap.parse_args()
+    if a.neighbor_groups:
+        model, on = a.neighbor_groups
+        if on not in ("on", "off"):
+            ap.error(f"--neighbor-groups takes on or off, got {on!r}")
+        print(regroup(model, on == "on"))
+        return
     if a.denoise:
         print(redenoise(a.denoise[0], float(a.denoise[1])))
         return

@@ -224,6 +224,8 @@ def randomised_batch_norm(model: DGAN) -> DGAN:
         ("hdmap", {"train.map_dropout": 0.0}),
         ("hdmap", {"model.map_res_blocks": 1}),
         ("hdmap", {"model.map_res_blocks": 0}),
+        ("hdmap", {"model.neighbor_groups": True}),
+        ("apolloscape", {"model.neighbor_groups": True}),
         ("ethucy_zara1", {"data.prior": "none", "train.map_dropout": 0.0}),
     ],
 )
