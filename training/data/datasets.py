@@ -22,6 +22,8 @@
 - ``ethucy_5hz``, ``sdd_5hz``, ``apolloscape_5hz``: those sources at the ``hdmap`` protocol (:data:`AT_HDMAP`), for a
   model trained on every source (``data.extra_sources``) and the leave-one-source-out tests
   (:mod:`training.studies.sources`).
+- ``ethucy_2hz``, ``sdd_2hz``, ``hdmap_2hz``: those sources at ApolloScape's protocol (:data:`AT_APOLLOSCAPE`), for
+  an ApolloScape model that also learns from them.
 
 Each dataset's labels map onto the engine's three classes as in the paper: pedestrian; cyclist (Biker, Skater;
 bicyclist/motorcyclist); vehicle (Cart, Car, Bus; small and big vehicles).
@@ -86,8 +88,12 @@ DATASETS["waymo"] = replace(DATASETS["hdmap"], name="waymo")
 #: labels and which of them are scored as in the source. A joint model trains on them beside ``hdmap``'s scenes
 #: (``data.extra_sources``) and a model that never saw one is tested on it (leave-one-source-out).
 AT_HDMAP = {"ethucy_5hz": "ethucy", "sdd_5hz": "sdd", "apolloscape_5hz": "apolloscape"}
-for _name, _source in AT_HDMAP.items():
-    _p = DATASETS["hdmap"]
+#: The same at ApolloScape's protocol (2 Hz, 6 observed and 6 predicted steps), ``hdmap``'s driving scenes included.
+AT_APOLLOSCAPE = {"ethucy_2hz": "ethucy", "sdd_2hz": "sdd", "hdmap_2hz": "hdmap"}
+#: Each resampled source's protocol: the dataset whose time base it takes.
+PROTOCOL_OF = {**dict.fromkeys(AT_HDMAP, "hdmap"), **dict.fromkeys(AT_APOLLOSCAPE, "apolloscape")}
+for _name, _source in {**AT_HDMAP, **AT_APOLLOSCAPE}.items():
+    _p = DATASETS[PROTOCOL_OF[_name]]
     DATASETS[_name] = replace(
         DATASETS[_source], name=_name, dt_s=_p.dt_s, t_obs=_p.t_obs, t_f=_p.t_f, unit="m", min_targets=1, has_map=False
     )
@@ -140,15 +146,16 @@ def ethucy_all_files(root: Path, split: str) -> list[Path]:
     return files
 
 
-def _at_hdmap(source: str) -> Source:
-    """``source``'s recordings at the ``hdmap`` protocol's time base (:data:`AT_HDMAP`)."""
+def _at(source: str, protocol: str) -> Source:
+    """``source``'s recordings at the time base of the dataset ``protocol`` (:data:`AT_HDMAP`,
+    :data:`AT_APOLLOSCAPE`)."""
     files = SOURCES[source].files if source != "ethucy" else (lambda root, split, _: ethucy_all_files(root, split))
-    dt_from, dt_to = DATASETS[source].dt_s, DATASETS["hdmap"].dt_s
+    dt_from, dt_to = DATASETS[source].dt_s, DATASETS[protocol].dt_s
 
     def read(path: Path, root: Path, split: str, _with_map: bool) -> list[Recording]:
         out = []
         for rec in SOURCES[source].read(path, root, split, False):
-            out.append(replace(resampled(rec, dt_from, dt_to), unit_m=1.0))  # errors in metres
+            out.append(replace(resampled(rec, dt_from, dt_to), unit_m=1.0, map=None))  # in metres, no map
         return out
 
     return Source(files, read)
@@ -262,5 +269,5 @@ def pedestrian_recordings(source: str, root: Path, dt_s: float) -> list[Recordin
 # ---- Driving scenes with vector HD maps (nuScenes, Waymo, Argoverse 2) -----------------------------------------------
 
 
-for _name, _source in AT_HDMAP.items():
-    SOURCES[_name] = _at_hdmap(_source)
+for _name, _source in {**AT_HDMAP, **AT_APOLLOSCAPE}.items():
+    SOURCES[_name] = _at(_source, PROTOCOL_OF[_name])

@@ -339,13 +339,23 @@ def test_hdmap_sources_apart_split_its_scenes() -> None:
         assert all("waymo" in str(p.parent) for p in waymo)
 
 
-@pytest.mark.parametrize("source", ["ethucy_5hz", "sdd_5hz", "apolloscape_5hz"])
-def test_other_sources_join_the_hdmap_protocol(source: str) -> None:
-    """Each source's recordings on the hdmap time base: 0.2 s steps in metres (a walker moves under 1 m a step),
-    without a map, its own labels and scoring; windows at the hdmap protocol."""
+@pytest.mark.parametrize(
+    ("source", "protocol"),
+    [
+        ("ethucy_5hz", (0.2, 10, 15)),
+        ("sdd_5hz", (0.2, 10, 15)),
+        ("apolloscape_5hz", (0.2, 10, 15)),
+        ("ethucy_2hz", (0.5, 6, 6)),
+        ("sdd_2hz", (0.5, 6, 6)),
+        ("hdmap_2hz", (0.5, 6, 6)),
+    ],
+)
+def test_other_sources_join_a_protocol(source: str, protocol: tuple[float, int, int]) -> None:
+    """Each source's recordings on the hdmap (0.2 s) or ApolloScape (0.5 s) time base, in metres (nothing moves over
+    40 m/s), without a map, its own labels and scoring; windows at that protocol."""
     root = shared_data("sdd")
     info = DATASETS[source]
-    assert (info.dt_s, info.t_obs, info.t_f, info.unit, info.has_map) == (0.2, 10, 15, "m", False)
+    assert (info.dt_s, info.t_obs, info.t_f, info.unit, info.has_map) == (*protocol, "m", False)
     files = source_files(source, root, "val")
     rec = recordings(source, root, "val")[0]
     assert files
@@ -354,10 +364,10 @@ def test_other_sources_join_the_hdmap_protocol(source: str) -> None:
     assert rec.heading is None
     one = rec.agent == rec.agent[len(rec.agent) // 2]
     steps = np.diff(rec.step[one]) == 1
-    assert (np.linalg.norm(np.diff(rec.xy[one], axis=0), axis=1)[steps] < 8.0).all()  # 40 m/s at most
+    assert (np.linalg.norm(np.diff(rec.xy[one], axis=0), axis=1)[steps] < 40.0 * info.dt_s).all()
     windows = list(iter_windows(rec, info, info.t_obs, info.t_f, stride=5))
     assert windows
-    assert all(w.positions.shape[1] == 25 for w in windows)
+    assert all(w.positions.shape[1] == info.t_obs + info.t_f for w in windows)
 
 
 def test_ethucy_as_one_source_tests_every_scene() -> None:
