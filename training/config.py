@@ -110,6 +110,10 @@ class TrainConfig:
     # window of the validation split, data.extra_sources' included) or "own" (the configuration's own dataset's
     # alone): a model trained on every source but served for one protocol's scenes calibrated on those scenes.
     calibration_split: str = "all"
+    # The validation windows the kept epoch is chosen on (train.select): "all" (every window of the validation split,
+    # data.extra_sources' included) or "own" (the configuration's own dataset's alone; log.csv's val_* then count
+    # those alone).
+    select_split: str = "all"
     # What is fitted (training.calibrate.CALIBRATIONS): "temperature" (one temperature of the anchor logits, contract
     # 2) or "speed_class" (contract 9: a temperature growing with the prior's speed and one of the class logits,
     # fitted together by the Brier score of the best mode).

@@ -36,10 +36,15 @@ class TrainingSplits:
 
 
 def training_splits(cfg: Config, spec: dgan.InputSpec, progress: bool) -> TrainingSplits:
-    """The training parts and validation windows of ``cfg`` (each read from the window cache or built into it)."""
+    """The training parts and validation windows of ``cfg`` (each read from the window cache or built into it; the
+    validation windows of the dataset alone with ``train.select_split = "own"``)."""
     d = cfg.data
     target = target_class_index(d.target_class, spec)
+    if cfg.train.select_split not in ("all", "own"):
+        raise ValueError(f"train.select_split must be 'all' or 'own', got {cfg.train.select_split!r}")
     train_sets, val_sets = window_sets(d, "train"), window_sets(d, "val")
+    if cfg.train.select_split == "own":
+        val_sets = val_sets[:1]  # the dataset's own validation windows come first (window_sets)
     windows = set_windows(d, train_sets + val_sets, spec, progress)
     parts, val = windows[: len(train_sets)], windows[len(train_sets) :]
     return TrainingSplits(parts, concat_windows(parts), concat_windows(val), target)

@@ -407,6 +407,25 @@ def test_extra_sources_are_checked_against_the_protocol() -> None:
     assert [(p.dataset, p.split, p.stride) for p in val] == [("hdmap", "val", 1), ("ethucy_5hz", "val", 4)]
 
 
+def test_the_kept_epoch_can_be_chosen_on_the_own_validation_windows(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from training.build import input_spec
+    from training.config import Config
+    from training.data.splits import training_splits
+
+    root = shared_data("apolloscape_trajectory")
+    cfg = Config.load(ROOT / "training" / "configs" / "apolloscape.toml", {"data.root": str(root)})
+    cfg = replace(cfg, data=replace(cfg.data, cache_dir=str(tmp_path), extra_sources="ethucy_2hz:20"))
+    spec = input_spec(cfg)
+    pooled = training_splits(cfg, spec, False).val
+    own = training_splits(replace(cfg, train=replace(cfg.train, select_split="own")), spec, False).val
+    alone = training_splits(replace(cfg, data=replace(cfg.data, extra_sources="")), spec, False).val
+    assert int(own.target.sum()) == int(alone.target.sum()) < int(pooled.target.sum())
+    with pytest.raises(ValueError, match="select_split must be 'all' or 'own'"):
+        training_splits(replace(cfg, train=replace(cfg.train, select_split="mine")), spec, False)
+
+
 def test_a_source_without_maps_is_flagged_absent_for_a_map_model(tmp_path: Path) -> None:
     """Windows of a dataset without maps carry ``map_absent``, which the batch turns into ``map_present`` 0 (as the
     engine does for a frame without a map); the model's own windows stay present."""
