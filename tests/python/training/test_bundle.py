@@ -139,3 +139,29 @@ def test_a_bad_denoising_gate_is_refused_before_the_checkpoint_is_touched() -> N
         with pytest.raises(InvalidSpecError, match="denoise_gate_m"):
             redenoise("zara1", bad)
     assert (CHECKPOINTS / "zara1.pt").read_bytes() == before
+
+
+def test_neighbor_groups_export_the_same_predictions(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--neighbor-groups`` sets ``model.neighbor_groups`` in a copy of the checkpoint and exports it again: the
+    graph splits its neighbours by degree (a ScatterND) and the engine's predictions are those of the bundled file."""
+    import shutil
+
+    import numpy as np
+    import onnx
+    import torch
+
+    import dgan
+    from dgan.demo import scene_for
+    from training.release import bundle
+
+    shutil.copy(bundle.CHECKPOINTS / "apolloscape.pt", tmp_path / "apolloscape.pt")
+    monkeypatch.setattr(bundle, "CHECKPOINTS", tmp_path)
+    monkeypatch.setattr(bundle, "MODELS", tmp_path)
+    path = bundle.regroup("apolloscape", True)
+    assert path == tmp_path / "apolloscape.onnx"
+    assert "ScatterND" in {n.op_type for n in onnx.load(str(path)).graph.node}
+    assert torch.load(tmp_path / "apolloscape.pt", weights_only=False)["config"]["model"]["neighbor_groups"] is True
+    frame = scene_for(dgan.Predictor("apolloscape").spec).frame
+    a, b = dgan.Predictor("apolloscape").predict(frame), dgan.Predictor(path).predict(frame)
+    np.testing.assert_array_equal(a.trajectories, b.trajectories)
+    np.testing.assert_array_equal(a.probabilities, b.probabilities)
