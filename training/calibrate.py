@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 import dgan
-from training.config import Config
+from training.config import Config, validation_data
 from training.data.arrays import Windows
 from training.losses import Calibration, mode_probabilities
 from training.metrics import worst_gap
@@ -233,20 +233,13 @@ def fit_speed_class(modes: BestModes, class_of: torch.Tensor, single: Temperatur
     )
 
 
-#: ``train.calibration_split``: which validation windows the temperature is fitted on (:func:`calibration_config`).
-CALIBRATION_SPLITS = ("all", "own")
-
-
 def calibration_config(cfg: Config) -> Config:
     """The configuration whose validation split the temperature is fitted on: ``cfg`` itself
     (``train.calibration_split = "all"``), or ``cfg`` without its ``data.extra_sources`` ("own": the configuration's
-    own dataset's validation windows alone). Raises a ValueError naming the choices for any other value."""
-    split = cfg.train.calibration_split
-    if split not in CALIBRATION_SPLITS:
-        raise ValueError(f"train.calibration_split must be 'all' or 'own', got {split!r}")
-    if split == "own" and cfg.data.extra_sources:
-        return replace(cfg, data=replace(cfg.data, extra_sources=""))
-    return cfg
+    own dataset's validation windows alone; :func:`training.config.validation_data`). Raises a ValueError naming the
+    choices for any other value."""
+    data = validation_data(cfg.data, cfg.train.calibration_split, "train.calibration_split")
+    return cfg if data is cfg.data else replace(cfg, data=data)
 
 
 def validation_logits(

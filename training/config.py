@@ -141,6 +141,19 @@ class TrainConfig:
     distill_soft: float = 0.0
 
 
+#: ``train.calibration_split`` and ``train.select_split``: every window of the validation split ("all",
+#: ``data.extra_sources``' included) or the configuration's own dataset's alone ("own").
+VALIDATION_SPLITS = ("all", "own")
+
+
+def validation_data(d: DataConfig, split: str, key: str) -> DataConfig:
+    """The data whose validation windows ``split`` (the value of ``key``, one of :data:`VALIDATION_SPLITS`) names:
+    ``d`` itself, or ``d`` without its ``data.extra_sources``. Raises a ValueError naming the choices otherwise."""
+    if split not in VALIDATION_SPLITS:
+        raise ValueError(f"{key} must be 'all' or 'own', got {split!r}")
+    return replace(d, extra_sources="") if split == "own" and d.extra_sources else d
+
+
 @dataclass(frozen=True)
 class Config:
     name: str = "ethucy"

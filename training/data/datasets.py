@@ -90,9 +90,11 @@ DATASETS["waymo"] = replace(DATASETS["hdmap"], name="waymo")
 AT_HDMAP = {"ethucy_5hz": "ethucy", "sdd_5hz": "sdd", "apolloscape_5hz": "apolloscape"}
 #: The same at ApolloScape's protocol (2 Hz, 6 observed and 6 predicted steps), ``hdmap``'s driving scenes included.
 AT_APOLLOSCAPE = {"ethucy_2hz": "ethucy", "sdd_2hz": "sdd", "hdmap_2hz": "hdmap"}
+#: Every resampled source, by its name: the source it reads.
+RESAMPLED = {**AT_HDMAP, **AT_APOLLOSCAPE}
 #: Each resampled source's protocol: the dataset whose time base it takes.
 PROTOCOL_OF = {**dict.fromkeys(AT_HDMAP, "hdmap"), **dict.fromkeys(AT_APOLLOSCAPE, "apolloscape")}
-for _name, _source in {**AT_HDMAP, **AT_APOLLOSCAPE}.items():
+for _name, _source in RESAMPLED.items():
     _p = DATASETS[PROTOCOL_OF[_name]]
     DATASETS[_name] = replace(
         DATASETS[_source], name=_name, dt_s=_p.dt_s, t_obs=_p.t_obs, t_f=_p.t_f, unit="m", min_targets=1, has_map=False
@@ -269,5 +271,5 @@ def pedestrian_recordings(source: str, root: Path, dt_s: float) -> list[Recordin
 # ---- Driving scenes with vector HD maps (nuScenes, Waymo, Argoverse 2) -----------------------------------------------
 
 
-for _name, _source in {**AT_HDMAP, **AT_APOLLOSCAPE}.items():
+for _name, _source in RESAMPLED.items():
     SOURCES[_name] = _at(_source, PROTOCOL_OF[_name])

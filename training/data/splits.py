@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 import dgan
-from training.config import Config, DataConfig
+from training.config import Config, DataConfig, validation_data
 from training.data.arrays import Windows, concat_windows
 from training.data.cache import cached
 from training.data.datasets import DATASETS, PEDESTRIAN_SOURCES, locate
@@ -40,11 +40,8 @@ def training_splits(cfg: Config, spec: dgan.InputSpec, progress: bool) -> Traini
     validation windows of the dataset alone with ``train.select_split = "own"``)."""
     d = cfg.data
     target = target_class_index(d.target_class, spec)
-    if cfg.train.select_split not in ("all", "own"):
-        raise ValueError(f"train.select_split must be 'all' or 'own', got {cfg.train.select_split!r}")
-    train_sets, val_sets = window_sets(d, "train"), window_sets(d, "val")
-    if cfg.train.select_split == "own":
-        val_sets = val_sets[:1]  # the dataset's own validation windows come first (window_sets)
+    val_data = validation_data(d, cfg.train.select_split, "train.select_split")
+    train_sets, val_sets = window_sets(d, "train"), window_sets(val_data, "val")
     windows = set_windows(d, train_sets + val_sets, spec, progress)
     parts, val = windows[: len(train_sets)], windows[len(train_sets) :]
     return TrainingSplits(parts, concat_windows(parts), concat_windows(val), target)

@@ -41,8 +41,8 @@ class ModelConfig:
     use_edge_features: bool = True  # False: the attention sees no neighbour geometry (ablation)
     #: How the exported network arranges its attention, not what it computes (the same outputs, bit for bit on the
     #: bundled scenes): true splits the padded neighbours into two groups by degree inside the graph
-    #: (:func:`neighbor_groups`), which pays where few agents have many senders (`hdmap`: -7 to -12% at 128-256 agents,
-    #: +60 µs a call for its fixed cost; docs/speed.md).
+    #: (:func:`neighbor_groups`), which pays where few agents have many senders (`hdmap`: -5 to -12% at 128-256 agents,
+    #: some 70-95 µs a call for its fixed cost; docs/speed.md).
     neighbor_groups: bool = False
 
 
