@@ -165,3 +165,15 @@ def test_neighbor_groups_export_the_same_predictions(tmp_path: Path, monkeypatch
     a, b = dgan.Predictor("apolloscape").predict(frame), dgan.Predictor(path).predict(frame)
     np.testing.assert_array_equal(a.trajectories, b.trajectories)
     np.testing.assert_array_equal(a.probabilities, b.probabilities)
+
+
+def test_neighbor_groups_take_on_or_off(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import sys
+
+    from training.release import bundle
+
+    monkeypatch.setattr(sys, "argv", ["bundle", "--neighbor-groups", "hdmap", "yes"])
+    with pytest.raises(SystemExit) as exit_info:
+        bundle.main()
+    assert exit_info.value.code == 2
+    assert "--neighbor-groups takes on or off, got 'yes'" in capsys.readouterr().err
