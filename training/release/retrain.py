@@ -43,10 +43,14 @@ def train_multiclass(root: Path) -> None:
                 calibrate_checkpoint(path, root)
 
 
-#: The multi-class models bundled as one network distilled from their members' consensus (issue 26), with the
-#: epoch chosen by validation top-1 ADE (``train.select``): ApolloScape's student was within 1% of the consensus on
-#: validation and on the test recordings (1.997/3.636 against 1.998/3.631 m; 1.460/2.650 against 1.462/2.648).
-DISTILLED = ("apolloscape",)
+#: The multi-class models bundled as one network distilled from their members' consensus (or, for one member, from
+#: that run) (issue 26), with the epoch chosen by validation top-1 ADE (``train.select``): ApolloScape's student was
+#: within 1% of the consensus on validation and on the test recordings (1.997/3.636 against 1.998/3.631 m;
+#: 1.460/2.650 against 1.462/2.648); Stanford Drone's is a slimmer network (:data:`STUDENT_ARGS`) taught by the run.
+DISTILLED = ("apolloscape", "sdd")
+#: What a student changes of its configuration: Stanford Drone's leaves out the map CNN's first residual block (the
+#: 8-channel stage, a quarter of the network's time; docs/speed.md), chosen on validation (docs/results.md).
+STUDENT_ARGS = {"sdd": ("--set", "model.map_res_blocks=1")}
 #: How every student is trained: the consensus's most probable mode weighs 1 in the loss, and the epoch kept is the
 #: one of lowest validation top-1 ADE.
 DISTILL = ("--set", "train.distill_weight=1.0", "--set", "train.select=val_ade")
@@ -61,7 +65,7 @@ def _distilled(
     """The student of the members' consensus, and for each calibration fold (its held-out recordings and runs) the
     student of that fold's consensus (no top-mode scale or temperature: the fold stands in for the model before
     calibration)."""
-    student = _student(members, TEACHERS / f"{ds}.pt", toml, root, f"{ds}_student")
+    student = _student(members, TEACHERS / f"{ds}.pt", toml, root, f"{ds}_student", *STUDENT_ARGS.get(ds, ()))
     fold_students = []
     for i, (recordings, runs) in enumerate(folds):
         fold_teacher = model_checkpoint(runs, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")
