@@ -55,8 +55,9 @@ class GATLayer(nn.Module):
         - the edge MLP's first layer with its bias as the last row of one product against the features' column of
           ones (no pass of its own over the ``(N, D, dim)`` result: the same sums, the bias their last term);
         - the edge MLP's second linear layer W2 applied after the sum over senders (Σ α (W2 e + b2) = W2 (Σ α e) +
-          b2, as Σ α = 1), as one product with the block-diagonal of the heads' W2, and its part of the score as the
-          hidden edge vector times W2ᵀ a_send;
+          b2, as Σ α = 1), each head's own block of W2 to its own sum, as one product batched over the heads (a
+          quarter of the operations of one product with their block-diagonal, which multiplies its zeros: 0.20
+          MFLOP an agent of two layers), and its part of the score as the hidden edge vector times W2ᵀ a_send;
         - the messages of the senders' nodes as one batched product α (N, H, D) @ (N, D, dim), of which each head
           keeps its own dh columns.
         The weights-only products are constants that the exporter folds.
@@ -89,8 +90,6 @@ class GATLayer(nn.Module):
         v = (w2 * self.a_send.unsqueeze(-1)).sum(1).t()  # (dim, H)
         c = (lin2.bias.view(heads, dh) * self.a_send).sum(-1)  # (H,)
         eye = torch.eye(heads, dtype=wh.dtype, device=wh.device)
-        # The block-diagonal (H·dim, H·dh) of the heads' W2ᵀ (torch.block_diag has no ONNX export).
-        w2_blocks = (w2.transpose(1, 2).unsqueeze(2) * eye.view(heads, 1, heads, 1)).reshape(-1, heads * dh)
         own = eye.repeat_interleave(dh, dim=1)  # (H, dim): head k keeps its own dh columns
         hidden = torch.relu(features @ torch.cat([lin1.weight.t(), lin1.bias.unsqueeze(0)]))  # (n, d, dim)
         # (n, d, H) turned as the 2-D (n·d, H), and the weights back to (n, H, d) by moving the outer axis: two
@@ -100,7 +99,9 @@ class GATLayer(nn.Module):
         score = torch.clamp(nn.functional.leaky_relu(score, 0.2), -20.0, 20.0) + bias.reshape(1, n, d)
         alpha = torch.softmax(score, dim=-1).transpose(0, 1)  # (n, H, d)
         from_nodes = ((alpha @ wh[index]) * own).sum(1)  # (n, dim)
-        from_edges = (alpha @ hidden).reshape(n, -1) @ w2_blocks  # (n, dim)
+        # Each head's sum of hidden edge vectors (H, n, dim) times its own W2ᵀ (H, dim, dh), back to (n, H·dh): the
+        # outer axis moved twice, which runs on two threads as fast as on one.
+        from_edges = ((alpha @ hidden).transpose(0, 1) @ w2.transpose(1, 2)).transpose(0, 1).reshape(n, -1)
         return from_nodes + from_edges
 
 

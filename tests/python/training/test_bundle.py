@@ -143,7 +143,8 @@ def test_a_bad_denoising_gate_is_refused_before_the_checkpoint_is_touched() -> N
 
 def test_neighbor_groups_export_the_same_predictions(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``--neighbor-groups`` sets ``model.neighbor_groups`` in a copy of the checkpoint and exports it again: the
-    graph splits its neighbours by degree (a ScatterND) and the engine's predictions are those of the bundled file."""
+    graph splits its neighbours by degree (a ScatterND) and the engine's predictions are those of the bundled file, to
+    float rounding."""
     import shutil
 
     import numpy as np
@@ -163,8 +164,10 @@ def test_neighbor_groups_export_the_same_predictions(tmp_path: Path, monkeypatch
     assert torch.load(tmp_path / "apolloscape.pt", weights_only=False)["config"]["model"]["neighbor_groups"] is True
     frame = scene_for(dgan.Predictor("apolloscape").spec).frame
     a, b = dgan.Predictor("apolloscape").predict(frame), dgan.Predictor(path).predict(frame)
-    np.testing.assert_array_equal(a.trajectories, b.trajectories)
-    np.testing.assert_array_equal(a.probabilities, b.probabilities)
+    # The same arithmetic; the heads' batched products over a group of a few receivers may round otherwise than over
+    # every agent (1.4e-6 m on this scene; `hdmap`'s scenes bit-identical).
+    np.testing.assert_allclose(a.trajectories, b.trajectories, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(a.probabilities, b.probabilities, rtol=0, atol=1e-6)
 
 
 def test_neighbor_groups_take_on_or_off(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
