@@ -4,7 +4,8 @@
 
 For every bundled model, the real bundled scene of its time base (`dgan.demo.scene_for`) is tiled to N agents
 (copies of the scene shifted by 60 m, so each copy keeps its own neighbourhood and map), and each figure is the
-median over ``--repeat`` runs after warm-up:
+median over ``--repeat`` runs after warm-up, the figures of a row timed in interleaved rounds (`interleaved_ms`), so
+that their ratios hold on a machine whose speed drifts:
 
 - ``predict``: `dgan.Predictor.predict` (preprocessing, the network in ONNX Runtime, decoding), one intra-op thread;
 - ``preprocess``: `dgan.preprocess` alone (traffic state, graph, map crops, prior), on one thread as `predict`;
@@ -90,6 +91,27 @@ def median_ms(fn: Callable[[], Any], repeat: int, warmup: int = 3) -> float:
     return 1e3 * statistics.median(times)
 
 
+def interleaved_ms(
+    fns: dict[str, Callable[[], Any]], repeat: int, warmup: int = 3, every: dict[str, int] | None = None
+) -> dict[str, float]:
+    """The median milliseconds of each of ``fns``, timed in interleaved rounds (each round calls every one once, in
+    turn), so that a machine whose speed drifts over a row (another job, a noisy neighbour on a VM) moves all of the
+    row's figures alike and their ratios stay fair; ``every[key] = k`` times ``key`` only in every k-th round (a slow
+    pipeline), at least 3 times."""
+    every = every or {}
+    times: dict[str, list[float]] = {k: [] for k in fns}
+    for r in range(warmup + repeat):
+        for key, fn in fns.items():
+            k = every.get(key, 1)
+            if (0 < r < warmup and k > 1) or (r >= warmup and (r - warmup) % k and len(times[key]) >= 3):
+                continue  # a slow one: warmed up once, timed in every k-th round
+            t0 = time.perf_counter()
+            fn()
+            if r >= warmup:
+                times[key].append(time.perf_counter() - t0)
+    return {key: 1e3 * statistics.median(v) for key, v in times.items()}
+
+
 def torch_pipeline(name: str, device: str = "cpu") -> Callable[[dict[str, np.ndarray]], Any] | None:
     """The training code's model from the bundled checkpoint, eager, with `decode_torch`; None without torch. On
     ``device`` (``"cuda"``: the preprocessed tensors are copied there and the decoded modes back, as the engine's CUDA
@@ -146,18 +168,23 @@ def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any
         x = dgan.preprocess(f, spec)
         feed = {k: x[k] for k in names}
         row: dict[str, Any] = {"model": name, "N": n, "E": len(x["edge_index"])}
-        row["predict"] = median_ms(partial(predictor.predict, f), repeat)
-        row["preprocess"] = median_ms(partial(dgan.preprocess, f, spec, threads=1), repeat)
-        row["ort"] = median_ms(partial(session.run, None, feed), repeat)
+        fns: dict[str, Callable[[], Any]] = {
+            "predict": partial(predictor.predict, f),
+            "preprocess": partial(dgan.preprocess, f, spec, threads=1),
+            "ort": partial(session.run, None, feed),
+        }
+        if torch_run is not None:
+            fns["torch"] = partial(torch_run, x)
+        if research_run is not None:
+            fns["research"] = partial(research_run, f)
+        row.update(interleaved_ms(fns, repeat, every={"research": 5}))
         flops = graph_flops(predictor.path, feed).total
         row["mflop_per_agent"] = flops / n / 1e6
         row["gflops"] = flops / (row["ort"] * 1e-3) / 1e9
         if torch_run is not None:
-            row["torch"] = median_ms(partial(torch_run, x), repeat)
             row["torch_pipeline"] = row["preprocess"] + row["torch"]
             row["vs_torch"] = row["torch_pipeline"] / row["predict"]
         if research_run is not None:
-            row["research"] = median_ms(partial(research_run, f), max(3, repeat // 5), warmup=1)
             row["vs_research"] = row["research"] / row["predict"]
         rows.append(row)
         print(fmt_row(row), flush=True)
@@ -228,7 +255,10 @@ def latency(name: str, agents: list[int], repeat: int, matmul_ms: float) -> None
     frame = scene_for(by_threads[1].spec).frame
     for n in agents:
         f = tiled(frame, n)
-        ms = {t: median_ms(partial(p.predict, f), repeat) for t, p in by_threads.items()}
+        ms = {
+            int(t): v
+            for t, v in interleaved_ms({str(t): partial(p.predict, f) for t, p in by_threads.items()}, repeat).items()
+        }
         two = ms.get(2, float("nan"))
         cells = [
             str(largest_component(n, by_threads[1].predict(f).edges)),
@@ -373,8 +403,11 @@ def batch_throughput(name: str, count: int, repeat: int) -> None:
     def loop_of(p: dgan.Predictor) -> list[dgan.Prediction]:
         return [p.predict(f) for f in frames]
 
-    loop = {t: median_ms(partial(loop_of, p), repeat) for t, p in by_threads.items()}
-    batch = {t: median_ms(partial(p.predict_batch, frames), repeat) for t, p in by_threads.items()}
+    fns: dict[str, Callable[[], Any]] = {f"loop {t}": partial(loop_of, p) for t, p in by_threads.items()}
+    fns.update({f"batch {t}": partial(p.predict_batch, frames) for t, p in by_threads.items()})
+    ms = interleaved_ms(fns, repeat)
+    loop = {t: ms[f"loop {t}"] for t in by_threads}
+    batch = {t: ms[f"batch {t}"] for t in by_threads}
     row = f"| {name} | {count} | {agents:.1f} | {loop[1]:.2f} | {batch[1]:.2f} | {loop[1] / batch[1]:.2f}×"
     if 2 in by_threads:
         row += f" | {loop[2]:.2f} | {batch[2]:.2f} | {loop[1] / batch[2]:.2f}× | {loop[2] / batch[2]:.2f}×"
