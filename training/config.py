@@ -67,6 +67,10 @@ class DataConfig:
     # observed steps before the current one dropped; "" = none. Validation and test stay as recorded.
     augment_noise: str = ""
     augment_drop: float = 0.1
+    # One held copy of the training windows (training.data.augment.held_still): every agent whose observed positions
+    # stay within this many metres of its current one given that position at every observed step, as a tracker
+    # holding a static object's box gives it; 0 = none.
+    augment_hold_m: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -34,3 +34,21 @@ def tracker_noise(
         before_last = np.arange(keep.shape[1])[None, :] < last[:, None]
         keep &= ~(before_last & (rng.random(keep.shape) < drop))
     return pos, keep
+
+
+def held_still(positions_m: Arr, mask: Arr, within_m: float) -> Arr:
+    """``positions_m (N, T, 2)`` with every agent whose valid positions all lie within ``within_m`` of its last valid
+    one given that position at every valid step: a tracker holding a static object's box where it is, rather than a
+    dataset's annotation jitter. Other agents, invalid steps and ``mask`` are unchanged. Returns a new array."""
+    if not (np.isfinite(within_m) and within_m > 0):
+        raise ValueError(f"within_m must be a positive number of metres, got {within_m}")
+    pos = np.array(positions_m, dtype=np.float64, copy=True)
+    keep = np.asarray(mask, dtype=bool)
+    if not keep.size:
+        return pos
+    last = keep.shape[1] - 1 - np.argmax(keep[:, ::-1], axis=1)  # (N,) the last valid step (0 if none)
+    now = pos[np.arange(len(pos)), last]  # (N, 2)
+    spread = np.where(keep, np.linalg.norm(pos - now[:, None], axis=-1), 0.0).max(axis=1)
+    hold = keep.any(axis=1) & (spread < within_m)
+    pos[hold] = np.where(keep[hold][..., None], now[hold][:, None], pos[hold])
+    return pos

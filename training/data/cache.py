@@ -33,6 +33,8 @@ def cache_path(found: Located, spec: dgan.InputSpec, cache_dir: Path) -> Path:
         version = f"v8-move{info.min_move_m:g}"
         if part.noise != (0.0, 0.0):
             version += f"-noise{part.noise[0]:g}-drop{part.noise[1]:g}"
+        if part.hold > 0:
+            version += f"-hold{part.hold:g}"
     files_key = [(f.name, f.stat().st_size) for f in found.files]
     content = json.dumps([spec.to_json(), files_key, part.stride, version, CACHE_KEY])
     return cache_dir / f"{stem}_{hashlib.sha256(content.encode()).hexdigest()[:16]}.npz"
@@ -57,7 +59,7 @@ def cached(found: Sequence[Located], spec: dgan.InputSpec, cache_dir: Path, prog
         if path.is_file():
             out.append(read_windows(path))
             continue
-        w = build_windows(f.read(), f.info, spec, f.part.stride, progress, f.part.noise)
+        w = build_windows(f.read(), f.info, spec, f.part.stride, progress, f.part.noise, f.part.hold)
         cache_dir.mkdir(parents=True, exist_ok=True)
         arrays = {k: v for k, v in vars(w).items() if isinstance(v, np.ndarray)}
         np.savez(path, files=np.array(w.files), **arrays)  # type: ignore[arg-type]

@@ -71,8 +71,9 @@ class Recording:
 class WindowSet:
     """One part of a split as the window cache keys it: ``split`` of ``dataset`` (``fold``: the held-out ETH/UCY
     scene, or ApolloScape's validation recordings) with windows ending every ``stride`` steps, its observed histories
-    corrupted as a tracker would with ``noise = (sigma_m, drop)``; or, with ``pedestrians``, the training pedestrians
-    of the source ``dataset`` for an ETH/UCY model."""
+    corrupted as a tracker would with ``noise = (sigma_m, drop)`` or, with ``hold`` (metres), its still agents held
+    where they are (:func:`training.data.augment.held_still`); or, with ``pedestrians``, the training pedestrians of
+    the source ``dataset`` for an ETH/UCY model."""
 
     dataset: str
     split: str
@@ -80,6 +81,7 @@ class WindowSet:
     stride: int = 1
     noise: tuple[float, float] = (0.0, 0.0)
     pedestrians: bool = False
+    hold: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -60,7 +60,7 @@ def set_windows(d: DataConfig, sets: list[WindowSet], spec: dgan.InputSpec, prog
     windows = cached(found, spec, cache, progress)
     # A noisy copy's agents are flagged (train.distill_noisy = false keeps the teacher off them).
     return [
-        replace(w, noisy=np.ones(len(w.target), bool)) if part.noise != (0.0, 0.0) else w
+        replace(w, noisy=np.ones(len(w.target), bool)) if part.noise != (0.0, 0.0) or part.hold > 0 else w
         for part, w in zip(sets, windows, strict=True)
     ]
 
@@ -72,8 +72,8 @@ def window_set(part: WindowSet, root: Path, spec: dgan.InputSpec, cache_dir: Pat
 
 def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
     """The parts of ``split`` that ``d`` asks for: the dataset's own windows; for training, then one noisy copy per
-    level of ``data.augment_noise`` and the pedestrians of each ``data.extra_pedestrians`` source; then the split of
-    each ``data.extra_sources`` dataset."""
+    level of ``data.augment_noise``, a held copy with ``data.augment_hold_m`` and the pedestrians of each
+    ``data.extra_pedestrians`` source; then the split of each ``data.extra_sources`` dataset."""
     fold = {"ethucy": d.scene, "apolloscape": d.val_recordings}.get(d.dataset, "")
     if d.val_recordings and d.dataset != "apolloscape":
         raise ValueError(f"data.val_recordings is for ApolloScape, not {d.dataset!r}")
@@ -85,6 +85,9 @@ def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
     if split != "train":
         return [own, *joint]
     noisy = [replace(own, noise=(sigma, d.augment_drop)) for sigma in augment_sigmas(d.augment_noise)]
+    if d.augment_hold_m < 0:
+        raise ValueError(f"data.augment_hold_m must be >= 0 metres, got {d.augment_hold_m}")
+    noisy += [replace(own, hold=d.augment_hold_m)] if d.augment_hold_m > 0 else []
     extra = [WindowSet(s, "train", stride=d.extra_stride, pedestrians=True) for s in sources]
     return [own, *noisy, *extra, *joint]
 

@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 import dgan
 from training.data.arrays import Windows
-from training.data.augment import tracker_noise
+from training.data.augment import held_still, tracker_noise
 from training.data.recording import DatasetInfo, Recording
 
 Arr = npt.NDArray[Any]
@@ -118,10 +118,12 @@ def build_windows(
     stride: int = 1,
     progress: bool = True,
     noise: tuple[float, float] = (0.0, 0.0),
+    hold: float = 0.0,
 ) -> Windows:
     """Preprocesses every window of ``recs`` through the engine; ``noise = (sigma_m, drop)`` first corrupts the
     observed histories as a tracker would (:func:`training.data.augment.tracker_noise`, seeded by the recording's
-    order), the futures staying as recorded."""
+    order), ``hold`` (metres) holds their still agents where they are (:func:`training.data.augment.held_still`), the
+    futures staying as recorded."""
     from tqdm import tqdm
 
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
@@ -136,6 +138,9 @@ def build_windows(
         for w in tqdm(windows, desc=rec.name, disable=not progress, leave=False):
             if noise != (0.0, 0.0):
                 w = noisy_window(w, spec.t_obs, noise, rng)
+            if hold > 0:
+                obs = held_still(w.positions[:, : spec.t_obs], w.mask[:, : spec.t_obs], hold)
+                w = replace(w, positions=np.concatenate([obs, w.positions[:, spec.t_obs :]], axis=1))
             x = dgan.preprocess(w.frame(info, spec.t_obs, with_map=spec.map is not None), spec)
             fut = np.where(w.mask[:, spec.t_obs :, None], w.positions[:, spec.t_obs :], 0.0)
             future = dgan.to_agent_frame(fut, x["origin"], x["heading"])

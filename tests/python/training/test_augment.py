@@ -145,3 +145,36 @@ def test_evaluation_scores_standing_agents_apart() -> None:
     noisy = evaluate(predictor, "apolloscape", root, noise=(0.3, 0.1))
     assert noisy["agents"] == clean["agents"]
     assert noisy["cv_last2_ade"] > clean["cv_last2_ade"] + 0.1
+
+
+def test_still_agents_are_held_at_their_current_position_and_movers_kept() -> None:
+    from training.data.augment import held_still
+
+    rng = np.random.default_rng(0)
+    still = np.array([5.0, 2.0]) + rng.normal(0.0, 0.05, (8, 2))  # annotation jitter of a parked car
+    moving = np.cumsum(np.full((8, 2), 0.4), axis=0)
+    pos = np.stack([still, moving])
+    mask = np.ones((2, 8), bool)
+    mask[0, 7] = False  # its last valid step is the 7th
+    pos[0, 7] = [99.0, 99.0]  # an invalid step keeps what it held
+    out = held_still(pos, mask, 0.5)
+    np.testing.assert_array_equal(out[0, :7], np.broadcast_to(pos[0, 6], (7, 2)))
+    np.testing.assert_array_equal(out[0, 7], [99.0, 99.0])
+    np.testing.assert_array_equal(out[1], pos[1])
+    assert not np.shares_memory(out, pos)
+    with pytest.raises(ValueError, match="within_m"):
+        held_still(pos, mask, 0.0)
+
+
+def test_a_held_copy_joins_the_training_sets_flagged_and_cached_apart() -> None:
+    from dataclasses import replace
+
+    from training.config import DataConfig
+    from training.data.splits import window_sets
+
+    d = replace(DataConfig(), dataset="apolloscape", augment_hold_m=0.5)
+    sets = window_sets(d, "train")
+    assert [s.hold for s in sets] == [0.0, 0.5]
+    assert [s.hold for s in window_sets(d, "val")] == [0.0]
+    with pytest.raises(ValueError, match="augment_hold_m"):
+        window_sets(replace(d, augment_hold_m=-1.0), "train")
