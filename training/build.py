@@ -72,4 +72,15 @@ def run_name(cfg: Config) -> str:
 def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
     hw = (spec.map.height_px, spec.map.width_px) if spec.map else None
     optional = spec.map is not None and spec.map.optional
-    return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw, optional)
+    gate = map_gate(cfg.model.map_classes, spec)
+    return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw, optional, gate)
+
+
+def map_gate(declared: str, spec: dgan.InputSpec) -> list[float] | None:
+    """``model.map_classes`` (comma-separated class names; "" = every class) as 1 or 0 per class of ``spec``."""
+    names = [x.strip() for x in declared.split(",") if x.strip()]
+    if not names:
+        return None
+    if unknown := [x for x in names if x not in spec.classes]:
+        raise ValueError(f"model.map_classes names {unknown}, not classes of this model ({', '.join(spec.classes)})")
+    return [1.0 if c in names else 0.0 for c in spec.classes]

@@ -12,6 +12,11 @@ softmax(class logits / T_c); T, b and T_c fitted together by the Brier score (Ne
 starting class temperatures, since the score has more than one minimum). Fast agents' top modes are rarely the best
 of K and standing agents' often; a model whose class is an input has p(c) ≈ 1 although its best mode is often
 another class's anchor. The engine applies either in decoding (:class:`training.losses.Calibration`).
+
+``"per_class"``: one temperature per class's block of anchors, each fitted as ``"temperature"`` is on the targets of
+that class (the class is an input, so p(c) is all but one-hot), and folded into the network as a scale of each
+anchor's logit (``DGAN.set_anchor_logit_scale``, the checkpoint's ``anchor_logit_scale``); the contract's temperature
+is then 1. For single networks.
 """
 
 from __future__ import annotations
@@ -29,9 +34,10 @@ from training.config import Config, validation_data
 from training.data.arrays import Windows
 from training.losses import Calibration, mode_probabilities
 from training.metrics import worst_gap
+from training.modules.dgan import DGAN
 
 #: ``train.calibration``: what is fitted (:func:`fit_calibration`).
-CALIBRATIONS = ("temperature", "speed_class")
+CALIBRATIONS = ("temperature", "speed_class", "per_class")
 #: The class temperatures ``"speed_class"``'s search starts from (log-spaced, 1/e to e³).
 CLASS_TEMPERATURE_STARTS = np.exp(np.linspace(-1.0, 3.0, 9))
 
@@ -130,6 +136,8 @@ class TemperatureFit:
     folds: int = 1
     speed_exponent: float = 0.0
     class_temperature: float = 1.0
+    #: ``"per_class"``: each anchor's logit scale, 1 / its class's temperature (None for the other kinds).
+    anchor_logit_scale: tuple[float, ...] | None = None
 
     @property
     def calibration(self) -> Calibration:
@@ -139,6 +147,9 @@ class TemperatureFit:
     def __str__(self) -> str:
         where = "validation" if self.folds == 1 else f"{self.folds} validation folds"
         extra = ""
+        if self.anchor_logit_scale is not None:
+            per = sorted({round(1.0 / x, 3) for x in self.anchor_logit_scale})
+            extra = f", per class's anchors {per} folded into the network"
         if (self.speed_exponent, self.class_temperature) != (0.0, 1.0):
             extra = f" x (1 + v)^{self.speed_exponent:.3f}, class temperature {self.class_temperature:.3f}"
         return (
@@ -170,7 +181,39 @@ def fit_calibration(kind: str, modes: BestModes, class_of: torch.Tensor) -> Temp
     """The ``train.calibration`` named ``kind`` fitted on ``modes`` (:func:`check_calibration`)."""
     check_calibration(kind)
     single = choose_temperature(modes.class_logits, modes.anchor_logits, modes.best, class_of)
+    if kind == "per_class":
+        return fit_per_class(modes, class_of, single)
     return single if kind == "temperature" else fit_speed_class(modes, class_of, single)
+
+
+#: ``"per_class"``: a class with fewer validation targets keeps the single temperature.
+MIN_CLASS_TARGETS = 30
+
+
+def fit_per_class(modes: BestModes, class_of: torch.Tensor, single: TemperatureFit) -> TemperatureFit:
+    """``"per_class"``: for each class, :func:`choose_temperature` on the targets of that class (the argmax of their
+    class logits: the class is an input), ``single``'s where it has fewer than :data:`MIN_CLASS_TARGETS`; returned
+    as each anchor's logit scale 1 / T of its class, with a temperature of 1."""
+    klass = modes.class_logits.argmax(dim=1)
+    temps = []
+    for c in range(modes.class_logits.shape[1]):
+        m = klass == c
+        if int(m.sum()) < MIN_CLASS_TARGETS:
+            temps.append(single.temperature)
+            continue
+        temps.append(
+            choose_temperature(modes.class_logits[m], modes.anchor_logits[m], modes.best[m], class_of).temperature
+        )
+    scale = 1.0 / torch.tensor(temps, dtype=torch.float64)[class_of]
+    p = mode_probabilities(modes.class_logits, modes.anchor_logits * scale.to(modes.anchor_logits.dtype), class_of)
+    return replace(
+        single,
+        temperature=1.0,
+        objective="per class",
+        nll_after=best_mode_log_loss(p, modes.best),
+        gap_after=reliability_gap(p, modes.best),
+        anchor_logit_scale=tuple(float(x) for x in scale),
+    )
 
 
 def choose_temperature(
@@ -252,6 +295,8 @@ def validation_logits(
     from training.export import load_checkpoint
 
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
+    if isinstance(model, DGAN):  # fitted on the network's own logits, not on an earlier fit's folded scale
+        model.set_anchor_logit_scale(None)
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = split_windows(calibration_config(cfg), spec, "val", progress)
@@ -280,5 +325,8 @@ def calibrate_checkpoint(
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
         parts.append(fold_modes)
     found = replace(fit_calibration(kind, BestModes.joined(parts), class_of), folds=len(parts))
-    update_checkpoint(path, **found.calibration.keys(complete=True))
+    if found.anchor_logit_scale is not None and "members" in torch.load(path, weights_only=False):
+        raise ValueError(f"{path}: train.calibration = 'per_class' is for single networks, not a consensus")
+    scale = None if found.anchor_logit_scale is None else list(found.anchor_logit_scale)
+    update_checkpoint(path, **found.calibration.keys(complete=True), anchor_logit_scale=scale)
     return found

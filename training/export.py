@@ -22,7 +22,7 @@ from training.modules.dgan import DGAN, ConsensusEnsemble
 
 OUTPUTS = list(CONTRACT_OUTPUTS)
 #: What a bundled checkpoint keeps of a run's ``best.pt`` (export and the parity test need no optimizer state).
-SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature", *Calibration.KEYS)
+SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature", *Calibration.KEYS, "anchor_logit_scale")
 #: The inputs of an exported model (contract 3, the padded neighbour layout), in ``DGAN.forward_padded``'s order.
 INPUTS = PADDED_INPUTS
 
@@ -70,6 +70,7 @@ def _member(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.
     spec = input_spec(cfg)
     model = build_model(cfg, spec, len(ckpt["anchors"]))
     model.load_state_dict(ckpt["model"])
+    model.set_anchor_logit_scale(ckpt.get("anchor_logit_scale"))  # a per-class temperature (training.calibrate)
     model.eval()
     anchors = np.asarray(ckpt["anchors"])
     # Checkpoints from before multi-class training have one class and no class_of.

@@ -44,6 +44,10 @@ class ModelConfig:
     #: degree inside the graph (:func:`neighbor_groups`), which pays where few agents have many senders (`hdmap`: -5 to
     #: -12% at 128-256 agents, some 70-95 µs a call for its fixed cost; docs/speed.md).
     neighbor_groups: bool = False
+    #: The classes whose agents read the map (comma-separated names; "" = every class). Another class's agents get
+    #: ``map_present`` 0 inside the network, as if their frame had no map (models with an optional map only; chosen on
+    #: validation: `hdmap`'s vehicles are better without it, docs/results.md).
+    map_classes: str = ""
 
 
 class ResBlock(nn.Module):
@@ -98,6 +102,9 @@ class MapEncoder(nn.Module):
 class DGAN(nn.Module):
     """Inputs and outputs follow the dgan model contract (``docs/model-contract.md``)."""
 
+    map_gate: Tensor
+    anchor_logit_scale: Tensor
+
     def __init__(
         self,
         cfg: ModelConfig,
@@ -108,9 +115,18 @@ class DGAN(nn.Module):
         num_anchors: int,
         map_hw: tuple[int, int] | None,
         map_optional: bool = False,
+        map_gate: list[float] | None = None,
     ) -> None:
         super().__init__()
-        self.cfg, self.t_f, self.k = cfg, t_f, num_anchors
+        self.cfg, self.t_f, self.k, self.num_classes = cfg, t_f, num_anchors, num_classes
+        # Per class, whether its agents read the map (``map_classes``); derived from the configuration, not stored.
+        self.register_buffer("map_gate", torch.tensor(map_gate or [1.0] * num_classes), persistent=False)
+        self.gated = map_gate is not None and any(g != 1.0 for g in map_gate)
+        # Each anchor's logit scale, 1/T of its class's block under a per-class temperature (``train.calibration =
+        # "per_class"``, folded into the network so that the engine's decoding, at temperature 1, applies it); set
+        # from the checkpoint by :meth:`set_anchor_logit_scale`.
+        self.register_buffer("anchor_logit_scale", torch.ones(num_anchors), persistent=False)
+        self.scaled = False
         self.embed = nn.Sequential(nn.Linear(3, cfg.embed_dim), nn.ReLU())
         self.lstm = nn.LSTM(cfg.embed_dim, cfg.lstm_dim, batch_first=True)
         self.state_mlp = nn.Sequential(
@@ -127,6 +143,8 @@ class DGAN(nn.Module):
         # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
         # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
         self.map_optional = map_optional and self.map_enc is not None
+        if self.gated and not self.map_optional:
+            raise ValueError("model.map_classes needs a model whose map is optional (map dropout, contract 2)")
         node_in = cfg.lstm_dim + cfg.state_dim_out + (cfg.map_dim if self.map_enc is not None else 0)
         node_in += 1 if self.map_optional else 0
         self.node = nn.Sequential(nn.Linear(node_in, cfg.node_dim), nn.ReLU())
@@ -153,6 +171,8 @@ class DGAN(nn.Module):
             features = self.map_enc(map)
             if self.map_optional:
                 assert map_present is not None, "this model's map is optional: it takes map_present"
+                if self.gated:  # the state's last C columns are the agent's one-hot class
+                    map_present = map_present * (state[:, -self.num_classes :] @ self.map_gate.to(state.dtype))
                 present = map_present.unsqueeze(-1)
                 parts += [features * present, present]
             else:
@@ -163,7 +183,18 @@ class DGAN(nn.Module):
     def heads(self, p: Tensor, v: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         z = self.trunk(torch.cat([p, v], dim=-1)) if self.cfg.use_gat else self.trunk(v + p)
         offsets = self.offset_head(z).view(-1, self.k, self.t_f, 2)
-        return self.class_head(z), self.anchor_head(z), offsets
+        anchor_logits = self.anchor_head(z)
+        if self.scaled:
+            anchor_logits = anchor_logits * self.anchor_logit_scale.to(anchor_logits.dtype)
+        return self.class_head(z), anchor_logits, offsets
+
+    def set_anchor_logit_scale(self, scale: list[float] | None) -> None:
+        """Scales each anchor's logit (``None``: none), as a per-class temperature folded into the network does."""
+        values = [1.0] * self.k if scale is None else [float(x) for x in scale]
+        if len(values) != self.k or not all(0.0 < x < float("inf") for x in values):
+            raise ValueError(f"anchor_logit_scale needs {self.k} positive finite values, got {scale}")
+        self.anchor_logit_scale.copy_(torch.tensor(values))
+        self.scaled = scale is not None
 
     def forward(
         self,

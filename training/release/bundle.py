@@ -8,6 +8,7 @@ for the parity test in ``training/checkpoints/<name>.pt``, evaluate it with the 
     python -m training.release.bundle --reexport zara1 sdd      # the kept checkpoints, exported again (a new contract)
     python -m training.release.bundle --denoise zara1 0.1       # histories denoised first (contract 10), exported again
     python -m training.release.bundle --restate zara1           # its card's test metrics measured again
+    python -m training.release.bundle --map-classes hdmap cyclist,pedestrian   # only they read the map
 """
 
 from __future__ import annotations
@@ -174,6 +175,24 @@ def regroup(name: str, groups: bool) -> Path:
     return _reexport_with(name, "neighbor_groups", groups, section="model")
 
 
+def regate(name: str, classes: str, data_root: Path) -> Path:
+    """Sets which classes of the bundled model ``name`` read its map (``model.map_classes``: the others' map_present
+    is 0 inside the network) in its kept checkpoint, refits its calibration as one temperature per class
+    (``train.calibration = "per_class"``) on its validation split and exports it again; its weights are unchanged.
+    Which classes read the map is chosen on validation before bundling (docs/results.md)."""
+    from training.checkpoint import update_checkpoint
+
+    ckpt = CHECKPOINTS / f"{name}.pt"
+    loaded = torch.load(ckpt, weights_only=False)
+    if "members" in loaded:
+        raise ValueError(f"{name} is a consensus; model.map_classes and a per-class temperature are for one network")
+    loaded["config"]["model"]["map_classes"] = classes
+    loaded["config"]["train"]["calibration"] = "per_class"
+    update_checkpoint(ckpt, config=loaded["config"])
+    print(f"{name}: {calibrate_checkpoint(ckpt, data_root)}", flush=True)
+    return reexport(name)
+
+
 def _reexport_with(name: str, key: str, value: Any, section: str = "data") -> Path:
     """Sets ``<section>.<key>`` in the bundled model ``name``'s kept checkpoint (in each member's config too, for a
     consensus: ``training.ensemble``) and exports it again (:func:`reexport`)."""
@@ -204,6 +223,37 @@ def restate(name: str, data_root: Path) -> dict[str, Any]:
 
 
 def main() -> None:
+    ap = _parser()
+    a = ap.parse_args()
+    if a.map_classes:
+        print(regate(a.map_classes[0], a.map_classes[1], a.data_root.expanduser()))
+        return
+    if a.neighbor_groups:
+        model, on = a.neighbor_groups
+        if on not in ("on", "off"):
+            ap.error(f"--neighbor-groups takes on or off, got {on!r}")
+        print(regroup(model, on == "on"))
+        return
+    if a.denoise:
+        print(redenoise(a.denoise[0], float(a.denoise[1])))
+        return
+    if a.restate:
+        for name in a.restate:
+            print(json.dumps({name: restate(name, a.data_root.expanduser())}, indent=2))
+        return
+    if a.render:
+        print(rerender(*a.render))
+        return
+    if a.reexport:
+        for name in a.reexport:
+            print(reexport(name))
+        return
+    if not a.run or a.name is None:
+        ap.error("give a run folder (or several) and --name (or --reexport MODEL ...)")
+    print(json.dumps(bundle(a.run, a.name, a.data_root.expanduser(), a.calibration_fold), indent=2))
+
+
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
         "run", type=Path, nargs="*", help="a run folder, or several runs of one configuration (an ensemble)"
@@ -237,30 +287,13 @@ def main() -> None:
         metavar=("MODEL", "ON"),
         help="export a bundled model again with its attention in two degree groups (on) or one (off); same outputs",
     )
-    a = ap.parse_args()
-    if a.neighbor_groups:
-        model, on = a.neighbor_groups
-        if on not in ("on", "off"):
-            ap.error(f"--neighbor-groups takes on or off, got {on!r}")
-        print(regroup(model, on == "on"))
-        return
-    if a.denoise:
-        print(redenoise(a.denoise[0], float(a.denoise[1])))
-        return
-    if a.restate:
-        for name in a.restate:
-            print(json.dumps({name: restate(name, a.data_root.expanduser())}, indent=2))
-        return
-    if a.render:
-        print(rerender(*a.render))
-        return
-    if a.reexport:
-        for name in a.reexport:
-            print(reexport(name))
-        return
-    if not a.run or a.name is None:
-        ap.error("give a run folder (or several) and --name (or --reexport MODEL ...)")
-    print(json.dumps(bundle(a.run, a.name, a.data_root.expanduser(), a.calibration_fold), indent=2))
+    ap.add_argument(
+        "--map-classes",
+        nargs=2,
+        metavar=("MODEL", "CLASSES"),
+        help="set which classes read a bundled model's map (comma-separated), refit a temperature per class, export",
+    )
+    return ap
 
 
 if __name__ == "__main__":

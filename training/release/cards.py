@@ -96,9 +96,13 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             "Agents' headings come from their direction of motion"
             + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
         )
+    if classes := cfg["model"].get("map_classes", ""):
+        parts.append(f"Only its {classes.replace(',', ' and ')} agents read the map (`model.map_classes`).")
     if words := denoise_words(cfg):
         parts.append(words)
-    parts.append(f"Mode probabilities at {temperature_words(metrics)} {fitted_where(cfg)}.")
+    per_class = t.get("calibration") == "per_class"
+    words = "one temperature per class, folded into the anchor logits," if per_class else temperature_words(metrics)
+    parts.append(f"Mode probabilities at {words} {fitted_where(cfg)}.")
     return " ".join(parts)
 
 

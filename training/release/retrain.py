@@ -10,7 +10,7 @@ from dgan.frame import DENOISE_GATE_M
 from training.calibrate import calibrate_checkpoint
 from training.config import Config
 from training.ensemble import ensemble_checkpoint, fit_top_scale
-from training.release.bundle import bundle, model_checkpoint, redenoise, restate, slim_checkpoint
+from training.release.bundle import bundle, model_checkpoint, redenoise, regate, restate, slim_checkpoint
 from training.release.cards import calibration_folds
 from training.reports import hdmap, multiclass
 from training.reports.ethucy import SCENES
@@ -106,10 +106,15 @@ def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: 
 ENSEMBLE_SEEDS = {"hdmap": (0,), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1, 2)}
 
 
+#: The classes whose agents read the bundled HD-map model's map once it is trained (``model.map_classes``, with one
+#: temperature per class): its vehicles are better without it on validation (hdmap.toml).
+HDMAP_MAP_CLASSES = "cyclist,pedestrian"
+
+
 def train_hdmap(root: Path) -> None:
     """Trains the HD-map model with and without its map (both on every source, ``data.extra_sources``), one run per
-    seed of :data:`ENSEMBLE_SEEDS`; bundles the first configuration's run as ``hdmap`` and keeps the second's as
-    ``training/checkpoints/baselines/hdmap-nomap.pt``."""
+    seed of :data:`ENSEMBLE_SEEDS`; bundles the first configuration's run as ``hdmap`` (its map read by
+    :data:`HDMAP_MAP_CLASSES` alone) and keeps the second's as ``training/checkpoints/baselines/hdmap-nomap.pt``."""
     from training.release.bundle import bundle
 
     runs = {
@@ -117,6 +122,7 @@ def train_hdmap(root: Path) -> None:
         for config in ("hdmap", "hdmap_nomap")
     }
     bundle(runs["hdmap"], "hdmap", root)
+    regate("hdmap", HDMAP_MAP_CLASSES, root)
     if len(runs["hdmap_nomap"]) > 1:
         ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)
         fit_top_scale(hdmap.NOMAP, root)

@@ -180,3 +180,39 @@ def test_neighbor_groups_take_on_or_off(monkeypatch: pytest.MonkeyPatch, capsys:
         bundle.main()
     assert exit_info.value.code == 2
     assert "--neighbor-groups takes on or off, got 'yes'" in capsys.readouterr().err
+
+
+def test_map_classes_refit_a_temperature_per_class_and_export_the_bundled_hdmap_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--map-classes``: the kept checkpoint's model.map_classes and train.calibration = "per_class" are set, the
+    temperatures refitted on validation and the model exported again; done on the bundled `hdmap`'s own checkpoint
+    (already so), it gives the bundled file's predictions back. A consensus is refused."""
+    import shutil
+
+    import numpy as np
+    import torch
+    from conftest import shared_data
+
+    import dgan
+    from dgan.demo import scene_for
+    from training.release import bundle
+
+    root = shared_data("waymo_motion_samples")
+    shutil.copy(bundle.CHECKPOINTS / "hdmap.pt", tmp_path / "hdmap.pt")
+    shutil.copy(bundle.CHECKPOINTS / "eth.pt", tmp_path / "eth.pt")
+    monkeypatch.setattr(bundle, "CHECKPOINTS", tmp_path)
+    monkeypatch.setattr(bundle, "MODELS", tmp_path)
+    path = bundle.regate("hdmap", "cyclist,pedestrian", root)
+    kept = torch.load(tmp_path / "hdmap.pt", weights_only=False)
+    assert (kept["config"]["model"]["map_classes"], kept["config"]["train"]["calibration"]) == (
+        "cyclist,pedestrian",
+        "per_class",
+    )
+    assert len(kept["anchor_logit_scale"]) == 30
+    frame = scene_for(dgan.Predictor("hdmap").spec).frame
+    a, b = dgan.Predictor("hdmap").predict(frame), dgan.Predictor(path).predict(frame)
+    np.testing.assert_allclose(a.trajectories, b.trajectories, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(a.probabilities, b.probabilities, rtol=0, atol=1e-6)
+    with pytest.raises(ValueError, match="consensus"):
+        bundle.regate("eth", "pedestrian", root)

@@ -82,7 +82,7 @@ def test_speed_and_class_temperatures_drawn_are_given_back() -> None:
     # One temperature cannot be right for slow and fast agents at once.
     assert fit.gap_after < 0.03 < single.gap_after
     assert "class temperature" in str(fit)
-    with pytest.raises(ValueError, match=r"train\.calibration must be one of temperature, speed_class"):
+    with pytest.raises(ValueError, match=r"train\.calibration must be one of temperature, speed_class, per_class"):
         check_calibration("platt")
 
 
@@ -100,6 +100,29 @@ def test_a_one_class_model_keeps_a_class_temperature_of_one() -> None:
     assert fit.class_temperature == 1.0
     assert (fit.temperature, fit.speed_exponent) == pytest.approx((0.7, 0.6), rel=0.15)
     assert set(fit.calibration.keys(complete=False)) == {"temperature", "temperature_speed_exponent"}
+
+
+def test_per_class_temperatures_drawn_are_given_back_and_fold_into_the_logits() -> None:
+    # Two classes (an input: p(c) all but one-hot), each agent's best mode drawn at its class's temperature.
+    g = torch.Generator().manual_seed(3)
+    n, temps = 40000, (0.6, 2.5)
+    class_of = torch.tensor([0, 0, 0, 1, 1, 1])
+    klass = (torch.rand(n, generator=g) < 0.5).long()
+    cl = 8.0 * torch.nn.functional.one_hot(klass, 2).float()
+    al = 2.0 * torch.randn(n, 6, generator=g)
+    t = torch.tensor(temps)[class_of]  # (K,)
+    p = torch.softmax(cl, dim=1)[:, class_of] * torch.cat(
+        [torch.softmax(al[:, :3] / t[:3], dim=1), torch.softmax(al[:, 3:] / t[3:], dim=1)], dim=1
+    )
+    modes = BestModes(cl, al, torch.multinomial(p, 1, generator=g).squeeze(1), torch.zeros(n, dtype=torch.float64))
+    fit = fit_calibration("per_class", modes, class_of)
+    assert fit.objective == "per class"
+    assert fit.temperature == 1.0
+    assert fit.anchor_logit_scale is not None
+    assert [1.0 / x for x in fit.anchor_logit_scale] == pytest.approx([0.6] * 3 + [2.5] * 3, rel=0.1)
+    single = fit_calibration("temperature", modes, class_of)
+    assert fit.gap_after < 0.03 < single.gap_after  # one temperature cannot be right for both classes
+    assert "folded into the network" in str(fit)
 
 
 def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int, target_class: str = "") -> Path:
