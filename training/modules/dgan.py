@@ -168,17 +168,32 @@ class DGAN(nn.Module):
         parts = [h_n[-1], self.state_mlp(state)]
         if self.map_enc is not None:
             assert map is not None, "this model has a map branch"
-            features = self.map_enc(map)
+            if self.gated:  # the state's last C columns are the agent's one-hot class
+                assert map_present is not None, "this model's map is optional: it takes map_present"
+                reads = state[:, -self.num_classes :] @ self.map_gate.to(state.dtype)
+                map_present = map_present * reads
+                features = self._readers_map(map, reads)
+            else:
+                features = self.map_enc(map)
             if self.map_optional:
                 assert map_present is not None, "this model's map is optional: it takes map_present"
-                if self.gated:  # the state's last C columns are the agent's one-hot class
-                    map_present = map_present * (state[:, -self.num_classes :] @ self.map_gate.to(state.dtype))
                 present = map_present.unsqueeze(-1)
                 parts += [features * present, present]
             else:
                 parts.append(features)
         out: Tensor = self.node(torch.cat(parts, dim=-1))
         return out
+
+    def _readers_map(self, map: Tensor, reads: Tensor) -> Tensor:
+        """The map CNN's features of the agents whose class reads the map (``reads`` 1), zeros for the others: only
+        their crops go through it, so a frame's cost follows its readers (none: an empty batch, which PyTorch and ONNX
+        Runtime both run). BatchNorm in eval mode works row by row, so each row's features are those of a pass over
+        every crop."""
+        assert self.map_enc is not None
+        rows = torch.nonzero(reads > 0).reshape(-1)
+        sub = self.map_enc(map[rows])
+        out = torch.zeros(map.shape[0], sub.shape[1], dtype=sub.dtype, device=sub.device)
+        return out.index_put((rows,), sub)
 
     def heads(self, p: Tensor, v: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         z = self.trunk(torch.cat([p, v], dim=-1)) if self.cfg.use_gat else self.trunk(v + p)

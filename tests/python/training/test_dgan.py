@@ -44,6 +44,14 @@ def test_classes_that_do_not_read_the_map_are_served_as_without_one() -> None:
     torch.testing.assert_close(gated_nodes[vehicle], without[vehicle])
     torch.testing.assert_close(gated_nodes[~vehicle], with_map[~vehicle])
     assert not torch.allclose(with_map[vehicle], without[vehicle])  # the map reached the plain model's vehicles
+    # A frame without a reader: no crop goes through the map CNN (an empty batch), as without the map.
+    x3 = dgan.preprocess(dgan.Frame(pos[:3], classes=["vehicle"] * 3, map=vector), spec)
+    bare3 = dgan.preprocess(dgan.Frame(pos[:3], classes=["vehicle"] * 3), spec)
+    with torch.no_grad():
+        torch.testing.assert_close(
+            gated.encode(*[torch.from_numpy(x3[k]) for k in keys]),
+            plain.encode(*[torch.from_numpy(bare3[k]) for k in keys]),
+        )
     inputs = [torch.from_numpy(x[k]) for k in PADDED_INPUTS if k in x]
     with torch.no_grad():
         logits = gated.forward_padded(*inputs)[1]
