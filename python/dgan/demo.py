@@ -4,7 +4,7 @@ the paper's Figure 3 (observed path, ground truth, predicted modes coloured by p
 The scene follows the model's time base: ETH/UCY models (0.4 s) get zara1, ``sdd`` (1/3 s) a Stanford Drone excerpt
 over its reference image, ``apolloscape`` (0.5 s) an ApolloScape excerpt drawn in world metres with each agent's
 measured box, ``hdmap`` (0.2 s) a Waymo Open Motion scenario over its vector map as the engine rasterises it, plus a
-second picture of one agent's map crop as the network sees it. Classes are told apart by colour.
+second picture of one agent's map crop as the engine draws it for the network. Classes are told apart by colour.
 """
 
 from __future__ import annotations
@@ -309,5 +309,5 @@ def run(model: str = "zara1", now: float | None = None, modes: int = 3, out: Pat
     print(f"wrote {path}")
     if predictor.spec.map is not None:
         crop = draw_crop(scene, predictor, pred, out.with_name(f"{out.stem}_crop{out.suffix}"))
-        print(f"wrote {crop} (one agent's map crop as the network sees it)")
+        print(f"wrote {crop} (one agent's map crop as the engine draws it for the network)")
     return 0
