@@ -297,6 +297,8 @@ def validation_logits(
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
     if isinstance(model, DGAN):  # fitted on the network's own logits, not on an earlier fit's folded scale
         model.set_anchor_logit_scale(None)
+    elif cfg.train.calibration == "per_class":
+        raise ValueError(f"{path}: train.calibration = 'per_class' is for single networks, not a consensus")
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = split_windows(calibration_config(cfg), spec, "val", progress)
@@ -325,8 +327,6 @@ def calibrate_checkpoint(
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
         parts.append(fold_modes)
     found = replace(fit_calibration(kind, BestModes.joined(parts), class_of), folds=len(parts))
-    if found.anchor_logit_scale is not None and "members" in torch.load(path, weights_only=False):
-        raise ValueError(f"{path}: train.calibration = 'per_class' is for single networks, not a consensus")
     scale = None if found.anchor_logit_scale is None else list(found.anchor_logit_scale)
     update_checkpoint(path, **found.calibration.keys(complete=True), anchor_logit_scale=scale)
     return found

@@ -200,3 +200,18 @@ def test_the_calibration_split_names_the_validation_windows_of_the_fit() -> None
     assert own.data.augment_noise == joint.data.augment_noise
     with pytest.raises(ValueError, match=r"train\.calibration_split must be 'all' or 'own', got 'every'"):
         calibration_config(Config.from_dict({"train": {"calibration_split": "every"}}))
+
+
+def test_a_per_class_temperature_is_refused_for_a_consensus_before_any_fit(tmp_path: Path) -> None:
+    import shutil
+
+    from training.checkpoint import update_checkpoint
+
+    path = tmp_path / "eth.pt"
+    shutil.copy(ROOT / "training" / "checkpoints" / "eth.pt", path)
+    members = torch.load(path, weights_only=False)["members"]
+    for m in members:
+        m["config"]["train"]["calibration"] = "per_class"
+    update_checkpoint(path, members=members)
+    with pytest.raises(ValueError, match="per_class' is for single networks, not a consensus"):
+        calibrate_checkpoint(path, tmp_path / "no data here")
