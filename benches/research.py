@@ -329,17 +329,19 @@ def draw_boxes(crops: Arr, states: dict[str, Arr], m: Any) -> None:
 
 
 def map_crops(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> Arr:
-    """``(N, 3, H, W)`` float32 crops in [0, 1]."""
+    """``(N, 3, H, W)`` float32 crops in [0, 1]; those of classes not in ``m.classes`` (contract 11) all zeros."""
+    readers = np.isin(np.asarray(frame.classes), m.classes) if m.classes else np.ones(len(frame), dtype=bool)
     if isinstance(frame.map, dgan.RasterMap):
         crops = raster_crops(frame.map, pixel_world(states, m))
     else:
         els = Elements(frame.map.elements() if frame.map is not None else [])
         pos, heading = states["position"], states["heading"]
         crops = np.zeros((len(pos), m.height_px, m.width_px, 3), dtype=np.uint8)
-        for i in range(len(pos)):
+        for i in np.flatnonzero(readers):
             crops[i] = vector_crop(els, pos[i], heading[i], m)
     if m.draw_agents:
         draw_boxes(crops, states, m)
+    crops[~readers] = 0
     out: Arr = (crops.astype(np.float32) / 255.0).transpose(0, 3, 1, 2)
     return np.ascontiguousarray(out)
 

@@ -24,6 +24,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
             d.map_width_px // 2,
             optional=cfg.train.map_dropout > 0,
             render=d.map_render,
+            classes=tuple(x.strip() for x in cfg.model.map_classes.split(",") if x.strip()),
         )
     return dgan.InputSpec(
         dt_s=info.dt_s,

@@ -10,6 +10,7 @@ second picture of one agent's map crop as the engine draws it for the network. C
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -207,14 +208,14 @@ def draw(scene: DemoScene, pred: Prediction, out: Path, title: str) -> Path:
     return out
 
 
-def crop_agent(scene: DemoScene) -> int:
+def crop_agent(scene: DemoScene, readers: Sequence[str] = ()) -> int:
     """The row of the agent whose crop the demo shows: the one that travels farthest over its observed path and its
-    future."""
+    future, among the classes that read the map (``readers``, a model's ``map.classes``; empty: every class)."""
     frame = scene.frame
     best, row = -1.0, 0
     for i, pid in enumerate(frame.ids):
         fut = scene.futures.get(int(pid))
-        if fut is None or not len(fut):
+        if fut is None or not len(fut) or (readers and frame.classes[i] not in readers):
             continue
         hist = frame.positions[i][frame.mask[i]]
         score = float(np.linalg.norm(fut[-1] - hist[-1]) + np.linalg.norm(hist[-1] - hist[0]))
@@ -237,7 +238,7 @@ def draw_crop(scene: DemoScene, predictor: Predictor, pred: Prediction, out: Pat
     spec = predictor.spec
     assert spec.map is not None
     x = preprocess(scene.frame, spec)
-    i = crop_agent(scene)
+    i = crop_agent(scene, spec.map.classes)
     pid = int(scene.frame.ids[i])
     m = spec.map
     origin, heading = x["origin"][i : i + 1], x["heading"][i : i + 1]

@@ -38,6 +38,14 @@ class MapSpec:
     #: :class:`dgan.VectorMap` for every later call, and resamples each crop from them (a raster map is always
     #: resampled per crop).
     render: str = "agent"
+    #: Contract 11: the classes whose agents read the map, when the network reads it for them alone (e.g.
+    #: ``("cyclist", "pedestrian")``); the other agents' crops are left blank instead of drawn. Empty: every agent's.
+    classes: Sequence[str] = ()
+
+    def __post_init__(self) -> None:
+        if isinstance(self.classes, str) or not hasattr(self.classes, "__iter__"):
+            raise InvalidSpecError(f"map.classes must be a sequence of class names, got {self.classes!r}")
+        object.__setattr__(self, "classes", tuple(self.classes))
 
 
 @dataclass(frozen=True)
@@ -138,6 +146,10 @@ class InputSpec:
         d["prior"] = self.prior.to_dict()
         if d["denoise_gate_m"] == 0:  # as the contract writes it: contracts 1-9 have no gate
             del d["denoise_gate_m"]
+        if d["map"] is not None:  # contracts 1-10 draw every agent's crop
+            d["map"]["classes"] = list(self.map.classes) if self.map is not None else []
+            if not d["map"]["classes"]:
+                del d["map"]["classes"]
         return json.dumps(d)
 
     @classmethod

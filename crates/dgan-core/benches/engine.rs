@@ -103,6 +103,7 @@ fn bench_raster(c: &mut Criterion) {
         draw_agents: true,
         optional: false,
         render: dgan_core::MapRender::Agent,
+        classes: vec![],
     };
     let mut g = c.benchmark_group("raster");
     let frame = road_frame(vector_map());

@@ -17,10 +17,10 @@ use std::collections::BTreeMap;
 /// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`); version 9 a temperature that grows
 /// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`);
 /// version 10 histories denoised before preprocessing (`denoise_gate_m`).
-pub const CONTRACT_VERSION: u32 = 10;
+pub const CONTRACT_VERSION: u32 = 11;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 10] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 11] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -258,6 +258,11 @@ impl ModelContract {
         if self.contract_version < 10 && self.input.denoise_gate_m != 0.0 {
             return Err(DganError::Contract(
                 "denoise_gate_m is a contract-10 key; versions 1 to 9 take the histories as given".into(),
+            ));
+        }
+        if self.contract_version < 11 && self.input.map.as_ref().is_some_and(|m| !m.classes.is_empty()) {
+            return Err(DganError::Contract(
+                "map.classes is a contract-11 key; versions 1 to 10 draw every agent's crop".into(),
             ));
         }
         let render = self.input.map.as_ref().map_or(MapRender::Agent, |m| m.render);
@@ -598,6 +603,19 @@ mod tests {
             let err = ModelContract::from_json(&v10.replace("0.1, \"units\"", &format!("{bad}, \"units\"")));
             assert!(err.unwrap_err().to_string().contains("denoise_gate_m"), "{bad}");
         }
+        // Version 11 may name the classes whose crops are drawn; version 10 draws every agent's.
+        let readers = "\"render\": \"tiles\", \"classes\": [\"pedestrian\"]";
+        let v11 = v10
+            .replace("\"contract_version\": 10", "\"contract_version\": 11")
+            .replace("\"render\": \"tiles\"", readers);
+        let c = ModelContract::from_json(&v11).unwrap();
+        assert_eq!(c.input.map.as_ref().unwrap().classes, vec![AgentClass::Pedestrian]);
+        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+        assert!(!ModelContract::from_json(&v10).unwrap().to_json().unwrap().contains("\"classes\": [\"pedestrian\"]"));
+        let err = ModelContract::from_json(&v10.replace("\"render\": \"tiles\"", readers)).unwrap_err().to_string();
+        assert!(err.contains("map.classes is a contract-11 key"), "{err}");
+        let err = ModelContract::from_json(&v11.replace("[\"pedestrian\"]", "[\"cyclist\"]")).unwrap_err().to_string();
+        assert!(err.contains("map.classes names cyclist"), "{err}");
     }
 
     #[test]

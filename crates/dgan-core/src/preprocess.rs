@@ -530,6 +530,7 @@ mod tests {
                 draw_agents: true,
                 optional,
                 render: crate::spec::MapRender::Agent,
+                classes: vec![],
             }),
             prior: PriorSpec::constant_velocity(0.0),
             graph: GraphLayout::Padded,

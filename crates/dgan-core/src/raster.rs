@@ -105,9 +105,13 @@ fn rasterize_rows_into(
         return Err(DganError::InvalidFrame(format!("{} states for {} agents", states.len(), frame.len())));
     }
     let n = states.len();
-    let mine: Vec<&TrafficState> = rows
+    // Each row's state, or None where its class does not read the map (`spec.classes`): that crop stays blank.
+    let mine: Vec<Option<&TrafficState>> = rows
         .iter()
-        .map(|&i| states.get(i).ok_or_else(|| DganError::InvalidSpec(format!("crop of agent {i} of {n}"))))
+        .map(|&i| match (states.get(i), frame.classes().get(i)) {
+            (Some(s), Some(&c)) => Ok(spec.reads(c).then_some(s)),
+            _ => Err(DganError::InvalidSpec(format!("crop of agent {i} of {n}"))),
+        })
         .collect::<Result<_>>()?;
     let (h, w) = (spec.height_px, spec.width_px);
     let agents: RTree<GeomWithData<[f64; 2], usize>> =
@@ -130,12 +134,16 @@ fn rasterize_rows_into(
     // From tiles, the boxes are drawn once on the tiles the crops read instead of once on each crop.
     let overlay = match frame.map() {
         Some(SceneMap::Vector(m)) if spec.render == MapRender::Tiles && spec.draw_agents => {
-            let views: Vec<[f64; 4]> = mine.iter().map(|s| world_bounds(spec, &s.pose())).collect();
+            let views: Vec<[f64; 4]> = mine.iter().flatten().map(|s| world_bounds(spec, &s.pose())).collect();
             Some(Overlay::new(m, spec, &views, boxes_near, threads)?)
         }
         _ => None,
     };
-    let draw = |crop: &mut [f32], s: &TrafficState| -> Result<()> {
+    let draw = |crop: &mut [f32], s: &Option<&TrafficState>| -> Result<()> {
+        let Some(s) = *s else {
+            crop.fill(0.0);
+            return Ok(());
+        };
         // From tiles, straight into the crop: the boxes, if drawn, are on the overlay's tiles already.
         match (frame.map(), &overlay) {
             (Some(SceneMap::Vector(m)), Some(o)) => {
@@ -174,7 +182,7 @@ fn rasterize_rows_into(
         // blank ones, and contiguous shares left them on one thread (a tiled zara1 frame of 4,096 agents: 86 ms of
         // crops on one thread, 83 on two, 32 on sixteen).
         let jobs: Vec<_> = flat.chunks_mut(per * CROPS_PER_JOB).zip(mine.chunks(CROPS_PER_JOB)).collect();
-        let one = |(crops, part): (&mut [f32], &[&TrafficState])| {
+        let one = |(crops, part): (&mut [f32], &[Option<&TrafficState>])| {
             crops.chunks_mut(per).zip(part).try_for_each(|(crop, s)| draw(crop, s))
         };
         share_jobs(jobs, threads, one, || DganError::InvalidSpec("a rasterising thread panicked".into()))?;
@@ -202,6 +210,7 @@ mod tests {
             draw_agents,
             optional: false,
             render: MapRender::Agent,
+            classes: vec![],
         }
     }
 
@@ -382,6 +391,38 @@ mod tests {
         let s_back = traffic_states(&back, 1.0);
         let reversed = rasterize_on(&back, &s_back, &tiles, 1).unwrap();
         assert_eq!(reversed.select(ndarray::Axis(0), &rev), first);
+    }
+
+    #[test]
+    fn only_the_classes_that_read_the_map_get_drawn_crops() {
+        // `map.classes` (contract 11): a pedestrian's crop is the one drawn for every agent; a vehicle's stays blank.
+        let (f, _, _) = road(MapRender::Agent);
+        let classes: Vec<_> =
+            (0..40).map(|i| if i % 3 == 0 { AgentClass::Pedestrian } else { AgentClass::Vehicle }).collect();
+        let f = Frame::new(f.positions().clone(), None, classes.clone())
+            .unwrap()
+            .with_map(Arc::new(f.map().unwrap().clone()));
+        let s = traffic_states(&f, 1.0);
+        for render in [MapRender::Agent, MapRender::Tiles] {
+            let every = MapSpec { render, ..road(render).2 };
+            let readers = MapSpec { classes: vec![AgentClass::Pedestrian], ..every.clone() };
+            let all = rasterize_on(&f, &s, &every, 1).unwrap();
+            for threads in [1, 3] {
+                let some = rasterize_on(&f, &s, &readers, threads).unwrap();
+                for (i, c) in classes.iter().enumerate() {
+                    let (got, want) = (some.index_axis(ndarray::Axis(0), i), all.index_axis(ndarray::Axis(0), i));
+                    match c {
+                        AgentClass::Pedestrian => assert_eq!(got, want, "{render:?}, agent {i}"),
+                        _ => assert!(got.iter().all(|v| *v == 0.0) && want.iter().any(|v| *v > 0.0), "{i}"),
+                    }
+                }
+                let rows = [3, 4, 0];
+                assert_eq!(
+                    rasterize_rows(&f, &s, &readers, &rows, threads).unwrap(),
+                    some.select(ndarray::Axis(0), &rows)
+                );
+            }
+        }
     }
 
     #[test]

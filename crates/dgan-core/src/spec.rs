@@ -35,6 +35,11 @@ pub struct MapSpec {
     /// How a vector map is drawn into the crops (contract 7); raster maps are always resampled per crop.
     #[serde(default)]
     pub render: MapRender,
+    /// The classes whose agents read the map (contract 11), when the network reads it for them alone: the other
+    /// agents' crops are left blank (zeros) instead of drawn, as the network never looks at them. Empty (the
+    /// default): every agent's crop is drawn.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub classes: Vec<AgentClass>,
 }
 
 /// How a vector map becomes the agents' crops (`map.render` of a contract-7 model).
@@ -80,7 +85,18 @@ impl MapSpec {
                 self.height_px, self.width_px
             ));
         }
+        let mut sorted = self.classes.clone();
+        sorted.sort();
+        sorted.dedup();
+        if sorted.len() != self.classes.len() {
+            return bad(format!("map.classes repeat: {:?}", self.classes));
+        }
         Ok(())
+    }
+
+    /// Whether an agent of `class` gets a drawn crop ([`MapSpec::classes`]).
+    pub fn reads(&self, class: AgentClass) -> bool {
+        self.classes.is_empty() || self.classes.contains(&class)
     }
 
     /// The continuous image coordinates `(col, row)` of a point in the agent's frame (pixel centres at +0.5).
@@ -192,6 +208,9 @@ impl InputSpec {
         if let Some((c, _)) = self.prior.by_class.iter().find(|(c, _)| !self.classes.contains(c)) {
             return bad(format!("prior.by_class names {c}, which is not among the model's classes {:?}", self.classes));
         }
+        if let Some(c) = self.map.iter().flat_map(|m| &m.classes).find(|c| !self.classes.contains(c)) {
+            return bad(format!("map.classes names {c}, which is not among the model's classes {:?}", self.classes));
+        }
         let gate = self.denoise_gate_m;
         if !(gate.is_finite() && (0.0..=MAX_DENOISE_GATE_M).contains(&gate)) {
             return bad(format!("denoise_gate_m must be a number of metres in [0, {MAX_DENOISE_GATE_M}], got {gate}"));
@@ -253,6 +272,7 @@ mod tests {
                 draw_agents: true,
                 optional: false,
                 render: MapRender::Agent,
+                classes: vec![],
             }),
             prior: PriorSpec::NONE,
             graph: GraphLayout::EdgeList,
@@ -274,6 +294,25 @@ mod tests {
         s.map.as_mut().unwrap().agent_row = 32;
         assert!(s.validate().is_err());
         assert!(spec().class_index(AgentClass::Vehicle).is_err());
+    }
+
+    #[test]
+    fn map_classes_are_classes_of_the_model_once_each() {
+        let with = |classes: Vec<AgentClass>| {
+            let mut s = spec();
+            s.map.as_mut().unwrap().classes = classes;
+            s.validate()
+        };
+        assert!(with(vec![AgentClass::Pedestrian]).is_ok());
+        let err = with(vec![AgentClass::Vehicle]).unwrap_err().to_string();
+        assert!(err.contains("map.classes names vehicle"), "{err}");
+        assert!(with(vec![AgentClass::Pedestrian, AgentClass::Pedestrian]).unwrap_err().to_string().contains("repeat"));
+        let m = MapSpec { classes: vec![AgentClass::Cyclist], ..spec().map.unwrap() };
+        assert!(
+            m.reads(AgentClass::Cyclist)
+                && !m.reads(AgentClass::Vehicle)
+                && spec().map.unwrap().reads(AgentClass::Vehicle)
+        );
     }
 
     #[test]

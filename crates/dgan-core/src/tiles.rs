@@ -55,6 +55,7 @@ fn tile_spec(spec: &MapSpec) -> MapSpec {
         draw_agents: false,
         optional: false,
         render: MapRender::Agent,
+        classes: vec![],
     }
 }
 

@@ -55,6 +55,7 @@ fn spec(rng: &mut ChaCha8Rng, t_obs: usize) -> InputSpec {
         draw_agents: rng.random(),
         optional: true,
         render: if rng.random() { dgan_core::MapRender::Tiles } else { dgan_core::MapRender::Agent },
+        classes: vec![],
     });
     InputSpec {
         dt_s: [0.1, 0.4, 1.0][rng.random_range(0..3)],

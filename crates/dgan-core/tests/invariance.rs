@@ -97,6 +97,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
             draw_agents: true,
             optional: false,
             render: dgan_core::MapRender::Agent,
+            classes: vec![],
         }),
         prior: PriorSpec::constant_velocity(0.8),
         graph: GraphLayout::Padded,

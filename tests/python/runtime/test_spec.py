@@ -34,6 +34,22 @@ def test_spec_validation() -> None:
         dgan.InputSpec(dt_s=0.4, t_obs=8, t_f=12, classes=("truck",))
 
 
+def test_map_classes_name_classes_of_the_model_and_are_written_only_when_given() -> None:
+    """Contract 11's ``map.classes``: the readers' names round-trip, none is written for every class (contracts
+    1-10), and a class the model lacks, a repeat or a bare string is refused."""
+    readers = dgan.InputSpec(0.5, 4, 6, ("vehicle", "pedestrian"), map=dgan.MapSpec(classes=["pedestrian"]))
+    assert readers.map is not None
+    assert readers.map.classes == ("pedestrian",)
+    assert dgan.InputSpec.from_dict(json_round_trip(readers)) == readers
+    every = dgan.InputSpec(0.5, 4, 6, ("vehicle", "pedestrian"), map=dgan.MapSpec())
+    assert "classes" not in json_round_trip(every)["map"]  # type: ignore[operator]
+    for bad, says in ((("cyclist",), "map.classes names cyclist"), (("vehicle", "vehicle"), "repeat")):
+        with pytest.raises(exc.InvalidSpecError, match=says):
+            dgan.InputSpec(0.5, 4, 6, ("vehicle", "pedestrian"), map=dgan.MapSpec(classes=bad))
+    with pytest.raises(exc.InvalidSpecError, match="sequence of class names"):
+        dgan.MapSpec(classes="pedestrian")
+
+
 def json_round_trip(spec: dgan.InputSpec) -> dict[str, object]:
     import json
 

@@ -61,3 +61,34 @@ def test_classes_that_do_not_read_the_map_are_served_as_without_one() -> None:
         gated.set_anchor_logit_scale([0.5] * 29)
     with pytest.raises(ValueError, match="not classes of this model"):
         build_model(replace(cfg, model=replace(cfg.model, map_classes="truck")), spec, 30)
+
+
+def test_the_spec_declares_the_readers_and_the_engine_draws_their_crops_alone() -> None:
+    """``model.map_classes`` is the exported spec's ``map.classes`` (contract 11): the engine leaves the other
+    agents' crops blank, each reader's crop is the one drawn for every agent, and the gated network's encoding is the
+    same from either (it never reads the others' crops)."""
+    cfg = Config.load(ROOT / "training" / "configs" / "hdmap.toml")
+    gated_cfg = replace(cfg, model=replace(cfg.model, map_classes="cyclist,pedestrian"))
+    every, readers = (replace(input_spec(c), graph="padded") for c in (cfg, gated_cfg))
+    assert every.map is not None
+    assert readers.map is not None
+    assert (every.map.classes, readers.map.classes) == ((), ("cyclist", "pedestrian"))
+    rng = np.random.default_rng(1)
+    pos = np.cumsum(rng.normal(0.5, 0.2, (5, every.t_obs, 2)), axis=1) + rng.uniform(0, 20, (5, 1, 2))
+    vector = dgan.VectorMap([("lane_centerline", [[-50, -50], [80, 80]]), ("road_edge", [[-50, 0], [80, 5]])])
+    classes = ["vehicle", "pedestrian", "cyclist", "vehicle", "pedestrian"]
+    frame = dgan.Frame(pos, classes=classes, map=vector)
+    x, y = dgan.preprocess(frame, every), dgan.preprocess(frame, readers)
+    vehicle = np.array([c == "vehicle" for c in classes])
+    np.testing.assert_array_equal(y["map"][~vehicle], x["map"][~vehicle])
+    assert not y["map"][vehicle].any()
+    assert x["map"][vehicle].any()
+    model = build_model(gated_cfg, readers, 30).eval()
+    keys = [k for k in inspect.signature(DGAN.encode).parameters if k != "self"]
+    with torch.no_grad():
+        torch.testing.assert_close(
+            model.encode(*[torch.from_numpy(x[k]) for k in keys]),
+            model.encode(*[torch.from_numpy(y[k]) for k in keys]),
+            rtol=0,
+            atol=0,
+        )
