@@ -178,6 +178,10 @@ pub const SPLIT_MIN_AGENTS: usize = 8;
 /// With `threads` ≥ 2, a frame of fewer agents that does not split runs on one lane, single-threaded: at 8 agents
 /// two intra-op threads took 1.11-1.40 of one thread's time (`hdmap`, `apolloscape`; docs/speed.md).
 pub const INTRA_MIN_AGENTS: usize = 16;
+/// [`INTRA_MIN_AGENTS`] for a model without a map, whose network has no convolution to share out: `apolloscape`'s
+/// `predict` on two threads took 1.14, 1.07, 0.99 and 0.87 of one thread's time at 16, 24, 32 and 48 agents (bare
+/// network 1.12, 1.03, 0.97, 0.83), where map models gain from 16 (`zara1` 0.71, `sdd` 0.92; docs/speed.md).
+pub const INTRA_MIN_AGENTS_WITHOUT_MAP: usize = 32;
 
 /// The prediction for every agent of a frame.
 #[derive(Debug, Clone)]
@@ -538,12 +542,24 @@ impl Predictor {
             times.crops = started.elapsed().saturating_sub(times.preprocess);
         }
         // A small frame on a lane: waking intra-op workers costs more than they give there.
-        let pool =
-            if pre.poses.len() < INTRA_MIN_AGENTS && !self.lanes.is_empty() { Pool::Lanes } else { Pool::Sessions };
+        let pool = if pre.poses.len() < self.intra_min_agents() && !self.lanes.is_empty() {
+            Pool::Lanes
+        } else {
+            Pool::Sessions
+        };
         let mut out = self.run_and_decode(std::slice::from_ref(frame), vec![pre], modes, pool, Some(&mut times))?;
         times.total = started.elapsed();
         *self.last_times.lock().unwrap_or_else(|e| e.into_inner()) = Some(times);
         out.pop().ok_or_else(|| DganError::Inference("no prediction for the frame".into()))
+    }
+
+    /// The fewest agents of a frame that does not split for its network call to take the intra-op threads.
+    fn intra_min_agents(&self) -> usize {
+        if self.contract.input.map.is_some() {
+            INTRA_MIN_AGENTS
+        } else {
+            INTRA_MIN_AGENTS_WITHOUT_MAP
+        }
     }
 
     /// Where the time of the latest [`Predictor::predict_modes`] call to finish went (with several threads predicting
