@@ -177,34 +177,39 @@ def regroup(name: str, groups: bool) -> Path:
 
 def regate(name: str, classes: str, data_root: Path) -> Path:
     """Sets which classes of the bundled model ``name`` read its map (``model.map_classes``: the others' map_present
-    is 0 inside the network) in its kept checkpoint, refits its calibration as one temperature per class
-    (``train.calibration = "per_class"``) on its validation split and exports it again; its weights are unchanged.
-    Which classes read the map is chosen on validation before bundling (docs/results.md)."""
-    from training.checkpoint import update_checkpoint
-
-    ckpt = CHECKPOINTS / f"{name}.pt"
-    loaded = torch.load(ckpt, weights_only=False)
-    if "members" in loaded:
-        raise ValueError(f"{name} is a consensus; model.map_classes and a per-class temperature are for one network")
-    loaded["config"]["model"]["map_classes"] = classes
-    loaded["config"]["train"]["calibration"] = "per_class"
-    update_checkpoint(ckpt, config=loaded["config"])
+    is 0 inside the network, and their crops are left blank, contract 11) in its kept checkpoint, refits its
+    calibration as one temperature per class (``train.calibration = "per_class"``) on its validation split and exports
+    it again; its weights are unchanged. Which classes read the map is chosen on validation before bundling
+    (docs/results.md)."""
+    values = {("model", "map_classes"): classes, ("train", "calibration"): "per_class"}
+    ckpt = _set_config(name, values, why="model.map_classes and a per-class temperature are for one network")
     print(f"{name}: {calibrate_checkpoint(ckpt, data_root)}", flush=True)
     return reexport(name)
 
 
 def _reexport_with(name: str, key: str, value: Any, section: str = "data") -> Path:
-    """Sets ``<section>.<key>`` in the bundled model ``name``'s kept checkpoint (in each member's config too, for a
-    consensus: ``training.ensemble``) and exports it again (:func:`reexport`)."""
+    """Sets ``<section>.<key>`` in the bundled model ``name``'s kept checkpoint (:func:`_set_config`) and exports it
+    again (:func:`reexport`)."""
+    _set_config(name, {(section, key): value})
+    return reexport(name)
+
+
+def _set_config(name: str, values: dict[tuple[str, str], Any], why: str = "") -> Path:
+    """Sets each ``(section, key)`` of ``values`` in the bundled model ``name``'s kept checkpoint's configuration (in
+    each member's too, for a consensus: ``training.ensemble``) and returns the checkpoint's path. ``why``: a consensus
+    is refused with that reason, before anything is written."""
     from training.checkpoint import update_checkpoint
 
     ckpt = CHECKPOINTS / f"{name}.pt"
     loaded = torch.load(ckpt, weights_only=False)
+    if why and "members" in loaded:
+        raise ValueError(f"{name} is a consensus; {why}")
     for holder in [loaded, *loaded.get("members", [])]:
         if "config" in holder:
-            holder["config"][section][key] = value
+            for (section, key), value in values.items():
+                holder["config"][section][key] = value
     update_checkpoint(ckpt, **{k: loaded[k] for k in ("config", "members") if k in loaded})
-    return reexport(name)
+    return ckpt
 
 
 def restate(name: str, data_root: Path) -> dict[str, Any]:
