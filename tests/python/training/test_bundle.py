@@ -214,5 +214,10 @@ def test_map_classes_refit_a_temperature_per_class_and_export_the_bundled_hdmap_
     a, b = dgan.Predictor("hdmap").predict(frame), dgan.Predictor(path).predict(frame)
     np.testing.assert_allclose(a.trajectories, b.trajectories, rtol=0, atol=1e-5)
     np.testing.assert_allclose(a.probabilities, b.probabilities, rtol=0, atol=1e-6)
+    spec = dgan.Predictor(path).spec
+    assert spec.map is not None
+    assert spec.map.classes == ("cyclist", "pedestrian")  # contract 11: the engine draws their crops alone
+    before = (tmp_path / "eth.pt").read_bytes()
     with pytest.raises(ValueError, match="consensus"):
         bundle.regate("eth", "pedestrian", root)
+    assert (tmp_path / "eth.pt").read_bytes() == before  # refused before anything is written
