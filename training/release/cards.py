@@ -97,7 +97,8 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
         )
     if classes := cfg["model"].get("map_classes", ""):
-        parts.append(f"Only its {classes.replace(',', ' and ')} agents read the map (`model.map_classes`).")
+        who = classes.replace(",", " and ")
+        parts.append(f"Only its {who} agents read the map (`map.classes`: the engine draws their crops alone).")
     if words := denoise_words(cfg):
         parts.append(words)
     per_class = t.get("calibration") == "per_class"
