@@ -142,6 +142,33 @@ def test_tiled_crops_match_the_drawn_ones_and_the_bundled_hdmap_serves_them() ->
     np.testing.assert_array_equal(a.trajectories, b.trajectories)
 
 
+def test_the_bundled_hdmap_reads_only_the_crops_the_engine_draws_for_it() -> None:
+    """Contract 11: `hdmap` declares the classes that read its map; the engine leaves the other agents' crops blank,
+    and the network gives the very same outputs as from every crop drawn."""
+    import onnxruntime as ort  # type: ignore[import-untyped]
+
+    from dgan.demo import scene_for
+
+    predictor = dgan.Predictor("hdmap")
+    readers = predictor.spec
+    assert readers.map is not None
+    assert readers.map.classes == ("cyclist", "pedestrian")
+    every = dataclasses.replace(readers, map=dataclasses.replace(readers.map, classes=()))
+    frame = scene_for(readers).frame
+    x, y = dgan.preprocess(frame, readers), dgan.preprocess(frame, every)
+    reads = np.isin(np.asarray(frame.classes), readers.map.classes)
+    assert 0 < reads.sum() < len(frame)
+    assert not x["map"][~reads].any()
+    assert y["map"][~reads].any()
+    np.testing.assert_array_equal(x["map"][reads], y["map"][reads])
+    session = ort.InferenceSession(str(predictor.path), providers=["CPUExecutionProvider"])
+    names = [i.name for i in session.get_inputs()]
+    drawn_for_readers = session.run(None, {k: x[k] for k in names})
+    drawn_for_every_agent = session.run(None, {k: y[k] for k in names})
+    for a, b in zip(drawn_for_readers, drawn_for_every_agent, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_tiles_are_refused_for_large_crops_and_unknown_ways() -> None:
     assert SPEC.map is not None
     big = dataclasses.replace(SPEC.map, height_px=300, agent_row=150, render="tiles")
