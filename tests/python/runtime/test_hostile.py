@@ -538,6 +538,34 @@ def contract_cases(tmp: Path) -> list[Case]:
     return cases
 
 
+def readers_cases(tmp: Path) -> list[Case]:
+    """Contract 11's ``map.classes`` (the classes whose crops the engine draws) made invalid in the bundled zara1
+    model's contract (a contract-10 file, or declared version 11), sealed again: a ``ContractError`` that says why."""
+    import json
+
+    import onnx
+
+    src = onnx.load(str(Path(dgan.models.__file__).parent / "zara1.onnx"))
+    meta = json.loads(next(p.value for p in src.metadata_props if p.key == "dgan_contract"))
+    cases: list[Case] = []
+    for label, version, classes, msg in [
+        ("in a contract-10 model", 10, ["pedestrian"], "map.classes is a contract-11 key"),
+        ("naming no class", 11, ["bus"], "unknown variant `bus`"),
+        ("naming a class the model lacks", 11, ["vehicle"], "map.classes names vehicle"),
+        ("as a string", 11, "pedestrian", "invalid type"),
+        ("repeated", 11, ["pedestrian", "pedestrian"], "map.classes repeat"),
+    ]:
+        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, map={**meta["map"], "classes": classes})
+        path = tmp / f"readers_{len(cases)}.onnx"
+        m = onnx.ModelProto()
+        m.CopyFrom(src)
+        onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(bad)})
+        onnx.save(m, str(path))
+        dgan._dgan.seal_model(path)
+        cases.append((f"contract map.classes {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
+    return cases
+
+
 def file_and_misc_cases(tmp: Path) -> list[Case]:
     cases: list[Case] = []
     (tmp / "empty.png").write_bytes(b"")
@@ -664,6 +692,7 @@ def all_cases(tmp: Path) -> list[Case]:
         + predictor_cases(tmp)
         + spec_and_misc_cases()
         + contract_cases(tmp)
+        + readers_cases(tmp)
         + file_and_misc_cases(tmp)
     )
 
