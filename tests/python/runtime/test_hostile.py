@@ -465,15 +465,35 @@ def spec_and_misc_cases() -> list[Case]:
     return cases
 
 
-def contract_cases(tmp: Path) -> list[Case]:
-    """The bundled zara1 model with one key of its contract made invalid, sealed again so that the contract itself
-    is what the engine judges: a ``ContractError`` naming the key."""
+def zara1_contract() -> tuple[Any, dict[str, Any]]:
+    """The bundled zara1 model (an ``onnx.ModelProto``) and its contract, to be made invalid by the cases below."""
     import json
 
     import onnx
 
     src = onnx.load(str(Path(dgan.models.__file__).parent / "zara1.onnx"))
-    meta = json.loads(next(p.value for p in src.metadata_props if p.key == "dgan_contract"))
+    return src, json.loads(next(p.value for p in src.metadata_props if p.key == "dgan_contract"))
+
+
+def sealed_with(src: Any, contract: dict[str, Any], path: Path) -> Path:
+    """A copy of the model ``src`` carrying ``contract``, saved at ``path`` and sealed again, so that the contract
+    itself is what the engine judges."""
+    import json
+
+    import onnx
+
+    m = onnx.ModelProto()
+    m.CopyFrom(src)
+    onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(contract)})
+    onnx.save(m, str(path))
+    dgan._dgan.seal_model(path)
+    return path
+
+
+def contract_cases(tmp: Path) -> list[Case]:
+    """The bundled zara1 model with one key of its contract made invalid, sealed again so that the contract itself
+    is what the engine judges: a ``ContractError`` naming the key."""
+    src, meta = zara1_contract()
     edits: list[tuple[str, str, Any, str]] = []
     for key, values in {
         "dt_s": [-1, 0, "0.4", None, [], 1e400],
@@ -525,12 +545,7 @@ def contract_cases(tmp: Path) -> list[Case]:
             bad.pop(key)
         else:
             bad[key] = value
-        path = tmp / f"contract_{k}.onnx"
-        m = onnx.ModelProto()
-        m.CopyFrom(src)
-        onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(bad)})
-        onnx.save(m, str(path))
-        dgan._dgan.seal_model(path)
+        path = sealed_with(src, bad, tmp / f"contract_{k}.onnx")
         missing = "missing field|must declare|no anchors|version" if value is None else msg
         cases.append(
             (f"contract {key} = {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, f"{msg}|{missing}")
@@ -541,12 +556,7 @@ def contract_cases(tmp: Path) -> list[Case]:
 def readers_cases(tmp: Path) -> list[Case]:
     """Contract 11's ``map.classes`` (the classes whose crops the engine draws) made invalid in the bundled zara1
     model's contract (a contract-10 file, or declared version 11), sealed again: a ``ContractError`` that says why."""
-    import json
-
-    import onnx
-
-    src = onnx.load(str(Path(dgan.models.__file__).parent / "zara1.onnx"))
-    meta = json.loads(next(p.value for p in src.metadata_props if p.key == "dgan_contract"))
+    src, meta = zara1_contract()
     cases: list[Case] = []
     for label, version, classes, msg in [
         ("in a contract-10 model", 10, ["pedestrian"], "map.classes is a contract-11 key"),
@@ -556,12 +566,7 @@ def readers_cases(tmp: Path) -> list[Case]:
         ("repeated", 11, ["pedestrian", "pedestrian"], "map.classes repeat"),
     ]:
         bad = dict(meta, weights_sha256="0" * 64, contract_version=version, map={**meta["map"], "classes": classes})
-        path = tmp / f"readers_{len(cases)}.onnx"
-        m = onnx.ModelProto()
-        m.CopyFrom(src)
-        onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(bad)})
-        onnx.save(m, str(path))
-        dgan._dgan.seal_model(path)
+        path = sealed_with(src, bad, tmp / f"readers_{len(cases)}.onnx")
         cases.append((f"contract map.classes {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
     return cases
 
