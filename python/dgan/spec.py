@@ -18,6 +18,13 @@ from dgan.exceptions import InvalidFrameError, InvalidSpecError
 from dgan.frame import Frame
 
 
+def _class_names(value: Any, key: str) -> tuple[str, ...]:
+    """``value`` (a spec's ``key``) as a tuple of class names; a bare string or a non-sequence is refused."""
+    if isinstance(value, str) or not hasattr(value, "__iter__"):
+        raise InvalidSpecError(f"{key} must be a sequence of class names, got {value!r}")
+    return tuple(value)
+
+
 @dataclass(frozen=True)
 class MapSpec:
     """The agent-centric, heading-aligned map crop: ``height_px × width_px`` at ``resolution_m`` metres per pixel,
@@ -43,9 +50,7 @@ class MapSpec:
     classes: Sequence[str] = ()
 
     def __post_init__(self) -> None:
-        if isinstance(self.classes, str) or not hasattr(self.classes, "__iter__"):
-            raise InvalidSpecError(f"map.classes must be a sequence of class names, got {self.classes!r}")
-        object.__setattr__(self, "classes", tuple(self.classes))
+        object.__setattr__(self, "classes", _class_names(self.classes, "map.classes"))
 
 
 @dataclass(frozen=True)
@@ -124,9 +129,7 @@ class InputSpec:
     denoise_gate_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if isinstance(self.classes, str) or not hasattr(self.classes, "__iter__"):
-            raise InvalidSpecError(f"classes must be a sequence of class names, got {self.classes!r}")
-        object.__setattr__(self, "classes", tuple(self.classes))
+        object.__setattr__(self, "classes", _class_names(self.classes, "classes"))
         numbers = {"dt_s": self.dt_s, "attention_lambda": self.attention_lambda, "denoise_gate_m": self.denoise_gate_m}
         if self.map is not None:
             numbers["map.resolution_m"] = self.map.resolution_m
@@ -146,10 +149,8 @@ class InputSpec:
         d["prior"] = self.prior.to_dict()
         if d["denoise_gate_m"] == 0:  # as the contract writes it: contracts 1-9 have no gate
             del d["denoise_gate_m"]
-        if d["map"] is not None:  # contracts 1-10 draw every agent's crop
-            d["map"]["classes"] = list(self.map.classes) if self.map is not None else []
-            if not d["map"]["classes"]:
-                del d["map"]["classes"]
+        if d["map"] is not None and not d["map"]["classes"]:  # contracts 1-10 draw every agent's crop
+            del d["map"]["classes"]
         return json.dumps(d)
 
     @classmethod
