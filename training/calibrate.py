@@ -17,6 +17,12 @@ another class's anchor. The engine applies either in decoding (:class:`training.
 that class (the class is an input, so p(c) is all but one-hot), and folded into the network as a scale of each
 anchor's logit (``DGAN.set_anchor_logit_scale``, the checkpoint's ``anchor_logit_scale``); the contract's temperature
 is then 1. For single networks.
+
+``"entropy"``: a temperature per agent T_i = exp(a + b · H_i), H_i the entropy of its anchor distribution at T = 1
+(:func:`training.modules.dgan.entropy_tempered`), a and b fitted by the Brier score; folded into the network in the
+same way (the checkpoint's ``anchor_entropy_temperature``), the contract's temperature 1. A distilled student's
+reliability is S-shaped (spread distributions' top modes overconfident, peaked ones' underconfident), which a single
+temperature cannot mend and this can. For single networks.
 """
 
 from __future__ import annotations
@@ -34,10 +40,13 @@ from training.config import Config, validation_data
 from training.data.arrays import Windows
 from training.losses import Calibration, mode_probabilities
 from training.metrics import worst_gap
-from training.modules.dgan import DGAN
+from training.modules.dgan import DGAN, entropy_tempered
 
 #: ``train.calibration``: what is fitted (:func:`fit_calibration`).
-CALIBRATIONS = ("temperature", "speed_class", "per_class")
+CALIBRATIONS = ("temperature", "speed_class", "per_class", "entropy")
+#: The kinds folded into the network's anchor logits (a consensus of several networks cannot carry them), as a model
+#: card names them.
+FOLDED = {"per_class": "one temperature per class", "entropy": "a temperature set by each agent's anchor entropy"}
 #: The class temperatures ``"speed_class"``'s search starts from (log-spaced, 1/e to e³).
 CLASS_TEMPERATURE_STARTS = np.exp(np.linspace(-1.0, 3.0, 9))
 
@@ -138,6 +147,17 @@ class TemperatureFit:
     class_temperature: float = 1.0
     #: ``"per_class"``: each anchor's logit scale, 1 / its class's temperature (None for the other kinds).
     anchor_logit_scale: tuple[float, ...] | None = None
+    #: ``"entropy"``: (a, b) of T_i = exp(a + b · H_i) (None for the other kinds).
+    entropy_temperature: tuple[float, float] | None = None
+
+    def checkpoint_keys(self) -> dict[str, Any]:
+        """What a checkpoint stores of this fit: the engine's calibration at full precision and the folded terms
+        (None where this kind has none, so that a refit of another kind clears an earlier one's)."""
+        return {
+            **self.calibration.keys(complete=True),
+            "anchor_logit_scale": None if self.anchor_logit_scale is None else list(self.anchor_logit_scale),
+            "anchor_entropy_temperature": None if self.entropy_temperature is None else list(self.entropy_temperature),
+        }
 
     @property
     def calibration(self) -> Calibration:
@@ -150,6 +170,9 @@ class TemperatureFit:
         if self.anchor_logit_scale is not None:
             per = sorted({round(1.0 / x, 3) for x in self.anchor_logit_scale})
             extra = f", per class's anchors {per} folded into the network"
+        if self.entropy_temperature is not None:
+            a, b = self.entropy_temperature
+            extra = f", exp({a:.3f} + {b:.3f} H) by each agent's anchor entropy H, folded into the network"
         if (self.speed_exponent, self.class_temperature) != (0.0, 1.0):
             extra = f" x (1 + v)^{self.speed_exponent:.3f}, class temperature {self.class_temperature:.3f}"
         return (
@@ -183,6 +206,8 @@ def fit_calibration(kind: str, modes: BestModes, class_of: torch.Tensor) -> Temp
     single = choose_temperature(modes.class_logits, modes.anchor_logits, modes.best, class_of)
     if kind == "per_class":
         return fit_per_class(modes, class_of, single)
+    if kind == "entropy":
+        return fit_entropy(modes, class_of, single)
     return single if kind == "temperature" else fit_speed_class(modes, class_of, single)
 
 
@@ -206,13 +231,21 @@ def fit_per_class(modes: BestModes, class_of: torch.Tensor, single: TemperatureF
         )
     scale = 1.0 / torch.tensor(temps, dtype=torch.float64)[class_of]
     p = mode_probabilities(modes.class_logits, modes.anchor_logits * scale.to(modes.anchor_logits.dtype), class_of)
+    return folded_fit(single, "per class", p, modes.best, anchor_logit_scale=tuple(float(x) for x in scale))
+
+
+def folded_fit(
+    single: TemperatureFit, objective: str, p: torch.Tensor, best: torch.Tensor, **folded: Any
+) -> TemperatureFit:
+    """A kind folded into the network (:data:`FOLDED`): ``single`` with a contract temperature of 1, the scores of
+    the folded probabilities ``p`` against the best modes ``best``, and the folded terms ``folded``."""
     return replace(
         single,
         temperature=1.0,
-        objective="per class",
-        nll_after=best_mode_log_loss(p, modes.best),
-        gap_after=reliability_gap(p, modes.best),
-        anchor_logit_scale=tuple(float(x) for x in scale),
+        objective=objective,
+        nll_after=best_mode_log_loss(p, best),
+        gap_after=reliability_gap(p, best),
+        **folded,
     )
 
 
@@ -276,6 +309,26 @@ def fit_speed_class(modes: BestModes, class_of: torch.Tensor, single: Temperatur
     )
 
 
+def fit_entropy(modes: BestModes, class_of: torch.Tensor, single: TemperatureFit) -> TemperatureFit:
+    """``"entropy"``: (a, b) of T_i = exp(a + b · H_i) minimising the best mode's Brier score on ``modes``
+    (Nelder-Mead from ``single``'s temperature with b = 0), with a contract temperature of 1."""
+    from scipy.optimize import minimize
+
+    classes = modes.class_logits.shape[1]
+
+    def probabilities(x: np.ndarray) -> torch.Tensor:
+        a, b = (float(v) for v in np.clip(x, -6.9, 6.9))
+        return mode_probabilities(modes.class_logits, entropy_tempered(modes.anchor_logits, classes, a, b), class_of)
+
+    def score(x: np.ndarray) -> float:
+        return best_mode_brier(probabilities(x), modes.best)
+
+    x0 = np.array([np.log(single.temperature), 0.0])
+    x = np.clip(minimize(score, x0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-8}).x, -6.9, 6.9)
+    ab = (float(x[0]), float(x[1]))
+    return folded_fit(single, "brier (entropy)", probabilities(x), modes.best, entropy_temperature=ab)
+
+
 def calibration_config(cfg: Config) -> Config:
     """The configuration whose validation split the temperature is fitted on: ``cfg`` itself
     (``train.calibration_split = "all"``), or ``cfg`` without its ``data.extra_sources`` ("own": the configuration's
@@ -295,10 +348,13 @@ def validation_logits(
     from training.export import load_checkpoint
 
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
-    if isinstance(model, DGAN):  # fitted on the network's own logits, not on an earlier fit's folded scale
+    if isinstance(model, DGAN):  # fitted on the network's own logits, not on an earlier fit's folded ones
         model.set_anchor_logit_scale(None)
-    elif cfg.train.calibration == "per_class":
-        raise ValueError(f"{path}: train.calibration = 'per_class' is for single networks, not a consensus")
+        model.set_entropy_temperature(None)
+    elif cfg.train.calibration in FOLDED:
+        raise ValueError(
+            f"{path}: train.calibration = {cfg.train.calibration!r} is for single networks, not a consensus"
+        )
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = split_windows(calibration_config(cfg), spec, "val", progress)
@@ -327,6 +383,5 @@ def calibrate_checkpoint(
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
         parts.append(fold_modes)
     found = replace(fit_calibration(kind, BestModes.joined(parts), class_of), folds=len(parts))
-    scale = None if found.anchor_logit_scale is None else list(found.anchor_logit_scale)
-    update_checkpoint(path, **found.calibration.keys(complete=True), anchor_logit_scale=scale)
+    update_checkpoint(path, **found.checkpoint_keys())
     return found

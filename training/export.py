@@ -22,7 +22,17 @@ from training.modules.dgan import DGAN, ConsensusEnsemble
 
 OUTPUTS = list(CONTRACT_OUTPUTS)
 #: What a bundled checkpoint keeps of a run's ``best.pt`` (export and the parity test need no optimizer state).
-SLIM_KEYS = ("model", "anchors", "class_of", "config", "epoch", "temperature", *Calibration.KEYS, "anchor_logit_scale")
+SLIM_KEYS = (
+    "model",
+    "anchors",
+    "class_of",
+    "config",
+    "epoch",
+    "temperature",
+    *Calibration.KEYS,
+    "anchor_logit_scale",
+    "anchor_entropy_temperature",
+)
 #: The inputs of an exported model (contract 3, the padded neighbour layout), in ``DGAN.forward_padded``'s order.
 INPUTS = PADDED_INPUTS
 
@@ -71,6 +81,7 @@ def _member(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.
     model = build_model(cfg, spec, len(ckpt["anchors"]))
     model.load_state_dict(ckpt["model"])
     model.set_anchor_logit_scale(ckpt.get("anchor_logit_scale"))  # a per-class temperature (training.calibrate)
+    model.set_entropy_temperature(ckpt.get("anchor_entropy_temperature"))  # one by the anchors' entropy
     model.eval()
     anchors = np.asarray(ckpt["anchors"])
     # Checkpoints from before multi-class training have one class and no class_of.

@@ -64,7 +64,7 @@ def calibrate(
     ckpt = torch.load(path, weights_only=False)
     model.load_state_dict(ckpt["model"])
     found = fit_temperature(model, val, spec, anchors, class_of, kind)
-    ckpt.update(found.calibration.keys(complete=True))
+    ckpt.update(found.checkpoint_keys())
     save_atomic(ckpt, path)
     print(found, flush=True)
     return found

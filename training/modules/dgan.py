@@ -104,6 +104,7 @@ class DGAN(nn.Module):
 
     map_gate: Tensor
     anchor_logit_scale: Tensor
+    entropy_temperature: Tensor
 
     def __init__(
         self,
@@ -127,6 +128,10 @@ class DGAN(nn.Module):
         # from the checkpoint by :meth:`set_anchor_logit_scale`.
         self.register_buffer("anchor_logit_scale", torch.ones(num_anchors), persistent=False)
         self.scaled = False
+        # (a, b) of a temperature that follows the spread of each agent's anchor distribution (``train.calibration =
+        # "entropy"``, :func:`entropy_tempered`), folded in the same way; set by :meth:`set_entropy_temperature`.
+        self.register_buffer("entropy_temperature", torch.zeros(2), persistent=False)
+        self.by_entropy = False
         self.embed = nn.Sequential(nn.Linear(3, cfg.embed_dim), nn.ReLU())
         self.lstm = nn.LSTM(cfg.embed_dim, cfg.lstm_dim, batch_first=True)
         self.state_mlp = nn.Sequential(
@@ -201,6 +206,9 @@ class DGAN(nn.Module):
         anchor_logits = self.anchor_head(z)
         if self.scaled:
             anchor_logits = anchor_logits * self.anchor_logit_scale.to(anchor_logits.dtype)
+        if self.by_entropy:
+            ab = self.entropy_temperature.to(anchor_logits.dtype)
+            anchor_logits = entropy_tempered(anchor_logits, self.num_classes, ab[0], ab[1])
         return self.class_head(z), anchor_logits, offsets
 
     def set_anchor_logit_scale(self, scale: list[float] | None) -> None:
@@ -210,6 +218,13 @@ class DGAN(nn.Module):
             raise ValueError(f"anchor_logit_scale needs {self.k} positive finite values, got {scale}")
         self.anchor_logit_scale.copy_(torch.tensor(values))
         self.scaled = scale is not None
+
+    def set_entropy_temperature(self, ab: list[float] | None) -> None:
+        """Divides each agent's anchor logits by exp(a + b · H) (:func:`entropy_tempered`; ``None``: not)."""
+        if ab is not None and (len(ab) != 2 or not all(abs(float(x)) < float("inf") for x in ab)):
+            raise ValueError(f"anchor_entropy_temperature needs two finite values (a, b), got {ab}")
+        self.entropy_temperature.copy_(torch.tensor([0.0, 0.0] if ab is None else [float(x) for x in ab]))
+        self.by_entropy = ab is not None
 
     def forward(
         self,
@@ -263,6 +278,18 @@ class DGAN(nn.Module):
             unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
             p = unused * 0.0
         return self.heads(p, v)
+
+
+def entropy_tempered(anchor_logits: Tensor, classes: int, a: Tensor | float, b: Tensor | float) -> Tensor:
+    """``(N, K)`` anchor logits divided, per agent and class block, by T = exp(a + b · H), H the entropy (nats) of
+    the agent's softmax over that class's anchors at T = 1 (the blocks: ``classes`` equal runs of anchors,
+    ``training.anchors``). With b > 0 a spread distribution is flattened and a peaked one sharpened, which mends the
+    S-shaped reliability one temperature cannot (``training.calibrate``, ``"entropy"``)."""
+    n, k = anchor_logits.shape
+    blocks = anchor_logits.reshape(n, classes, k // classes)
+    logp = torch.log_softmax(blocks, dim=2)
+    h = -(logp.exp() * logp).sum(dim=2, keepdim=True)
+    return (blocks / torch.exp(a + b * h)).reshape(n, k)
 
 
 class PaddedDGAN(nn.Module):

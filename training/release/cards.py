@@ -10,6 +10,7 @@ from typing import Any
 
 import dgan
 from training.build import class_priors
+from training.calibrate import FOLDED
 from training.data.splits import pedestrian_sources
 
 
@@ -90,8 +91,7 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             f"Trained with map dropout ({t['map_dropout']:g} of the crops blanked), so it also runs without a map "
             "(`map.optional`)."
         )
-    heading = d.get("heading", "measured")
-    if heading != "measured":
+    if (heading := d.get("heading", "measured")) != "measured":
         parts.append(
             "Agents' headings come from their direction of motion"
             + (" (measured headings below 1 m/s)." if heading == "motion_when_moving" else ", measured ones ignored.")
@@ -101,8 +101,8 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
         parts.append(f"Only its {who} agents read the map (`map.classes`: the engine draws their crops alone).")
     if words := denoise_words(cfg):
         parts.append(words)
-    per_class = t.get("calibration") == "per_class"
-    words = "one temperature per class, folded into the anchor logits," if per_class else temperature_words(metrics)
+    folded = FOLDED.get(t.get("calibration", ""))
+    words = f"{folded}, folded into the anchor logits," if folded else temperature_words(metrics)
     parts.append(f"Mode probabilities at {words} {fitted_where(cfg)}.")
     return " ".join(parts)
 

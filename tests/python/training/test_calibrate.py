@@ -1,7 +1,7 @@
 """training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, the
 choice itself on best modes drawn at a known temperature, the speed-dependent and class temperatures of contract 9
-given back from best modes drawn with them, a temperature cross-fitted over validation folds, and the validation
-windows it is fitted on (train.calibration_split)."""
+and the entropy temperature given back from best modes drawn with them, a temperature cross-fitted over validation
+folds, and the validation windows it is fitted on (train.calibration_split)."""
 
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ from training.calibrate import (
 )
 from training.config import Config
 from training.losses import Calibration
+from training.modules.dgan import entropy_tempered
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -123,6 +124,38 @@ def test_per_class_temperatures_drawn_are_given_back_and_fold_into_the_logits() 
     single = fit_calibration("temperature", modes, class_of)
     assert fit.gap_after < 0.03 < single.gap_after  # one temperature cannot be right for both classes
     assert "folded into the network" in str(fit)
+
+
+def test_an_entropy_temperature_drawn_is_given_back_and_one_temperature_cannot_match_it() -> None:
+    # Best modes drawn at T_i = exp(a + b H_i): spread distributions flattened, peaked ones sharpened (b > 0).
+    g = torch.Generator().manual_seed(5)
+    n, a, b = 60000, -0.6, 0.5
+    class_of = torch.zeros(6, dtype=torch.long)
+    al = torch.randn(n, 6, generator=g) * (0.3 + 3.0 * torch.rand(n, 1, generator=g))
+    p = torch.softmax(entropy_tempered(al, 1, a, b), dim=1)
+    modes = BestModes(torch.zeros(n, 1), al, torch.multinomial(p, 1, generator=g).squeeze(1), torch.zeros(n))
+    fit = fit_calibration("entropy", modes, class_of)
+    assert fit.objective == "brier (entropy)"
+    assert fit.temperature == 1.0
+    assert fit.entropy_temperature is not None
+    assert fit.entropy_temperature == pytest.approx((a, b), abs=0.08)
+    single = fit_calibration("temperature", modes, class_of)
+    assert fit.gap_after < 0.03 < single.gap_after
+    assert "anchor entropy" in str(fit)
+    keys = fit.checkpoint_keys()
+    assert keys["anchor_entropy_temperature"] == list(fit.entropy_temperature)
+    assert keys["anchor_logit_scale"] is None  # a refit of this kind clears a per-class one
+    assert single.checkpoint_keys()["anchor_entropy_temperature"] is None
+
+
+def test_entropy_tempered_works_per_class_block() -> None:
+    # Two classes' blocks: each divided by exp(a + b H) of its own softmax.
+    al = torch.tensor([[0.0, 0.0, 5.0, 0.0], [1.0, -1.0, 2.0, 2.0]])
+    out = entropy_tempered(al, 2, 0.1, 0.7)
+    for block in (slice(0, 2), slice(2, 4)):
+        q = torch.softmax(al[:, block], dim=1)
+        h = -(q * q.log()).sum(dim=1, keepdim=True)
+        torch.testing.assert_close(out[:, block], al[:, block] / torch.exp(0.1 + 0.7 * h))
 
 
 def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int, target_class: str = "") -> Path:

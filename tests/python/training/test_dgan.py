@@ -15,7 +15,7 @@ import dgan
 from dgan.contract import PADDED_INPUTS
 from training.build import build_model, input_spec
 from training.config import Config
-from training.modules.dgan import DGAN
+from training.modules.dgan import DGAN, entropy_tempered
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -57,8 +57,14 @@ def test_classes_that_do_not_read_the_map_are_served_as_without_one() -> None:
         logits = gated.forward_padded(*inputs)[1]
         gated.set_anchor_logit_scale([0.5] * 30)
         torch.testing.assert_close(gated.forward_padded(*inputs)[1], 0.5 * logits)
+        gated.set_entropy_temperature([0.2, 0.3])  # after the scale, as a checkpoint never holds both
+        torch.testing.assert_close(
+            gated.forward_padded(*inputs)[1], entropy_tempered(0.5 * logits, len(spec.classes), 0.2, 0.3)
+        )
     with pytest.raises(ValueError, match="30 positive"):
         gated.set_anchor_logit_scale([0.5] * 29)
+    with pytest.raises(ValueError, match="two finite values"):
+        gated.set_entropy_temperature([0.2, float("nan")])
     with pytest.raises(ValueError, match="not classes of this model"):
         build_model(replace(cfg, model=replace(cfg.model, map_classes="truck")), spec, 30)
 
