@@ -1,0 +1,44 @@
+"""training.release.retrain: what a student changes of its configuration gives the bundled student's settings, so
+that retraining reproduces the bundled models."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from training.config import Config
+from training.release.retrain import DISTILLED, DISTILLED_SCENES, SCENE_STUDENT_ARGS, STUDENT_ARGS
+from training.train import parse_args
+
+ROOT = Path(__file__).resolve().parents[3]
+CHECKPOINTS = ROOT / "training" / "checkpoints"
+
+
+def _students() -> list[tuple[str, str, tuple[str, ...]]]:
+    """(bundled name, configuration file, the student's extra arguments) of every distilled bundled model."""
+    out = [(ds, f"{ds}.toml", STUDENT_ARGS.get(ds, ())) for ds in DISTILLED]
+    return out + [(s, f"ethucy_{s}.toml", SCENE_STUDENT_ARGS.get(s, ())) for s in DISTILLED_SCENES]
+
+
+@pytest.mark.parametrize(("name", "toml", "args"), _students())
+def test_a_students_arguments_give_the_bundled_students_settings(
+    name: str, toml: str, args: tuple[str, ...], tmp_path: Path
+) -> None:
+    _, cfg = parse_args(["--config", str(ROOT / "training" / "configs" / toml), "--out", str(tmp_path), *args])
+    ckpt = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=False)
+    assert "members" not in ckpt, f"{name} is bundled as one network"
+    kept = Config.from_dict({"name": name, **{k: ckpt["config"][k] for k in ("data", "model", "train")}})
+    changed = [tuple(a.split("=")[0].split(".")) for a in args if a != "--set"]
+    for section, key in [*changed, ("model", "head_dim"), ("model", "map_res_blocks"), ("train", "calibration")]:
+        want = getattr(getattr(kept, section), key)
+        assert getattr(getattr(cfg, section), key) == want, f"{name}: {section}.{key}"
+
+
+def test_hotels_student_is_wider_and_folds_an_entropy_temperature() -> None:
+    kept = torch.load(CHECKPOINTS / "hotel.pt", weights_only=False)
+    assert kept["config"]["model"]["head_dim"] == 512
+    _, b = kept["anchor_entropy_temperature"]
+    assert b > 0  # spread distributions flattened, peaked ones sharpened
+    assert kept.get("anchor_logit_scale") is None
