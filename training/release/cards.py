@@ -362,7 +362,8 @@ def distill_words(name: str, cfg: dict[str, Any]) -> str:
     """The card's words for a student (``train.distill``): one network that learned from a consensus."""
     if not cfg["train"].get("distill", ""):
         return ""
-    teacher = "a consensus of runs"
+    head = int(cfg.get("model", {}).get("head_dim", 256))
+    teacher = "a consensus of runs" + (f" whose heads' layers are 256 wide (this one's {head})" if head != 256 else "")
     if cfg.get("model", {}).get("map_res_blocks", 2) < 2:
         teacher = "a larger network (the same configuration with the map CNN's two residual blocks)"
     soft = float(cfg["train"].get("distill_soft", 0.0))

@@ -57,6 +57,9 @@ def test_what_a_student_learned_from_its_teacher_is_named() -> None:
     assert "its offsets only: the mode probabilities learned from the data alone" in distill_words("eth", offsets)
     both = {"data": {}, "train": {**offsets["train"], "distill_soft": 0.5}}
     assert "mode (its offsets only) and its mode probabilities (weight 0.5) of" in distill_words("eth", both)
+    wider = {"data": {}, "model": {"head_dim": 512}, "train": student["train"]}
+    assert "consensus of runs whose heads' layers are 256 wide (this one's 512)" in distill_words("hotel", wider)
+    assert "wide" not in words
 
 
 def test_a_cross_fitted_temperature_is_named() -> None:
