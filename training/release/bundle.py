@@ -26,14 +26,8 @@ import dgan
 from training.calibrate import calibrate_checkpoint
 from training.evaluate import evaluate
 from training.export import SLIM_KEYS, export_checkpoint
-from training.release.cards import (
-    MULTICLASS,
-    card,
-    declared_folds,
-    ensemble_line,
-    multiclass_card,
-    restated,
-)
+from training.release.cards import card, declared_folds, ensemble_line, restated
+from training.release.multiclass_card import MULTICLASS, multiclass_card
 
 ROOT = Path(__file__).resolve().parents[2]
 MODELS = ROOT / "python" / "dgan" / "models"

@@ -18,10 +18,10 @@ from training.release.cards import (
     extra_data_line,
     extra_licence_line,
     fitted_where,
-    joint_words,
     restated,
     temperature_words,
 )
+from training.release.multiclass_card import joint_words
 
 
 def cfg(**data: Any) -> dict[str, Any]:
