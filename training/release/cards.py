@@ -12,6 +12,7 @@ import dgan
 from training.build import class_priors
 from training.calibrate import FOLDED
 from training.data.splits import pedestrian_sources
+from training.modules.dgan import ModelConfig
 
 
 def training_log(run: Path) -> tuple[list[dict[str, str]], float, dict[str, str]]:
@@ -252,9 +253,12 @@ def distill_words(name: str, cfg: dict[str, Any]) -> str:
     """The card's words for a student (``train.distill``): one network that learned from a consensus."""
     if not cfg["train"].get("distill", ""):
         return ""
-    head = int(cfg.get("model", {}).get("head_dim", 256))
-    teacher = "a consensus of runs" + (f" whose heads' layers are 256 wide (this one's {head})" if head != 256 else "")
-    if cfg.get("model", {}).get("map_res_blocks", 2) < 2:
+    wide, blocks = ModelConfig.head_dim, ModelConfig.map_res_blocks  # the configuration's defaults: the teachers'
+    head = int(cfg.get("model", {}).get("head_dim", wide))
+    teacher = "a consensus of runs"
+    if head != wide:
+        teacher += f" whose heads' layers are {wide} wide (this one's {head})"
+    if cfg.get("model", {}).get("map_res_blocks", blocks) < blocks:
         teacher = "a larger network (the same configuration with the map CNN's two residual blocks)"
     soft = float(cfg["train"].get("distill_soft", 0.0))
     also = f" and its mode probabilities (weight {soft:g})" if soft > 0 else ""
