@@ -6,15 +6,28 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 import torch
 
 import dgan
 from training.config import Config
-from training.data.arrays import Windows
+from training.data.arrays import Windows, concat_windows
 from training.data.batches import batch_prior, forward_inputs, prepared_batch, windows_with_targets
+from training.data.splits import set_windows, window_sets
 from training.export import load_checkpoint
 from training.losses import Calibration, anchor_pool, decode_torch, dgan_loss, soft_class_loss
 from training.modules.dgan import DGAN
+
+
+def crop_geometry(m: dgan.MapSpec) -> tuple[int, int, float, int, int]:
+    """A crop's size, resolution and the agent's pixel: what a teacher's crops may differ from its student's in."""
+    return m.height_px, m.width_px, m.resolution_m, m.agent_row, m.agent_col
+
+
+def with_geometry(m: dgan.MapSpec, like: dgan.MapSpec) -> dgan.MapSpec:
+    """``m`` with the crop geometry (:func:`crop_geometry`) of ``like``."""
+    h, w, res, row, col = crop_geometry(like)
+    return replace(m, height_px=h, width_px=w, resolution_m=res, agent_row=row, agent_col=col)
 
 
 @dataclass(frozen=True)
@@ -29,25 +42,53 @@ class Teacher:
     spec: dgan.InputSpec
     #: Whether that prior differs from the student's (the teacher's modes are then carried onto the student's).
     own_prior: bool
+    #: Whether its map crops have another size or resolution than the student's (a student with a cheaper map
+    #: encoder, issue 26): it then runs on crops drawn to its own geometry, the batches' ``teacher_map``
+    #: (:func:`teacher_crops`).
+    own_map: bool = False
 
     @classmethod
     def load(cls, path: str, spec: dgan.InputSpec) -> Teacher:
         model, tspec, anchors, class_of, _, calibration = load_checkpoint(Path(path))
-        # A teacher runs on the student's crops whichever way its own were drawn (map.render): the same tensors.
+        own_map, compared = False, tspec.map
         if tspec.map is not None and spec.map is not None:
-            tspec = replace(tspec, map=replace(tspec.map, render=spec.map.render))
+            # A teacher runs on the student's crops whichever way its own were drawn (map.render): the same tensors.
+            theirs_map = replace(tspec.map, render=spec.map.render)
+            tspec = replace(tspec, map=theirs_map)
+            own_map = crop_geometry(theirs_map) != crop_geometry(spec.map)
+            # Nor is a crop's geometry an input it must share, when it gets crops of its own (the rest of the crop
+            # spec, what is drawn and for whom, it must).
+            compared = with_geometry(theirs_map, spec.map)
         # The prior is not a network input: a teacher with another one runs on the same tensors.
-        if replace(tspec, prior=spec.prior).to_json() != spec.to_json():
+        theirs = replace(tspec, prior=spec.prior, map=compared)
+        if theirs.to_json() != spec.to_json():
             raise ValueError(f"train.distill: {path} takes other inputs than this configuration ({tspec.to_json()})")
         anchors_t, class_of_t = torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long()
-        return cls(model.eval(), anchors_t, class_of_t, calibration, tspec, tspec.prior != spec.prior)
+        return cls(model.eval(), anchors_t, class_of_t, calibration, tspec, tspec.prior != spec.prior, own_map)
+
+    def crop_spec(self, spec: dgan.InputSpec) -> dgan.InputSpec:
+        """The student's ``spec`` with the teacher's crop geometry: what its crops (``teacher_map``) are drawn by."""
+        if not self.own_map or spec.map is None or self.spec.map is None:
+            return spec
+        return replace(spec, map=with_geometry(spec.map, self.spec.map))
+
+    def inputs(self, b: dict[str, torch.Tensor]) -> list[torch.Tensor]:
+        """The teacher's network inputs from a batch: the student's, with its own crops if it has them."""
+        if not self.own_map:
+            return forward_inputs(b)
+        if "teacher_map" not in b:
+            raise ValueError(
+                "train.distill: the teacher's map crops have another geometry than the student's, and this batch "
+                "carries none drawn to its own (teacher_map; training.step.teacher_crops)"
+            )
+        return forward_inputs({**b, "map": b["teacher_map"]})
 
     @torch.no_grad()
     def modes(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """The teacher's modes of each target ``(targets, K_t, T_f, 2)`` as residuals from the student's prior
         (``b["prior"]``), most probable first, and their probabilities ``(targets, K_t)`` under its calibration (as
         the engine decodes it, with its own prior's speeds)."""
-        cl, al, off = self.model(*forward_inputs(b))
+        cl, al, off = self.model(*self.inputs(b))
         t = b["target"]
         student = b["prior"][t]
         prior = torch.from_numpy(batch_prior(b, self.spec, t)) if self.own_prior else student
@@ -81,6 +122,19 @@ class Teacher:
         nearest = d.masked_fill(~allowed.unsqueeze(1), float("inf")).argmin(dim=2)  # (n, K_t)
         soft = torch.zeros(n, len(anchors), dtype=p.dtype).scatter_add_(1, nearest, p)
         return modes[:, 0], soft / soft.sum(dim=1, keepdim=True).clamp_min(1e-12)
+
+
+def teacher_crops(cfg: Config, spec: dgan.InputSpec, teacher: Teacher, train: Windows, progress: bool) -> Windows:
+    """The training windows ``train`` (of ``cfg``, under ``spec``) with their agents' crops drawn to the teacher's
+    geometry as well (``teacher_map``) where it differs from the student's (:attr:`Teacher.own_map`): the same
+    windows under the teacher's crop spec, from the window cache or built into it."""
+    if not teacher.own_map:
+        return train
+    sets = window_sets(cfg.data, "train")
+    theirs = concat_windows(set_windows(cfg.data, sets, teacher.crop_spec(spec), progress))
+    if theirs.map is None or not np.array_equal(theirs.agent_ptr, train.agent_ptr):
+        raise ValueError("train.distill: the teacher's crops do not line up with the training windows")
+    return replace(train, teacher_map=theirs.map)
 
 
 #: A network's class logits, anchor logits and offsets.

@@ -43,7 +43,7 @@ from training.data.splits import only_target_class, split_windows, target_class_
 from training.export import export_checkpoint
 from training.losses import check_anchor_pool, check_cls_target, class_weights
 from training.modules.dgan import DGAN
-from training.step import Teacher, forward_loss, validate
+from training.step import Teacher, forward_loss, teacher_crops, validate
 
 #: ``train.select``: the validation figure (a column of ``log.csv``) whose lowest epoch is kept as ``best.pt``, or
 #: ``"last"`` for the final epoch.
@@ -208,6 +208,8 @@ def main(argv: list[str] | None = None) -> Path:
         weight_of_class = class_weights(train_classes, len(spec.classes), cfg.train.class_balance)
     model = build_model(cfg, spec, len(anchors_np))
     teacher = Teacher.load(cfg.train.distill, spec) if cfg.train.distill else None
+    if teacher is not None:
+        train = teacher_crops(cfg, spec, teacher, train, bars)
     opt, sched = optimiser(cfg, model)
     start_epoch, best = resume(ckpt, model, opt, sched)
     net: torch.nn.Module = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model

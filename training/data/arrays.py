@@ -41,6 +41,9 @@ class Windows:
     map_absent: Arr | None = None
     # (A,) bool: the agent's window is a noisy copy (data.augment_noise, training.data.augment); None: none is
     noisy: Arr | None = None
+    # (A, 3, H_t, W_t) u8: the same agents' crops drawn to a distillation teacher's geometry where it differs from the
+    # student's (training.step.teacher_crops); None: the teacher takes the student's
+    teacher_map: Arr | None = None
 
     @property
     def num_windows(self) -> int:
@@ -75,6 +78,8 @@ class Windows:
             out["map_absent"] = self.map_absent[a_idx]
         if self.noisy is not None:
             out["noisy"] = self.noisy[a_idx]
+        if self.teacher_map is not None:
+            out["teacher_map"] = self.teacher_map[a_idx].astype(np.float32) / 255.0
         if flip is not None and flip.any():
             mirror(out, np.repeat(flip, n_agents), np.repeat(flip, n_edges))
         return out
@@ -98,8 +103,9 @@ def mirror(batch: dict[str, Arr], agents: Arr, edges: Arr) -> None:
         batch["state"][agents, col] *= -1
     for col in EDGE_MIRROR_COLUMNS:
         batch["edge_features"][edges, col] *= -1
-    if "map" in batch:
-        batch["map"][agents] = batch["map"][agents][..., ::-1]
+    for key in ("map", "teacher_map"):
+        if key in batch:
+            batch[key][agents] = batch[key][agents][..., ::-1]
 
 
 def concat_windows(parts: Sequence[Windows]) -> Windows:
@@ -111,6 +117,8 @@ def concat_windows(parts: Sequence[Windows]) -> Windows:
         return parts[0]
     if len({p.map is None for p in parts}) > 1:
         raise ValueError("window sets with and without map crops cannot be concatenated")
+    if any(p.teacher_map is not None for p in parts):
+        raise ValueError("a teacher's crops are added to the concatenated windows (training.step.teacher_crops)")
     agent_ptr, edge_ptr, window_file = [np.zeros(1, np.int64)], [np.zeros(1, np.int64)], []
     agents = edges = files = 0
     for p in parts:

@@ -63,5 +63,7 @@ def prepared_batch(
             gone = rng.random(len(present)) < drop
             present[gone] = 0.0
             b["map"][gone] = 0.0
+            if "teacher_map" in b:  # the teacher sees the agent without its map too
+                b["teacher_map"][gone] = 0.0
         b["map_present"] = present
     return to_tensors(b)

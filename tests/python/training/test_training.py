@@ -595,7 +595,47 @@ def test_a_teacher_runs_on_the_student_s_crops_whichever_way_its_own_were_drawn(
     assert spec.map.render == "tiles"
     # The kept teacher was trained on crops drawn per agent; it takes the tiled crops (the same tensors) ...
     Teacher.load(str(ROOT / "training" / "checkpoints" / "teachers" / "hdmap.pt"), spec)
-    # ... but not a crop of another size.
-    other = replace(spec, map=replace(spec.map, height_px=40, agent_row=30))
+    # ... nor what is drawn on them.
+    other = replace(spec, map=replace(spec.map, draw_agents=not spec.map.draw_agents))
     with pytest.raises(ValueError, match="takes other inputs"):
         Teacher.load(str(ROOT / "training" / "checkpoints" / "teachers" / "hdmap.pt"), other)
+
+
+def test_a_teacher_with_crops_of_another_geometry_runs_on_its_own() -> None:
+    """A student with a cheaper map encoder (coarser crops of the same field of view, issue 26) learns from a teacher
+    that runs on crops drawn to its own geometry (``teacher_map``), exactly as on a batch of its own."""
+    from training.data.arrays import Windows
+    from training.step import Teacher
+
+    cfg = Config.load(CONFIG, {"data.map_height_px": 16, "data.map_width_px": 15, "data.map_resolution_m": 1.0})
+    cfg = replace(cfg, data=replace(cfg.data, map_agent_row=12))
+    spec, b, _, _ = _teacher_batch(cfg, 2)
+    teacher = Teacher.load(str(CHECKPOINTS / "teachers" / "zara1.pt"), spec)
+    assert teacher.own_map
+    assert spec.map is not None
+    assert teacher.spec.map is not None
+    assert (teacher.spec.map.height_px, spec.map.height_px) == (32, 16)
+    own = teacher.crop_spec(spec)
+    assert own.map == replace(spec.map, height_px=32, width_px=31, resolution_m=0.5, agent_row=24, agent_col=15)
+    with pytest.raises(ValueError, match="teacher_map"):
+        teacher.top_residual(b)
+    frame = dgan.demo.scene_for(spec).frame
+    theirs = torch.from_numpy(dgan.preprocess(frame, own)["map"])
+    # The same teacher given a batch of its own geometry's crops, as a student of its own geometry would give it:
+    same = Teacher.load(str(CHECKPOINTS / "teachers" / "zara1.pt"), own)
+    assert not same.own_map
+    expected = same.top_residual({**b, "map": theirs})
+    torch.testing.assert_close(teacher.top_residual({**b, "teacher_map": theirs}), expected, rtol=0, atol=0)
+    # The training windows carry the teacher's crops beside the student's, batched and mirrored alike.
+    n = len(frame)
+    raw = {k: np.asarray(v) for k, v in b.items()}
+    w = Windows(
+        raw["trajectory"], raw["trajectory_mask"], raw["state"], raw["edge_index"], raw["edge_features"],
+        np.round(raw["map"] * 255).astype(np.uint8), raw["future"], raw["target"], raw["class_index"],
+        np.zeros((n, 2)), np.zeros(n), np.array([0, n]), np.array([0, len(raw["edge_index"])]), np.zeros(1, int),
+        np.zeros(1, int), ["scene"], teacher_map=np.round(theirs.numpy() * 255).astype(np.uint8),
+    )  # fmt: skip
+    plain, flipped = w.batch([0]), w.batch([0], flip=np.array([True]))
+    assert plain["teacher_map"].shape == (n, 3, 32, 31)
+    np.testing.assert_array_equal(flipped["teacher_map"], plain["teacher_map"][..., ::-1])
+    np.testing.assert_array_equal(flipped["map"], plain["map"][..., ::-1])
