@@ -22,6 +22,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
             d.map_resolution_m,
             d.map_agent_row,
             d.map_width_px // 2,
+            draw_agents=d.map_draw_agents,
             optional=cfg.train.map_dropout > 0,
             render=d.map_render,
             classes=tuple(x.strip() for x in cfg.model.map_classes.split(",") if x.strip()),

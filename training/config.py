@@ -24,6 +24,8 @@ class DataConfig:
     map_width_px: int = 31
     map_resolution_m: float = 0.5
     map_agent_row: int = 24
+    # Whether the crops carry the agents' boxes (dgan.MapSpec.draw_agents): most of a raster crop's cost (docs/speed.md)
+    map_draw_agents: bool = True
     # How a vector map becomes the crops (dgan.MapSpec.render): "agent" (each crop drawn from the elements) or "tiles"
     # (the map drawn once into tiles kept with it, each crop resampled from them: the map's cost stops growing with N).
     map_render: str = "agent"

@@ -19,15 +19,16 @@ from training.losses import Calibration, anchor_pool, decode_torch, dgan_loss, s
 from training.modules.dgan import DGAN
 
 
-def crop_geometry(m: dgan.MapSpec) -> tuple[int, int, float, int, int]:
-    """A crop's size, resolution and the agent's pixel: what a teacher's crops may differ from its student's in."""
-    return m.height_px, m.width_px, m.resolution_m, m.agent_row, m.agent_col
+def crop_geometry(m: dgan.MapSpec) -> tuple[int, int, float, int, int, bool]:
+    """A crop's size, resolution, the agent's pixel and whether the agents' boxes are drawn: what a teacher's crops
+    may differ from its student's in."""
+    return m.height_px, m.width_px, m.resolution_m, m.agent_row, m.agent_col, m.draw_agents
 
 
 def with_geometry(m: dgan.MapSpec, like: dgan.MapSpec) -> dgan.MapSpec:
     """``m`` with the crop geometry (:func:`crop_geometry`) of ``like``."""
-    h, w, res, row, col = crop_geometry(like)
-    return replace(m, height_px=h, width_px=w, resolution_m=res, agent_row=row, agent_col=col)
+    h, w, res, row, col, boxes = crop_geometry(like)
+    return replace(m, height_px=h, width_px=w, resolution_m=res, agent_row=row, agent_col=col, draw_agents=boxes)
 
 
 @dataclass(frozen=True)
@@ -42,8 +43,8 @@ class Teacher:
     spec: dgan.InputSpec
     #: Whether that prior differs from the student's (the teacher's modes are then carried onto the student's).
     own_prior: bool
-    #: Whether its map crops have another size or resolution than the student's (a student with a cheaper map
-    #: encoder, issue 26): it then runs on crops drawn to its own geometry, the batches' ``teacher_map``
+    #: Whether its map crops have another size, resolution or boxes than the student's (a student with cheaper crops,
+    #: issue 26): it then runs on crops drawn to its own geometry, the batches' ``teacher_map``
     #: (:func:`teacher_crops`).
     own_map: bool = False
 
@@ -57,7 +58,7 @@ class Teacher:
             tspec = replace(tspec, map=theirs_map)
             own_map = crop_geometry(theirs_map) != crop_geometry(spec.map)
             # Nor is a crop's geometry an input it must share, when it gets crops of its own (the rest of the crop
-            # spec, what is drawn and for whom, it must).
+            # spec, the map's classes, whether it is optional, it must).
             compared = with_geometry(theirs_map, spec.map)
         # The prior is not a network input: a teacher with another one runs on the same tensors.
         theirs = replace(tspec, prior=spec.prior, map=compared)

@@ -45,6 +45,24 @@ def test_config_is_typed() -> None:
         Config.from_dict({"optimizer": {}})
 
 
+def test_the_crops_can_leave_the_agents_boxes_out() -> None:
+    """``data.map_draw_agents = false``: the spec's crops without the agents' boxes (the engine draws none)."""
+    with_boxes = input_spec(Config.load(CONFIG))
+    without = input_spec(Config.load(CONFIG, {"data.map_draw_agents": False}))
+    assert with_boxes.map is not None
+    assert without.map is not None
+    assert with_boxes.map.draw_agents
+    assert not without.map.draw_agents
+    frame = dgan.demo.scene_for(with_boxes).frame
+    a, b = dgan.preprocess(frame, with_boxes)["map"], dgan.preprocess(frame, without)["map"]
+
+    # The boxes are blue (0, 0, 1): without them fewer pixels are pure blue, and nothing else differs in kind.
+    def blue(m: np.ndarray) -> int:
+        return int(((m[:, 2] == 1.0) & (m[:, 0] == 0.0) & (m[:, 1] == 0.0)).sum())
+
+    assert blue(a) > blue(b)
+
+
 def test_the_map_cnn_keeps_zero_one_or_two_residual_blocks() -> None:
     cfg = Config.load(ROOT / "training" / "configs" / "hdmap.toml")
     spec = input_spec(cfg)
@@ -595,8 +613,8 @@ def test_a_teacher_runs_on_the_student_s_crops_whichever_way_its_own_were_drawn(
     assert spec.map.render == "tiles"
     # The kept teacher was trained on crops drawn per agent; it takes the tiled crops (the same tensors) ...
     Teacher.load(str(ROOT / "training" / "checkpoints" / "teachers" / "hdmap.pt"), spec)
-    # ... nor what is drawn on them.
-    other = replace(spec, map=replace(spec.map, draw_agents=not spec.map.draw_agents))
+    # ... but not crops it must share: an optional map is another input (map_present).
+    other = replace(spec, map=replace(spec.map, optional=not spec.map.optional))
     with pytest.raises(ValueError, match="takes other inputs"):
         Teacher.load(str(ROOT / "training" / "checkpoints" / "teachers" / "hdmap.pt"), other)
 
@@ -639,3 +657,6 @@ def test_a_teacher_with_crops_of_another_geometry_runs_on_its_own() -> None:
     assert plain["teacher_map"].shape == (n, 3, 32, 31)
     np.testing.assert_array_equal(flipped["teacher_map"], plain["teacher_map"][..., ::-1])
     np.testing.assert_array_equal(flipped["map"], plain["map"][..., ::-1])
+    # Crops without the agents' boxes are another geometry too: the teacher draws its own with them.
+    boxless = replace(input_spec(Config.load(CONFIG)), map=replace(own.map, draw_agents=False))
+    assert Teacher.load(str(CHECKPOINTS / "teachers" / "zara1.pt"), boxless).own_map
