@@ -57,7 +57,7 @@ def load_checkpoint(path: Path) -> Checkpoint:
     ckpt = torch.load(path, weights_only=False)
     calibration = Calibration.of(ckpt)
     if "members" in ckpt:
-        members = [_member(m) for m in ckpt["members"]]
+        members = [network_of(m) for m in ckpt["members"]]
         first = members[0]
         for other in members[1:]:
             if other[1].to_json() != first[1].to_json() or not np.array_equal(other[3], first[3]):
@@ -67,11 +67,12 @@ def load_checkpoint(path: Path) -> Checkpoint:
             [m[0] for m in members], tables, len(first[1].classes), ckpt.get("top_scale")
         ).eval()
         return Checkpoint(ensemble, *first[1:], calibration)
-    return Checkpoint(*_member(ckpt), calibration)
+    return Checkpoint(*network_of(ckpt), calibration)
 
 
-def _member(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
-    """One trained network of a checkpoint: the model (eval mode), spec, anchors, class of each anchor, config."""
+def network_of(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:
+    """One trained network of a checkpoint's dict (a run's, or an ensemble's member): the model (eval mode), spec,
+    anchors, class of each anchor, config (also a soup's, ``training.soup``)."""
     from training.build import build_model, input_spec
 
     cfg = Config.from_dict(

@@ -70,7 +70,8 @@ def _shared_config(ckpts: Sequence[dict[str, Any]], runs: Sequence[Path]) -> Non
 def recompute_batchnorm(model: torch.nn.Module, batches: Iterable[dict[str, torch.Tensor]]) -> int:
     """Sets every BatchNorm layer's running statistics of ``model`` to their plain average over ``batches`` (a
     soup's mean weights fit none of its runs' statistics); returns how many batches that took. The model is left in
-    eval mode."""
+    eval mode. (``torch.optim.swa_utils.update_bn`` does the same for a model of one input; this one takes the
+    contract's several.)"""
     norms = [m for m in model.modules() if isinstance(m, torch.nn.modules.batchnorm._BatchNorm)]
     momenta = [m.momentum for m in norms]
     for m in norms:
@@ -103,7 +104,7 @@ def soup_checkpoint(runs: Sequence[Path], out: Path, batches: int = 200, data_ro
     """Writes the soup of ``runs`` (their ``last.pt``) as a run folder ``out`` (``best.pt``, ``config.json``)."""
     from dataclasses import replace
 
-    from training.export import _member
+    from training.export import network_of
 
     missing = [str(r) for r in runs if not (r / "last.pt").is_file()]
     if missing:
@@ -113,7 +114,7 @@ def soup_checkpoint(runs: Sequence[Path], out: Path, batches: int = 200, data_ro
     ckpt = {k: ckpts[0][k] for k in ("anchors", "class_of", "config", "epoch") if k in ckpts[0]}
     ckpt["model"] = soup_state([c["model"] for c in ckpts])
     ckpt["runs"] = [r.name for r in runs]
-    model, spec, _, _, cfg = _member(ckpt)
+    model, spec, _, _, cfg = network_of(ckpt)
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     recompute_batchnorm(model, training_batches(cfg, spec, batches))
