@@ -7,6 +7,7 @@ import dgan
 from training.config import Config
 from training.data.datasets import DATASETS
 from training.modules.dgan import DGAN
+from training.modules.scene import SCENE_STRIDE
 
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
@@ -26,6 +27,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
             optional=cfg.train.map_dropout > 0,
             render=d.map_render,
             classes=tuple(x.strip() for x in cfg.model.map_classes.split(",") if x.strip()),
+            scene=dgan.SceneSpec(d.map_scene_px, SCENE_STRIDE) if cfg.model.map_mode == "scene" else None,
         )
     return dgan.InputSpec(
         dt_s=info.dt_s,
@@ -72,6 +74,11 @@ def run_name(cfg: Config) -> str:
 
 
 def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
+    if (cfg.model.map_mode == "scene") != (cfg.data.map_scene_px > 0):
+        raise ValueError(
+            'model.map_mode = "scene" and data.map_scene_px > 0 go together (the scene CNN reads the windows\' scene'
+            f" rasters); got {cfg.model.map_mode!r} and {cfg.data.map_scene_px}"
+        )
     hw = (spec.map.height_px, spec.map.width_px) if spec.map else None
     optional = spec.map is not None and spec.map.optional
     gate = map_gate(cfg.model.map_classes, spec)

@@ -141,24 +141,32 @@ def upgrade(path: Path) -> str:
     return seal(path)
 
 
-def example_inputs(spec: dgan.InputSpec, n: int = 3) -> tuple[torch.Tensor, ...]:
-    """Inputs of the padded layout to trace the exported graph with: ``n`` agents, each hearing itself and the next
-    (D = 2, unlike N, so that the tracer cannot mistake one axis for the other)."""
+def example_inputs(spec: dgan.InputSpec, n: int = 3) -> dict[str, torch.Tensor]:
+    """Inputs of the padded layout to trace the exported graph with, by name in the contract's order: ``n`` agents,
+    each hearing itself and the next (D = 2, unlike N, so that the tracer cannot mistake one axis for the other); a
+    scene model's two frames (F = 2, M = 2 agents each, a raster of 24 px)."""
     g = torch.Generator().manual_seed(0)
     rows = torch.arange(n)
-    args = [
-        torch.randn(n, spec.t_obs, 2, generator=g),
-        torch.ones(n, spec.t_obs),
-        torch.randn(n, spec.state_dim, generator=g),
-        torch.stack([rows, (rows + 1) % n], dim=1),
-        torch.ones(n, 2),
-        torch.randn(n, 2, 6, generator=g),
-    ]
-    if spec.map is not None:
-        args.append(torch.rand(n, 3, spec.map.height_px, spec.map.width_px, generator=g))
-        if spec.map.optional:
-            args.append(torch.ones(n))
-    return tuple(args)
+    args = {
+        "trajectory": torch.randn(n, spec.t_obs, 2, generator=g),
+        "trajectory_mask": torch.ones(n, spec.t_obs),
+        "state": torch.randn(n, spec.state_dim, generator=g),
+        "neighbor_index": torch.stack([rows, (rows + 1) % n], dim=1),
+        "neighbor_mask": torch.ones(n, 2),
+        "neighbor_features": torch.randn(n, 2, 6, generator=g),
+    }
+    m = spec.map
+    if m is not None and m.scene is not None:
+        args["map"] = torch.rand(2, 3, 24, 24, generator=g)
+    elif m is not None:
+        args["map"] = torch.rand(n, 3, m.height_px, m.width_px, generator=g)
+    if m is not None and m.optional:
+        args["map_present"] = torch.ones(n)
+    if m is not None and m.scene is not None:
+        gh, gw = (-(-side // m.scene.stride) for side in (m.height_px, m.width_px))
+        args["map_grid"] = torch.rand(2, 2, gh, gw, 2, generator=g) * 2 - 1
+        args["map_slot"] = torch.arange(n) % 4
+    return args
 
 
 def export_model(
@@ -175,11 +183,17 @@ def export_model(
     anchors must be grouped by class in the spec's class order. ``temperature``: as :func:`contract`."""
     from training.modules.dgan import PaddedDGAN
 
+    scene = any(getattr(m, "scene", False) for m in getattr(model, "members", [model]))
+    if scene != (spec.map is not None and spec.map.scene is not None):
+        raise ValueError(
+            'a model with model.map_mode = "scene" exports under a spec whose map reads the scene (map.scene), and '
+            "only such a model does"
+        )
     spec = replace(spec, graph="padded")
     if not np.all(np.diff(class_of) >= 0) or (len(class_of) and class_of[-1] >= len(spec.classes)):
         raise ValueError("anchors must be grouped by class, in the order of spec.classes")
-    args = example_inputs(spec)
-    names = list(INPUTS[: len(args)])
+    inputs = example_inputs(spec)
+    args, names = tuple(inputs.values()), list(inputs)
     dyn = {
         "trajectory": {0: "N"},
         "trajectory_mask": {0: "N"},
@@ -187,12 +201,14 @@ def export_model(
         "neighbor_index": {0: "N", 1: "D"},
         "neighbor_mask": {0: "N", 1: "D"},
         "neighbor_features": {0: "N", 1: "D"},
-        "map": {0: "N"},
+        "map": {0: "F", 2: "S", 3: "S"} if spec.map is not None and spec.map.scene is not None else {0: "N"},
         "map_present": {0: "N"},
+        "map_grid": {0: "F", 1: "M"},
+        "map_slot": {0: "N"},
     }
     dynamic_axes = {k: dyn[k] for k in names} | {o: {0: "N"} for o in OUTPUTS}
     torch.onnx.export(
-        PaddedDGAN(model).eval(),
+        PaddedDGAN(model, names).eval(),
         args,
         str(path),
         input_names=names,

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 import dgan
+from dgan.contract import SCENE_GRID_INPUTS
 from training.config import Config
 from training.data.arrays import Windows, concat_windows
 from training.data.batches import batch_prior, forward_inputs, prepared_batch, windows_with_targets
@@ -28,7 +29,10 @@ def crop_geometry(m: dgan.MapSpec) -> tuple[int, int, float, int, int, bool]:
 def with_geometry(m: dgan.MapSpec, like: dgan.MapSpec) -> dgan.MapSpec:
     """``m`` with the crop geometry (:func:`crop_geometry`) of ``like``."""
     h, w, res, row, col, boxes = crop_geometry(like)
-    return replace(m, height_px=h, width_px=w, resolution_m=res, agent_row=row, agent_col=col, draw_agents=boxes)
+    # A crop per agent, as a teacher reads them (a scene student's spec reads the scene: map.scene).
+    return replace(
+        m, height_px=h, width_px=w, resolution_m=res, agent_row=row, agent_col=col, draw_agents=boxes, scene=None
+    )
 
 
 @dataclass(frozen=True)
@@ -62,7 +66,9 @@ class Teacher:
             compared = with_geometry(theirs_map, spec.map)
         # The prior is not a network input: a teacher with another one runs on the same tensors.
         theirs = replace(tspec, prior=spec.prior, map=compared)
-        if theirs.to_json() != spec.to_json():
+        # A scene student's windows carry the agents' crops too (map.scene aside, the same spec): a teacher reads them.
+        crops = spec if spec.map is None else replace(spec, map=replace(spec.map, scene=None))
+        if theirs.to_json() != crops.to_json():
             raise ValueError(f"train.distill: {path} takes other inputs than this configuration ({tspec.to_json()})")
         anchors_t, class_of_t = torch.from_numpy(anchors).float(), torch.from_numpy(class_of).long()
         return cls(model.eval(), anchors_t, class_of_t, calibration, tspec, tspec.prior != spec.prior, own_map)
@@ -75,6 +81,10 @@ class Teacher:
 
     def inputs(self, b: dict[str, torch.Tensor]) -> list[torch.Tensor]:
         """The teacher's network inputs from a batch: the student's, with its own crops if it has them."""
+        if "map_grid" in b:  # a scene student's batch: the teacher reads the agents' crops
+            b = {k: v for k, v in b.items() if k not in ("map", *SCENE_GRID_INPUTS)}
+            if "crops" in b:
+                b["map"] = b.pop("crops")
         if not self.own_map:
             return forward_inputs(b)
         if "teacher_map" not in b:

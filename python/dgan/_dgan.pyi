@@ -21,10 +21,12 @@ __all__ = [
     "__version__",
     "attention_graph",
     "available_execution_providers",
+    "crop_grid",
     "frame_from_rows",
     "init_onnxruntime",
     "kinematic_prior",
     "preprocess",
+    "scene_raster",
     "seal_model",
     "to_agent_frame",
     "to_world_frame",
@@ -185,6 +187,18 @@ def to_world_frame(
 def attention_graph(
     centres: npt.NDArray[np.float64], radii: npt.NDArray[np.float64], brute_force: bool = False
 ) -> npt.NDArray[np.int64]: ...
+def scene_raster(
+    frame: Frame, spec_json: str, size_px: int, origin: tuple[float, float], heading: float
+) -> npt.NDArray[np.float32]: ...
+def crop_grid(
+    origins: npt.NDArray[np.float64],
+    headings: npt.NDArray[np.float64],
+    spec_json: str,
+    stride: int,
+    size_px: int,
+    scene_origin: tuple[float, float],
+    scene_heading: float,
+) -> npt.NDArray[np.float32]: ...
 def seal_model(path: str | os.PathLike[str]) -> str: ...
 def available_execution_providers(onnxruntime_library: str | os.PathLike[str] | None) -> list[str]: ...
 def init_onnxruntime(path: str | os.PathLike[str] | None) -> str: ...

@@ -53,6 +53,8 @@ STATE_MIRRORED: Final[tuple[str, ...]] = tuple(_C["state_mirrored"])
 EDGE_MIRRORED: Final[tuple[str, ...]] = tuple(_C["edge_mirrored"])
 EDGE_LIST_INPUTS: Final[tuple[str, ...]] = tuple(_C["inputs"]["edge_list"])
 PADDED_INPUTS: Final[tuple[str, ...]] = tuple(_C["inputs"]["padded"])
+#: A scene model's inputs after ``map_present`` (contract 12): where its agents read the frame's raster.
+SCENE_GRID_INPUTS: Final[tuple[str, ...]] = EDGE_LIST_INPUTS[EDGE_LIST_INPUTS.index("map_present") + 1 :]
 OUTPUTS: Final[tuple[str, ...]] = tuple(_C["outputs"])
 #: Keys what the engine's preprocessing produces, for caches of its output.
 CACHE_KEY: Final = f"contract{VERSION}-raster{RASTER_VERSION}-preprocess{PREPROCESS_VERSION}"

@@ -26,6 +26,17 @@ def _class_names(value: Any, key: str) -> tuple[str, ...]:
 
 
 @dataclass(frozen=True)
+class SceneSpec:
+    """How a scene model's map CNN reads the map (contract 12): once per frame, over a square north-up raster of the
+    scene at the crops' resolution (:func:`scene_raster`), at least ``min_px`` pixels a side and larger where the
+    agents' crops reach farther; each agent reads the network's features at the centres of its crop's
+    ``stride × stride`` blocks (:func:`crop_grid`)."""
+
+    min_px: int = 128
+    stride: int = 4
+
+
+@dataclass(frozen=True)
 class MapSpec:
     """The agent-centric, heading-aligned map crop: ``height_px × width_px`` at ``resolution_m`` metres per pixel,
     the agent at the centre of pixel ``(agent_row, agent_col)``, its heading pointing up."""
@@ -48,9 +59,16 @@ class MapSpec:
     #: Contract 11: the classes whose agents read the map, when the network reads it for them alone (e.g.
     #: ``("cyclist", "pedestrian")``); the other agents' crops are left blank instead of drawn. Empty: every agent's.
     classes: Sequence[str] = ()
+    #: Contract 12: the map CNN reads one raster of the scene per frame instead of a crop per agent (the crop's
+    #: geometry then says where each agent reads it); None, a crop per agent.
+    scene: SceneSpec | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "classes", _class_names(self.classes, "map.classes"))
+        if isinstance(self.scene, Mapping):
+            object.__setattr__(self, "scene", SceneSpec(**self.scene))
+        if self.scene is not None and not isinstance(self.scene, SceneSpec):
+            raise InvalidSpecError(f"map.scene must be a dgan.SceneSpec, got {self.scene!r}")
 
 
 @dataclass(frozen=True)
@@ -151,6 +169,8 @@ class InputSpec:
             del d["denoise_gate_m"]
         if d["map"] is not None and not d["map"]["classes"]:  # contracts 1-10 draw every agent's crop
             del d["map"]["classes"]
+        if d["map"] is not None and d["map"]["scene"] is None:  # contracts 1-11 take a crop per agent
+            del d["map"]["scene"]
         return json.dumps(d)
 
     @classmethod
@@ -181,10 +201,12 @@ def preprocess(frame: Frame, spec: InputSpec, threads: int | None = None) -> dic
     Returns ``trajectory (N, T_obs, 2)``, ``trajectory_mask (N, T_obs)``, ``state (N, 7 + C)``,
     ``edge_index (E, 2)``, ``edge_features (E, 6)`` (and for the padded layout ``neighbor_index (N, D)``,
     ``neighbor_mask (N, D)``, ``neighbor_features (N, D, 6)``), ``map (N, 3, H, W)`` for map models,
-    ``map_present (N,)`` for models whose map is optional, the kinematic ``prior (N, T_f, 2)`` in each agent's
-    frame, and ``origin (N, 2)``, ``heading (N,)`` (each agent's frame), ``speed (N,)``, ``radius (N,)`` and
-    undirected ``edges``. The map crops are drawn on at most ``threads`` threads (default: every core; a
-    ``Predictor`` draws them on its own ``threads``); the tensors are the same whatever the threads.
+    ``map_present (N,)`` for models whose map is optional (a scene model's ``map`` is the frame's raster
+    ``(1, 3, S, S)``, with ``map_grid (1, N, gh, gw, 2)`` and ``map_slot (N,)``), the kinematic
+    ``prior (N, T_f, 2)`` in each agent's frame, and ``origin (N, 2)``, ``heading (N,)`` (each agent's frame),
+    ``speed (N,)``, ``radius (N,)`` and undirected ``edges``. The map crops are drawn on at most ``threads``
+    threads (default: every core; a ``Predictor`` draws them on its own ``threads``); the tensors are the same
+    whatever the threads.
     """
     if not isinstance(frame, Frame):
         raise InvalidFrameError(
@@ -232,3 +254,57 @@ def attention_graph(
     c = np.ascontiguousarray(centres, dtype=np.float64)
     r = np.ascontiguousarray(radii, dtype=np.float64)
     return _dgan.attention_graph(c, r, brute_force)
+
+
+def scene_raster(
+    frame: Frame, spec: InputSpec, size_px: int, origin: npt.ArrayLike, heading: float
+) -> npt.NDArray[np.float32]:
+    """The square scene raster ``(3, size_px, size_px)`` (values in [0, 1]) of ``frame``'s map at the resolution of
+    ``spec``'s map crops, centred on ``origin`` (world metres) with image-up along ``heading`` (radians; π/2 puts
+    north up), the agents drawn as the crops draw them, each once: what a map CNN shared by every agent reads
+    (issue 26). Each agent's crop lies in it at :func:`crop_grid`."""
+    if not isinstance(frame, Frame):
+        raise InvalidFrameError(f"scene_raster takes a dgan.Frame, got {type(frame).__name__}")
+    o = np.asarray(origin, dtype=np.float64).reshape(-1)
+    if o.shape != (2,):
+        raise InvalidFrameError(f"origin must be two numbers, got shape {np.shape(origin)}")
+    out: npt.NDArray[np.float32] = _dgan.scene_raster(
+        frame._frame, _spec_json(spec), _count(size_px, "size_px"), (float(o[0]), float(o[1])), float(heading)
+    )
+    return out
+
+
+def crop_grid(
+    origins: npt.ArrayLike,
+    headings: npt.ArrayLike,
+    spec: InputSpec,
+    stride: int,
+    size_px: int,
+    scene_origin: npt.ArrayLike,
+    scene_heading: float,
+) -> npt.NDArray[np.float32]:
+    """Where each agent's map crop (``origins (N, 2)``, ``headings (N,)``: its frame, as :func:`preprocess` returns
+    them) lies in the :func:`scene_raster` of ``size_px`` placed at ``scene_origin``, ``scene_heading``:
+    ``(N, ceil(H / stride), ceil(W / stride), 2)``, for each ``stride × stride`` block of the crop the ``(x, y)`` of
+    its centre in ``torch.nn.functional.grid_sample``'s coordinates (``align_corners=False``; −1 and 1 at the raster's
+    outer edges)."""
+    o = np.asarray(scene_origin, dtype=np.float64).reshape(-1)
+    if o.shape != (2,):
+        raise InvalidFrameError(f"scene_origin must be two numbers, got shape {np.shape(scene_origin)}")
+    oo, hh = (np.ascontiguousarray(a, dtype=np.float64) for a in (origins, headings))
+    out: npt.NDArray[np.float32] = _dgan.crop_grid(
+        oo,
+        hh,
+        _spec_json(spec),
+        _count(stride, "stride"),
+        _count(size_px, "size_px"),
+        (float(o[0]), float(o[1])),
+        float(scene_heading),
+    )
+    return out
+
+
+def _count(v: Any, name: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+        raise InvalidSpecError(f"{name} must be a positive int, got {v!r}")
+    return int(v)

@@ -45,7 +45,10 @@ def test_the_inputs_are_those_preprocessing_gives() -> None:
     got = dgan.preprocess(frame, spec)
     layout = contract.PADDED_INPUTS if spec.graph == "padded" else contract.EDGE_LIST_INPUTS
     wanted = [n for n in layout if n in got]
-    assert wanted == [n for n in layout if n != "map_present" or (spec.map is not None and spec.map.optional)]
+    optional = spec.map is not None and spec.map.optional
+    scene = spec.map is not None and spec.map.scene is not None
+    grids = ("map_grid", "map_slot")
+    assert wanted == [n for n in layout if (n != "map_present" or optional) and (n not in grids or scene)]
     assert got["state"].shape[1] == spec.state_dim == contract.state_width(spec.classes)
     key = "neighbor_features" if spec.graph == "padded" else "edge_features"
     assert got[key].shape[-1] == len(contract.EDGE_FEATURES)

@@ -44,6 +44,10 @@ class Windows:
     # (A, 3, H_t, W_t) u8: the same agents' crops drawn to a distillation teacher's geometry where it differs from the
     # student's (training.step.teacher_crops); None: the teacher takes the student's
     teacher_map: Arr | None = None
+    # (W, 3, S, S) u8: each window's scene raster (data.map_scene_px, dgan.scene_raster); None: none
+    scene: Arr | None = None
+    # (A, gh, gw, 2) f32: where each agent's crop blocks lie in its window's scene raster (dgan.crop_grid)
+    scene_grid: Arr | None = None
 
     @property
     def num_windows(self) -> int:
@@ -80,14 +84,36 @@ class Windows:
             out["noisy"] = self.noisy[a_idx]
         if self.teacher_map is not None:
             out["teacher_map"] = self.teacher_map[a_idx].astype(np.float32) / 255.0
+        if self.scene is not None and self.scene_grid is not None:
+            # A scene model's inputs as the engine gives them (contract 12): the windows' rasters as ``map``, their
+            # agents' grids padded to the window with the most, each agent's slot; the crops stay for a teacher.
+            if "map" in out:
+                out["crops"] = out.pop("map")
+            out["map"] = self.scene[w].astype(np.float32) / 255.0
+            out["map_grid"], out["map_slot"] = padded_grids(self.scene_grid[a_idx], n_agents)
         if flip is not None and flip.any():
             mirror(out, np.repeat(flip, n_agents), np.repeat(flip, n_edges))
+            if "map_grid" in out:  # the scene flipped left-right, and its agents' grids with it (columns reversed)
+                out["map"][flip] = out["map"][flip][..., ::-1]
+                out["map_grid"][flip] = out["map_grid"][flip][:, :, :, ::-1] * np.array([-1.0, 1.0], np.float32)
         return out
 
 
 #: The columns of the state and edge features that mirroring negates (the engine's, ``dgan.contract``).
 STATE_MIRROR_COLUMNS: Final = tuple(STATE_FEATURES.index(c) for c in STATE_MIRRORED)
 EDGE_MIRROR_COLUMNS: Final = tuple(EDGE_FEATURES.index(c) for c in EDGE_MIRRORED)
+
+
+def padded_grids(grids: Arr, per_window: Arr) -> tuple[Arr, Arr]:
+    """Agents' crop grids ``(A, gh, gw, 2)``, ``per_window[w]`` of them to window w in order, as the engine lays them
+    out (contract 12): ``(W, M, gh, gw, 2)``, padded with zeros to the window with the most agents M, and each agent's
+    row of it flattened ``(A,)``."""
+    most = int(per_window.max()) if len(per_window) else 0
+    window = np.repeat(np.arange(len(per_window)), per_window)
+    slot = np.arange(len(grids)) - np.repeat(np.cumsum(per_window) - per_window, per_window)
+    out = np.zeros((len(per_window), most, *grids.shape[1:]), np.float32)
+    out[window, slot] = grids
+    return out, (window * most + slot).astype(np.int64)
 
 
 def mirror(batch: dict[str, Arr], agents: Arr, edges: Arr) -> None:
@@ -103,7 +129,8 @@ def mirror(batch: dict[str, Arr], agents: Arr, edges: Arr) -> None:
         batch["state"][agents, col] *= -1
     for col in EDGE_MIRROR_COLUMNS:
         batch["edge_features"][edges, col] *= -1
-    for key in ("map", "teacher_map"):
+    # A scene model's ``map`` is its windows' rasters, mirrored with their grids (:meth:`Windows.batch`).
+    for key in ("crops", "teacher_map") if "map_grid" in batch else ("map", "teacher_map"):
         if key in batch:
             batch[key][agents] = batch[key][agents][..., ::-1]
 
@@ -117,6 +144,8 @@ def concat_windows(parts: Sequence[Windows]) -> Windows:
         return parts[0]
     if len({p.map is None for p in parts}) > 1:
         raise ValueError("window sets with and without map crops cannot be concatenated")
+    if len({p.scene is None for p in parts}) > 1:
+        raise ValueError("window sets with and without scene rasters cannot be concatenated")
     if any(p.teacher_map is not None for p in parts):
         raise ValueError("a teacher's crops are added to the concatenated windows (training.step.teacher_crops)")
     agent_ptr, edge_ptr, window_file = [np.zeros(1, np.int64)], [np.zeros(1, np.int64)], []
@@ -131,6 +160,10 @@ def concat_windows(parts: Sequence[Windows]) -> Windows:
     absent, noisy = (_flags(parts, name) for name in ("map_absent", "noisy"))
     return Windows(
         map=None if parts[0].map is None else np.concatenate([p.map for p in parts if p.map is not None]),
+        scene=None if parts[0].scene is None else np.concatenate([p.scene for p in parts if p.scene is not None]),
+        scene_grid=None
+        if parts[0].scene_grid is None
+        else np.concatenate([p.scene_grid for p in parts if p.scene_grid is not None]),
         map_absent=absent,
         noisy=noisy,
         agent_ptr=np.concatenate(agent_ptr),

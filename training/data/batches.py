@@ -29,7 +29,10 @@ INPUTS = EDGE_LIST_INPUTS
 
 
 def forward_inputs(b: dict[str, Any]) -> list[Any]:
-    """The network inputs present in a batch, in ``DGAN.forward``'s order."""
+    """The network inputs present in a batch, in ``DGAN.forward``'s order (a scene model's ``map``, ``map_grid`` and
+    ``map_slot`` as the engine gives them, contract 12)."""
+    if "map_grid" in b:  # a scene model whose map is not optional: map_present is None in its place
+        return [b.get(k) for k in INPUTS if k in b or k == "map_present"]
     return [b[k] for k in INPUTS if k in b]
 
 
@@ -62,8 +65,9 @@ def prepared_batch(
                 raise ValueError("map dropout needs the trainer's random generator (rng)")
             gone = rng.random(len(present)) < drop
             present[gone] = 0.0
-            b["map"][gone] = 0.0
-            if "teacher_map" in b:  # the teacher sees the agent without its map too
-                b["teacher_map"][gone] = 0.0
+            # Crops blanked (a scene model's raster is every agent's: its features are gated by map_present).
+            for key in ("crops", "teacher_map") if "map_grid" in b else ("map", "teacher_map"):
+                if key in b:  # the teacher sees the agent without its map too
+                    b[key][gone] = 0.0
         b["map_present"] = present
     return to_tensors(b)

@@ -47,6 +47,8 @@ def read_windows(path: Path) -> Windows:
     d["files"] = [str(f) for f in d["files"]]
     d.setdefault("map", None)
     d.setdefault("map_absent", None)
+    d.setdefault("scene", None)
+    d.setdefault("scene_grid", None)
     return Windows(**d)
 
 

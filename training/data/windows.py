@@ -123,25 +123,33 @@ def build_windows(
     """Preprocesses every window of ``recs`` through the engine; ``noise = (sigma_m, drop)`` first corrupts the
     observed histories as a tracker would (:func:`training.data.augment.tracker_noise`, seeded by the recording's
     order), ``hold`` (metres) holds their still agents where they are (:func:`training.data.augment.held_still`), the
-    futures staying as recorded."""
+    futures staying as recorded. A scene model's windows (``spec.map.scene``, contract 12) also hold their scene
+    rasters and their agents' grids (:func:`scene_inputs`), beside the agents' crops that a teacher reads."""
     from tqdm import tqdm
 
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
     agent_ptr, edge_ptr = [0], [0]
     class_of_label = np.array([list(spec.classes).index(c) for c in info.label_class])
+    scene = spec.map.scene if spec.map is not None else None
+    crops = spec if scene is None or spec.map is None else replace(spec, map=replace(spec.map, scene=None))
     # A dataset without maps, for a model whose map is optional: its agents' crops are flagged absent, as the engine
     # flags a frame without a map (another source's pedestrians for an ETH/UCY model keep the flag present).
     flag_absent = spec.map is not None and spec.map.optional and not info.has_map
     for fi, rec in enumerate(recs):
         windows = list(iter_windows(rec, info, spec.t_obs, spec.t_f, stride))
-        rng = np.random.default_rng(fi)
+        rng, turns = np.random.default_rng(fi), np.random.default_rng([fi, 1])
         for w in tqdm(windows, desc=rec.name, disable=not progress, leave=False):
             if noise != (0.0, 0.0):
                 w = noisy_window(w, spec.t_obs, noise, rng)
             if hold > 0:
                 obs = held_still(w.positions[:, : spec.t_obs], w.mask[:, : spec.t_obs], hold)
                 w = replace(w, positions=np.concatenate([obs, w.positions[:, spec.t_obs :]], axis=1))
-            x = dgan.preprocess(w.frame(info, spec.t_obs, with_map=spec.map is not None), spec)
+            frame = w.frame(info, spec.t_obs, with_map=spec.map is not None)
+            x = dgan.preprocess(frame, crops)
+            if scene is not None:
+                scene_raster, grid = scene_inputs(frame, crops, x, scene, float(turns.uniform(-np.pi, np.pi)))
+                parts["scene"].append(scene_raster[None])
+                parts["scene_grid"].append(grid)
             fut = np.where(w.mask[:, spec.t_obs :, None], w.positions[:, spec.t_obs :], 0.0)
             future = dgan.to_agent_frame(fut, x["origin"], x["heading"])
             n = len(w.ids)
@@ -166,6 +174,18 @@ def build_windows(
         files=[r.name for r in recs],
         **cat,
     )
+
+
+def scene_inputs(
+    frame: dgan.Frame, spec: dgan.InputSpec, x: dict[str, Arr], scene: dgan.SceneSpec, heading: float
+) -> tuple[Arr, Arr]:
+    """A window's scene raster ``(3, S, S)`` u8 (S = ``scene.min_px``), centred on its agents' mean position and
+    turned to ``heading`` (the CNN learns the map whichever way the scene lies; the engine's lies north up, centred on
+    the agents' crops and grown to hold them), and each agent's crop grid in it ``(N, gh, gw, 2)``."""
+    centre = x["origin"].mean(axis=0) if len(x["origin"]) else np.zeros(2)
+    raster = dgan.scene_raster(frame, spec, scene.min_px, centre, heading)
+    grid = dgan.crop_grid(x["origin"], x["heading"], spec, scene.stride, scene.min_px, centre, heading)
+    return np.round(raster * 255).astype(np.uint8), grid
 
 
 def noisy_window(w: Window, t_obs: int, noise: tuple[float, float], rng: np.random.Generator) -> Window:

@@ -11,12 +11,14 @@ list of senders, which needs only gathers and dense reductions and which ONNX Ru
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
 
 from training.modules.attention import GATLayer, NeighborGroups, neighbor_groups, padding_bias
+from training.modules.scene import SCENE_STRIDE, MapEncoder, SceneMapEncoder
 
 
 @dataclass(frozen=True)
@@ -48,55 +50,10 @@ class ModelConfig:
     #: ``map_present`` 0 inside the network, as if their frame had no map (models with an optional map only; chosen on
     #: validation: `hdmap`'s vehicles are better without it, docs/results.md).
     map_classes: str = ""
-
-
-class ResBlock(nn.Module):
-    def __init__(self, c: int) -> None:
-        super().__init__()
-        self.body = nn.Sequential(
-            nn.Conv2d(c, c, 3, padding=1),
-            nn.BatchNorm2d(c),
-            nn.ReLU(),
-            nn.Conv2d(c, c, 3, padding=1),
-            nn.BatchNorm2d(c),
-        )
-
-    def forward(self, x: Tensor) -> Tensor:
-        out: Tensor = torch.relu(x + self.body(x))
-        return out
-
-
-class MapEncoder(nn.Module):
-    """A small ResNet over the ``(3, H, W)`` crop; the flattened 4× downsampled map keeps where things are."""
-
-    def __init__(self, c: int, out: int, h: int, w: int, res_blocks: int = 2) -> None:
-        super().__init__()
-        if not 0 <= res_blocks <= 2:
-            raise ValueError(f"model.map_res_blocks must be 0, 1 or 2, got {res_blocks}")
-        blocks = (
-            ResBlock(c) if res_blocks == 2 else nn.Identity(),
-            ResBlock(2 * c) if res_blocks >= 1 else nn.Identity(),
-        )
-        self.net = nn.Sequential(
-            nn.Conv2d(3, c, 3, stride=2, padding=1),
-            nn.BatchNorm2d(c),
-            nn.ReLU(),
-            blocks[0],
-            nn.Conv2d(c, 2 * c, 3, stride=2, padding=1),
-            nn.BatchNorm2d(2 * c),
-            nn.ReLU(),
-            blocks[1],
-            nn.Conv2d(2 * c, 2 * c, 3, stride=2, padding=1),
-            nn.ReLU(),
-        )
-        hh, ww = h, w
-        for _ in range(3):
-            hh, ww = (hh + 1) // 2, (ww + 1) // 2
-        self.proj = nn.Sequential(nn.Flatten(), nn.Linear(2 * c * hh * ww, out), nn.ReLU())
-
-    def forward(self, x: Tensor) -> Tensor:
-        out: Tensor = self.proj(self.net(x))
-        return out
+    #: "crop": the map CNN runs over each agent's crop (its cost grows with the agents); "scene": its first stages run
+    #: once over each window's scene raster and each agent reads their features at its crop's blocks
+    #: (:mod:`training.modules.scene`; needs ``data.map_scene_px``; training only so far, issue 26).
+    map_mode: str = "crop"
 
 
 class DGAN(nn.Module):
@@ -140,14 +97,20 @@ class DGAN(nn.Module):
             nn.Linear(cfg.state_dim_out, cfg.state_dim_out),
             nn.ReLU(),
         )
-        self.map_enc = (
-            MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw, res_blocks=cfg.map_res_blocks)
-            if (cfg.use_map and map_hw)
-            else None
-        )
+        if cfg.map_mode not in ("crop", "scene"):
+            raise ValueError(f'model.map_mode must be "crop" or "scene", got {cfg.map_mode!r}')
+        self.scene = cfg.map_mode == "scene"
+        self.map_enc: nn.Module | None = None
+        if cfg.use_map and map_hw and self.scene:
+            grid_hw = (math.ceil(map_hw[0] / SCENE_STRIDE), math.ceil(map_hw[1] / SCENE_STRIDE))
+            self.map_enc = SceneMapEncoder(cfg.map_channels, cfg.map_dim, grid_hw, cfg.map_res_blocks)
+        elif cfg.use_map and map_hw:
+            self.map_enc = MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw, res_blocks=cfg.map_res_blocks)
         # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
         # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
         self.map_optional = map_optional and self.map_enc is not None
+        if self.gated and self.scene:
+            raise ValueError('model.map_classes is not served by model.map_mode = "scene" yet')
         if self.gated and not self.map_optional:
             raise ValueError("model.map_classes needs a model whose map is optional (map dropout, contract 2)")
         node_in = cfg.lstm_dim + cfg.state_dim_out + (cfg.map_dim if self.map_enc is not None else 0)
@@ -165,9 +128,18 @@ class DGAN(nn.Module):
         self.offset_head = nn.Linear(cfg.head_dim, num_anchors * t_f * 2)
 
     def encode(
-        self, trajectory: Tensor, trajectory_mask: Tensor, state: Tensor, map: Tensor | None, map_present: Tensor | None
+        self,
+        trajectory: Tensor,
+        trajectory_mask: Tensor,
+        state: Tensor,
+        map: Tensor | None,
+        map_present: Tensor | None,
+        *,
+        scene: tuple[Tensor, Tensor] | None = None,
     ) -> Tensor:
-        """Node features: the trajectory LSTM, the traffic-state MLP and the map CNN, concatenated and projected."""
+        """Node features: the trajectory LSTM, the traffic-state MLP and the map CNN, concatenated and projected.
+        With ``model.map_mode = "scene"``, ``map`` is the frames' scene rasters and ``scene`` their agents' grids and
+        each agent's slot (``map_grid``, ``map_slot``: :class:`~training.modules.scene.SceneMapEncoder`)."""
         x = torch.cat([trajectory, trajectory_mask.unsqueeze(-1)], dim=-1)
         _, (h_n, _) = self.lstm(self.embed(x))
         parts = [h_n[-1], self.state_mlp(state)]
@@ -178,6 +150,9 @@ class DGAN(nn.Module):
                 reads = state[:, -self.num_classes :] @ self.map_gate.to(state.dtype)
                 map_present = map_present * reads
                 features = self._readers_map(map, reads)
+            elif self.scene:
+                assert scene is not None, "a scene map encoder takes map_grid and map_slot"
+                features = self.map_enc(map, *scene)
             else:
                 features = self.map_enc(map)
             if self.map_optional:
@@ -235,8 +210,11 @@ class DGAN(nn.Module):
         edge_features: Tensor,
         map: Tensor | None = None,
         map_present: Tensor | None = None,
+        map_grid: Tensor | None = None,
+        map_slot: Tensor | None = None,
     ) -> tuple[Tensor, Tensor, Tensor]:
-        v = self.encode(trajectory, trajectory_mask, state, map, map_present)
+        scene = None if map_grid is None or map_slot is None else (map_grid, map_slot)
+        v = self.encode(trajectory, trajectory_mask, state, map, map_present, scene=scene)
         if not self.cfg.use_edge_features:
             edge_features = edge_features * 0.0
         p = v
@@ -257,9 +235,12 @@ class DGAN(nn.Module):
         neighbor_features: Tensor,
         map: Tensor | None = None,
         map_present: Tensor | None = None,
+        map_grid: Tensor | None = None,
+        map_slot: Tensor | None = None,
     ) -> tuple[Tensor, Tensor, Tensor]:
         """:meth:`forward` on the padded neighbour layout (contract 3): the same outputs for the same graph."""
-        v = self.encode(trajectory, trajectory_mask, state, map, map_present)
+        scene = None if map_grid is None or map_slot is None else (map_grid, map_slot)
+        v = self.encode(trajectory, trajectory_mask, state, map, map_present, scene=scene)
         if not self.cfg.use_edge_features:
             neighbor_features = neighbor_features * 0.0
         p = v
@@ -295,12 +276,16 @@ def entropy_tempered(anchor_logits: Tensor, classes: int, a: Tensor | float, b: 
 class PaddedDGAN(nn.Module):
     """A trained :class:`DGAN` whose ``forward`` takes the padded neighbour layout: what the exporter traces."""
 
-    def __init__(self, model: DGAN | ConsensusEnsemble) -> None:
+    def __init__(self, model: DGAN | ConsensusEnsemble, names: list[str] | None = None) -> None:
         super().__init__()
         self.model = model
+        #: The inputs' names, in the order ``forward`` takes them (a scene model's map_present may be absent).
+        self.names = names
 
     def forward(self, *inputs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        return self.model.forward_padded(*inputs)
+        if self.names is None:
+            return self.model.forward_padded(*inputs)
+        return self.model.forward_padded(**dict(zip(self.names, inputs, strict=True)))
 
 
 class ConsensusEnsemble(nn.Module):
@@ -366,5 +351,5 @@ class ConsensusEnsemble(nn.Module):
     def forward(self, *inputs: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
         return self.combine([m(*inputs) for m in self.members])
 
-    def forward_padded(self, *inputs: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
-        return self.combine([m.forward_padded(*inputs) for m in self.members])  # type: ignore[operator]
+    def forward_padded(self, *inputs: Tensor | None, **named: Tensor | None) -> tuple[Tensor, Tensor, Tensor]:
+        return self.combine([m.forward_padded(*inputs, **named) for m in self.members])  # type: ignore[operator]

@@ -104,6 +104,7 @@ fn bench_raster(c: &mut Criterion) {
         optional: false,
         render: dgan_core::MapRender::Agent,
         classes: vec![],
+        scene: None,
     };
     let mut g = c.benchmark_group("raster");
     let frame = road_frame(vector_map());

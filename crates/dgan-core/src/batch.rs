@@ -4,7 +4,7 @@
 
 use crate::error::{DganError, Result};
 use crate::preprocess::{Neighbors, NetworkInputs};
-use ndarray::{concatenate, Array2, ArrayView, Axis, Dimension, RemoveAxis};
+use ndarray::{concatenate, Array1, Array2, Array5, ArrayView, Axis, Dimension, RemoveAxis};
 
 /// Joined inputs and where each frame's agents are: frame `f` holds rows `agent_ptr[f]..agent_ptr[f + 1]`.
 #[derive(Debug, Clone)]
@@ -48,6 +48,24 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
     } else {
         None
     };
+    let (map_grid, map_slot) = if same_presence(parts, |p| p.map_grid.as_ref(), "map_grid")? {
+        let grids: Vec<&Array5<f32>> = parts.iter().filter_map(|p| p.map_grid.as_ref()).collect();
+        let most = grids.iter().map(|g| g.dim().1).max().unwrap_or(0);
+        let (_, _, gh, gw, _) = grids[0].dim();
+        let mut grid = Array5::<f32>::zeros((grids.len(), most, gh, gw, 2));
+        let mut slot = Vec::with_capacity(agent_ptr.last().copied().unwrap_or(0));
+        for (f, g) in grids.iter().enumerate() {
+            if g.dim().0 != 1 || (g.dim().2, g.dim().3) != (gh, gw) {
+                return Err(DganError::InvalidSpec(format!("cannot join map_grid of shape {:?}", g.dim())));
+            }
+            let rows = g.dim().1;
+            grid.slice_mut(ndarray::s![f, ..rows, .., .., ..]).assign(&g.index_axis(Axis(0), 0));
+            slot.extend((0..rows).map(|r| (f * most + r) as i64));
+        }
+        (Some(grid), Some(Array1::from(slot)))
+    } else {
+        (None, None)
+    };
     fn views<'a, A: 'a, D: Dimension + 'a>(
         parts: &'a [NetworkInputs],
         f: impl Fn(&'a NetworkInputs) -> &'a ndarray::Array<A, D>,
@@ -82,6 +100,8 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
         edge_features: stack("edge_features", views(parts, |p| &p.edge_features))?,
         map,
         map_present,
+        map_grid,
+        map_slot,
         neighbors,
     };
     Ok(Joined { inputs, agent_ptr })
@@ -126,8 +146,14 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
         state: inputs.state.select(Axis(0), rows),
         edge_features: inputs.edge_features.select(Axis(0), &kept),
         edge_index,
-        map: inputs.map.as_ref().map(|m| m.select(Axis(0), rows)),
+        // A scene model's raster stays whole; the part's agents keep their grids, in a frame of their own.
+        map: match &inputs.map_grid {
+            Some(_) => inputs.map.clone(),
+            None => inputs.map.as_ref().map(|m| m.select(Axis(0), rows)),
+        },
         map_present: inputs.map_present.as_ref().map(|m| m.select(Axis(0), rows)),
+        map_grid: inputs.map_grid.as_ref().map(|g| g.select(Axis(1), rows)),
+        map_slot: inputs.map_grid.as_ref().map(|_| Array1::from_iter(0..rows.len() as i64)),
         neighbors,
     })
 }
@@ -191,6 +217,8 @@ mod tests {
             edge_features: Array2::zeros((e, 6)),
             map: map.then(|| Array4::zeros((n, 3, 2, 2))),
             map_present: map.then(|| Array1::ones(n)),
+            map_grid: None,
+            map_slot: None,
             neighbors: None,
         }
     }
@@ -205,6 +233,40 @@ mod tests {
         assert_eq!(j.inputs.trajectory[[2, 0, 0]], 1.0);
         assert_eq!(j.inputs.map.unwrap().dim().0, 3);
         assert_eq!(j.inputs.map_present.unwrap().len(), 3);
+    }
+
+    /// A scene model's inputs (contract 12): one raster `(1, 3, 4, 4)`, each agent's 1 × 1 grid at `(i, 10 n)`.
+    fn scene_inputs(n: usize) -> NetworkInputs {
+        let mut x = inputs(n, Array2::from_shape_fn((n, 2), |(i, _)| i as i64), true);
+        x.map = Some(Array4::from_elem((1, 3, 4, 4), n as f32));
+        x.map_grid =
+            Some(ndarray::Array5::from_shape_fn((1, n, 1, 1, 2), |(_, i, _, _, d)| [i as f32, 10.0 * n as f32][d]));
+        x.map_slot = Some(Array1::from_iter(0..n as i64));
+        x
+    }
+
+    #[test]
+    fn joins_scene_rasters_and_pads_their_grids() {
+        let j = join(&[scene_inputs(2), scene_inputs(3), scene_inputs(1)]).unwrap().inputs;
+        let (map, grid, slot) = (j.map.unwrap(), j.map_grid.unwrap(), j.map_slot.unwrap());
+        assert_eq!((map.dim(), grid.dim()), ((3, 3, 4, 4), (3, 3, 1, 1, 2)));
+        assert_eq!(map[[1, 0, 0, 0]], 3.0);
+        assert_eq!(slot.to_vec(), vec![0, 1, 3, 4, 5, 6]);
+        // Each agent's slot finds its own grid: frame f's agent i at (i, 10 n_f); padding is zeros.
+        let flat = grid.into_shape_with_order((9, 1, 1, 2)).unwrap();
+        let read: Vec<[f32; 2]> =
+            slot.iter().map(|&s| [flat[[s as usize, 0, 0, 0]], flat[[s as usize, 0, 0, 1]]]).collect();
+        assert_eq!(read, vec![[0.0, 20.0], [1.0, 20.0], [0.0, 30.0], [1.0, 30.0], [2.0, 30.0], [0.0, 10.0]]);
+        assert_eq!(flat[[2, 0, 0, 1]], 0.0);
+        // A part of a scene frame keeps the whole raster and its agents' grids, in a frame of its own.
+        let part = take(&scene_inputs(3), &[2]).unwrap();
+        assert_eq!(part.map.unwrap().dim(), (1, 3, 4, 4));
+        assert_eq!(part.map_grid.unwrap().into_raw_vec_and_offset().0, vec![2.0, 30.0]);
+        assert_eq!(part.map_slot.unwrap().to_vec(), vec![0]);
+        // Rasters of different sides do not stack: the predictor joins only frames of one side.
+        let mut other = scene_inputs(1);
+        other.map = Some(Array4::zeros((1, 3, 8, 8)));
+        assert!(matches!(join(&[scene_inputs(1), other]), Err(DganError::InvalidSpec(_))));
     }
 
     #[test]

@@ -16,11 +16,12 @@ use std::collections::BTreeMap;
 /// velocity is fitted (`prior.fit`) and its standing threshold (`prior.standing_mps`); version 7 the tiled map
 /// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`); version 9 a temperature that grows
 /// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`);
-/// version 10 histories denoised before preprocessing (`denoise_gate_m`).
-pub const CONTRACT_VERSION: u32 = 11;
+/// version 10 histories denoised before preprocessing (`denoise_gate_m`); version 11 the classes that read the map
+/// (`map.classes`); version 12 one raster of the scene per frame for the map CNN (`map.scene`: `map_grid`, `map_slot`).
+pub const CONTRACT_VERSION: u32 = 12;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 11] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 12] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -42,8 +43,14 @@ pub const INPUT_STATE: &str = "state";
 pub const INPUT_EDGE_INDEX: &str = "edge_index";
 /// Input: per-edge geometry `(E, 6)` f32, the sender seen from the receiver's frame.
 pub const INPUT_EDGE_FEATURES: &str = "edge_features";
-/// Input (map models only): agent-centric RGB crops `(N, 3, H, W)` f32 in [0, 1].
+/// Input (map models only): agent-centric RGB crops `(N, 3, H, W)` f32 in [0, 1]; of a scene model (contract 12),
+/// each frame's scene raster `(F, 3, S, S)`.
 pub const INPUT_MAP: &str = "map";
+/// Input (scene models, contract 12): `(F, M, gh, gw, 2)` f32, where the agents of each frame read its raster
+/// (`grid_sample` coordinates of each crop block's centre), padded to the frame with the most agents, M.
+pub const INPUT_MAP_GRID: &str = "map_grid";
+/// Input (scene models, contract 12): `(N,)` i64, each agent's row of `map_grid` flattened to `(F · M, ..)`.
+pub const INPUT_MAP_SLOT: &str = "map_slot";
 /// Input (padded layout): `(N, D)` i64, each agent's senders, itself included, padded with its own row.
 pub const INPUT_NEIGHBOR_INDEX: &str = "neighbor_index";
 /// Input (padded layout): `(N, D)` f32, 1 for a real sender, 0 for padding.
@@ -77,6 +84,8 @@ pub enum Dim {
     Edges,
     /// The dynamic largest degree D of the padded layout.
     Degree,
+    /// Another dynamic size (named): the frames of a call, the scene raster's side, the most agents of a frame.
+    Dynamic(&'static str),
     /// A fixed size.
     Fixed(usize),
 }
@@ -260,6 +269,14 @@ impl ModelContract {
                 "denoise_gate_m is a contract-10 key; versions 1 to 9 take the histories as given".into(),
             ));
         }
+        if self.contract_version < 12 && self.input.map.as_ref().is_some_and(|m| m.scene.is_some()) {
+            return Err(DganError::Contract(
+                "map.scene is a contract-12 key; versions 1 to 11 take a crop per agent".into(),
+            ));
+        }
+        if self.input.map.as_ref().is_some_and(|m| m.scene.is_some()) && self.input.graph != GraphLayout::Padded {
+            return Err(DganError::Contract("a scene model (map.scene) takes the padded graph layout".into()));
+        }
         if self.contract_version < 11 && self.input.map.as_ref().is_some_and(|m| !m.classes.is_empty()) {
             return Err(DganError::Contract(
                 "map.classes is a contract-11 key; versions 1 to 10 draw every agent's crop".into(),
@@ -424,13 +441,22 @@ pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
         }
     }
     if let Some(m) = &spec.map {
-        v.push(TensorSpec {
-            name: INPUT_MAP,
-            dtype: DType::F32,
-            dims: vec![Dim::Agents, Dim::Fixed(3), Dim::Fixed(m.height_px), Dim::Fixed(m.width_px)],
-        });
+        let dims = match m.scene {
+            None => vec![Dim::Agents, Dim::Fixed(3), Dim::Fixed(m.height_px), Dim::Fixed(m.width_px)],
+            Some(_) => {
+                let side = Dim::Dynamic("the scene raster's side");
+                vec![Dim::Dynamic("the frames F"), Dim::Fixed(3), side, side]
+            }
+        };
+        v.push(TensorSpec { name: INPUT_MAP, dtype: DType::F32, dims });
         if m.optional {
             v.push(TensorSpec { name: INPUT_MAP_PRESENT, dtype: DType::F32, dims: vec![Dim::Agents] });
+        }
+        if let Some((gh, gw)) = m.scene_grid() {
+            let (frames, most) = (Dim::Dynamic("the frames F"), Dim::Dynamic("a frame's most agents M"));
+            let dims = vec![frames, most, Dim::Fixed(gh), Dim::Fixed(gw), Dim::Fixed(2)];
+            v.push(TensorSpec { name: INPUT_MAP_GRID, dtype: DType::F32, dims });
+            v.push(TensorSpec { name: INPUT_MAP_SLOT, dtype: DType::I64, dims: vec![Dim::Agents] });
         }
     }
     v
@@ -447,10 +473,11 @@ pub fn check_tensor(kind: &str, want: &TensorSpec, dtype: Option<DType>, shape: 
     }
     for (axis, (got, dim)) in shape.iter().zip(&want.dims).enumerate() {
         match dim {
-            Dim::Agents | Dim::Edges | Dim::Degree if *got >= 0 => {
+            Dim::Agents | Dim::Edges | Dim::Degree | Dim::Dynamic(_) if *got >= 0 => {
                 let what = match dim {
                     Dim::Agents => "the agent count N",
                     Dim::Edges => "the edge count E",
+                    Dim::Dynamic(name) => name,
                     _ => "the largest degree D",
                 };
                 return fail(format!(
@@ -616,6 +643,33 @@ mod tests {
         assert!(err.contains("map.classes is a contract-11 key"), "{err}");
         let err = ModelContract::from_json(&v11.replace("[\"pedestrian\"]", "[\"cyclist\"]")).unwrap_err().to_string();
         assert!(err.contains("map.classes names cyclist"), "{err}");
+        // Version 12 reads one raster of the scene per frame: map_grid and map_slot follow map_present.
+        let scene = "\"render\": \"agent\", \"scene\": {\"min_px\": 64, \"stride\": 4}";
+        let v12 =
+            v10.replace("\"contract_version\": 10", "\"contract_version\": 12").replace("\"render\": \"tiles\"", scene);
+        let c = ModelContract::from_json(&v12).unwrap();
+        let m = c.input.map.as_ref().unwrap();
+        assert_eq!(m.scene, Some(crate::spec::SceneSpec { min_px: 64, stride: 4 }));
+        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+        let inputs = c.expected_inputs();
+        let names: Vec<_> = inputs.iter().map(|t| t.name).collect();
+        assert_eq!(&names[6..], [INPUT_MAP, INPUT_MAP_PRESENT, INPUT_MAP_GRID, INPUT_MAP_SLOT]);
+        let (gh, gw) = m.scene_grid().unwrap();
+        assert_eq!(inputs[8].dims[2..], [Dim::Fixed(gh), Dim::Fixed(gw), Dim::Fixed(2)]);
+        assert!(matches!(inputs[6].dims[2], Dim::Dynamic(_)));
+        let err = check_tensor("input", &inputs[6], Some(DType::F32), &[-1, 3, 64, 64]).unwrap_err().to_string();
+        assert!(err.contains("must be dynamic (the scene raster's side)"), "{err}");
+        let err = ModelContract::from_json(&v10.replace("\"render\": \"tiles\"", scene)).unwrap_err().to_string();
+        assert!(err.contains("map.scene is a contract-12 key"), "{err}");
+        let edges = v12.replace("\"graph\": \"padded\", ", "");
+        let err = ModelContract::from_json(&edges).unwrap_err().to_string();
+        assert!(err.contains("takes the padded graph layout"), "{err}");
+        for (bad, says) in [("\"stride\": 4", "\"stride\": 0"), ("\"min_px\": 64", "\"min_px\": 99999")] {
+            let err = ModelContract::from_json(&v12.replace(bad, says)).unwrap_err().to_string();
+            assert!(err.contains("map.scene."), "{err}");
+        }
+        let tiled = v12.replace("\"render\": \"agent\"", "\"render\": \"tiles\"");
+        assert!(ModelContract::from_json(&tiled).unwrap_err().to_string().contains("do not apply"));
     }
 
     #[test]

@@ -6,7 +6,8 @@
 //! - [`frame`]: the scene at t_obs, validated; [`map`]: raster and vector maps.
 //! - [`state`]: speed, acceleration, heading and yaw rate from the history; [`transform`]: agent-centric SE(2).
 //! - [`graph`]: the attention-zone graph r = v · T_f + λ · length, sub-quadratic and exact.
-//! - [`raster`]: agent-centric RGB map crops in the paper's colours.
+//! - [`raster`]: agent-centric RGB map crops in the paper's colours; [`scene`]: one raster of the scene that a map
+//!   CNN reads once for every agent, and where each agent's crop lies in it.
 //! - [`prior`]: the kinematic rollout the network refines.
 //! - [`preprocess`]: frame → network inputs; [`decode`]: p(c) · p(k | c), anchors + offsets → world modes.
 //! - [`history`]: detections at any times → frames on the model's time grid; the streaming [`history::Tracker`].
@@ -45,6 +46,7 @@ pub mod preprocess;
 pub mod prior;
 pub mod raster;
 pub mod runtime;
+pub mod scene;
 pub mod spec;
 pub mod state;
 pub mod tile_store;

@@ -9,7 +9,7 @@ use crate::raster::{rasterize_on, threads_in_flight};
 use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
 use crate::state::{traffic_states_with, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
-use ndarray::{Array1, Array2, Array3, Array4};
+use ndarray::{Array1, Array2, Array3, Array4, Array5};
 
 /// The version of the features (state and edge columns, agent-centric transforms, graph, prior). Bump it with any
 /// change to what the network receives: exporters write it into each model's contract (`preprocess_version`), a
@@ -34,6 +34,11 @@ pub struct NetworkInputs {
     pub map: Option<Array4<f32>>,
     /// `(N,)` 1 where the crop holds a map, 0 where the frame has none: for models whose map is optional.
     pub map_present: Option<Array1<f32>>,
+    /// `(F, M, gh, gw, 2)` where each frame's agents read its scene raster (`map`, `(F, 3, S, S)`), padded to the
+    /// frame with the most agents: for scene models (contract 12, [`crate::scene`]).
+    pub map_grid: Option<Array5<f32>>,
+    /// `(N,)` each agent's row of `map_grid` flattened to `(F · M, ..)`: for scene models.
+    pub map_slot: Option<Array1<i64>>,
     /// The same graph as each agent's padded list of senders, for models of the padded layout (contract 3).
     pub neighbors: Option<Neighbors>,
 }
@@ -458,8 +463,17 @@ fn build(
     let (edge_index, edge_features) = edge_rows(graph, &states, &poses, shared)?;
 
     let prior = prior_rows(spec, &trajectory, &trajectory_mask, &state, shared)?;
+    let (mut map_grid, mut map_slot) = (None, None);
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
+        (Some(m), present) if m.scene.is_some() && (present.is_some() || m.optional || n == 0) => {
+            let scene = m.scene.ok_or_else(|| DganError::InvalidSpec("map.scene".into()))?;
+            let (raster, grid) = crate::scene::scene_inputs(frame, &states, m, scene)?;
+            map_grid = Some(grid);
+            map_slot = Some(Array1::from_iter(0..n as i64));
+            let flag = if present.is_some() { 1.0 } else { 0.0 };
+            (Some(raster), m.optional.then(|| Array1::from_elem(n, flag)))
+        }
         (Some(m), Some(_)) => {
             let drawn = crops.then(|| rasterize_on(frame, &states, m, threads)).transpose()?;
             (drawn, m.optional.then(|| Array1::ones(n)))
@@ -490,6 +504,8 @@ fn build(
             edge_features,
             map,
             map_present,
+            map_grid,
+            map_slot,
             neighbors,
         },
         prior,
@@ -531,6 +547,7 @@ mod tests {
                 optional,
                 render: crate::spec::MapRender::Agent,
                 classes: vec![],
+                scene: None,
             }),
             prior: PriorSpec::constant_velocity(0.0),
             graph: GraphLayout::Padded,

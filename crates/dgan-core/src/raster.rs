@@ -211,6 +211,7 @@ mod tests {
             optional: false,
             render: MapRender::Agent,
             classes: vec![],
+            scene: None,
         }
     }
 

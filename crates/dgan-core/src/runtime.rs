@@ -7,9 +7,9 @@
 use crate::batch::{balanced_parts, join, take};
 use crate::contract::{check_tensor, DType, ModelContract, METADATA_KEY};
 use crate::contract::{
-    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_PRESENT, INPUT_NEIGHBOR_FEATURES, INPUT_NEIGHBOR_INDEX,
-    INPUT_NEIGHBOR_MASK, INPUT_STATE, INPUT_TRAJECTORY, INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS,
-    OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
+    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_GRID, INPUT_MAP_PRESENT, INPUT_MAP_SLOT,
+    INPUT_NEIGHBOR_FEATURES, INPUT_NEIGHBOR_INDEX, INPUT_NEIGHBOR_MASK, INPUT_STATE, INPUT_TRAJECTORY,
+    INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS, OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
 };
 use crate::decode::{decode_on, Anchors, DecodeParams, Decoded, NetworkOutputs};
 use crate::error::{DganError, Result};
@@ -572,7 +572,8 @@ impl Predictor {
     /// call on `threads` intra-op threads.
     fn split(&self, pre: &Preprocessed) -> Option<Vec<Vec<usize>>> {
         let (n, lanes) = (pre.poses.len(), self.lanes.len());
-        if lanes < 2 || n < SPLIT_MIN_AGENTS {
+        // A scene model's map CNN runs once over the frame's raster: each part would run it again.
+        if lanes < 2 || n < SPLIT_MIN_AGENTS || pre.inputs.map_grid.is_some() {
             return None;
         }
         let parts = balanced_parts(n, &pre.edges, lanes);
@@ -678,9 +679,13 @@ impl Predictor {
         let mut start = 0;
         while start < frames.len() {
             let (mut group, mut agents, mut degree) = (vec![], 0, 0);
-            while let Some(p) =
-                pres.next_if(|p| group.is_empty() || self.joins(agents + p.poses.len(), degree.max(degree_of(p)), cap))
-            {
+            // A scene model's frames join only with frames of the same raster side (one (F, 3, S, S) input).
+            let side = |p: &Preprocessed| p.inputs.map_grid.as_ref().and(p.inputs.map.as_ref()).map(|m| m.dim().2);
+            while let Some(p) = pres.next_if(|p| {
+                group.is_empty()
+                    || (self.joins(agents + p.poses.len(), degree.max(degree_of(p)), cap)
+                        && group.first().map(side) == Some(side(p)))
+            }) {
                 agents += p.poses.len();
                 degree = degree.max(degree_of(&p));
                 group.push(p);
@@ -838,6 +843,10 @@ impl Predictor {
         }
         if let Some(present) = inputs.map_present {
             feed.push((INPUT_MAP_PRESENT, Tensor::from_array(present).map_err(infer)?.into()));
+        }
+        if let (Some(grid), Some(slot)) = (inputs.map_grid, inputs.map_slot) {
+            feed.push((INPUT_MAP_GRID, Tensor::from_array(grid).map_err(infer)?.into()));
+            feed.push((INPUT_MAP_SLOT, Tensor::from_array(slot).map_err(infer)?.into()));
         }
         let mut session = self.session(pool)?;
         let outputs = session.run(feed).map_err(infer)?;

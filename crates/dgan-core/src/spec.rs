@@ -40,6 +40,23 @@ pub struct MapSpec {
     /// default): every agent's crop is drawn.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub classes: Vec<AgentClass>,
+    /// Contract 12: the network's map CNN reads one raster of the scene per frame instead of a crop per agent
+    /// ([`crate::scene`]); the crop's size, resolution and agent pixel then say where each agent reads it. None
+    /// (the default): a crop per agent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene: Option<SceneSpec>,
+}
+
+/// How a model's map CNN reads the scene (contract 12): a square raster of the frame at the crops' resolution,
+/// centred on its agents, north up, at least `min_px` pixels a side and larger where the agents' crops reach farther
+/// (up to [`crate::scene::MAX_SCENE_PX`]; beyond, an agent reads no map); each agent reads the network's features at
+/// the centres of its crop's `stride × stride` blocks ([`crate::scene::crop_grid`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct SceneSpec {
+    /// The raster's least side, pixels.
+    pub min_px: usize,
+    /// The side of a crop's blocks, pixels: the network's downsampling before the agents read it.
+    pub stride: usize,
 }
 
 /// How a vector map becomes the agents' crops (`map.render` of a contract-7 model).
@@ -91,7 +108,30 @@ impl MapSpec {
         if sorted.len() != self.classes.len() {
             return bad(format!("map.classes repeat: {:?}", self.classes));
         }
+        if let Some(scene) = &self.scene {
+            let longest = self.height_px.max(self.width_px);
+            if !(1..=longest).contains(&scene.stride) {
+                return bad(format!(
+                    "map.scene.stride must be 1..={longest} (the crop's longer side), got {}",
+                    scene.stride
+                ));
+            }
+            let most = crate::scene::MAX_SCENE_PX;
+            if !(1..=most).contains(&scene.min_px) {
+                return bad(format!("map.scene.min_px must be 1..={most} pixels, got {}", scene.min_px));
+            }
+            if self.render != MapRender::Agent || !self.classes.is_empty() {
+                return bad("map.scene reads one raster for every agent: map.render \"tiles\" and map.classes do not \
+                            apply to it"
+                    .into());
+            }
+        }
         Ok(())
+    }
+
+    /// The grid of each agent's reading of a scene model's raster, `(rows, columns)` of blocks; None for a crop model.
+    pub fn scene_grid(&self) -> Option<(usize, usize)> {
+        self.scene.map(|s| (self.height_px.div_ceil(s.stride), self.width_px.div_ceil(s.stride)))
     }
 
     /// Whether an agent of `class` gets a drawn crop ([`MapSpec::classes`]).
@@ -273,6 +313,7 @@ mod tests {
                 optional: false,
                 render: MapRender::Agent,
                 classes: vec![],
+                scene: None,
             }),
             prior: PriorSpec::NONE,
             graph: GraphLayout::EdgeList,

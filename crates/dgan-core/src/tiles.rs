@@ -56,6 +56,7 @@ fn tile_spec(spec: &MapSpec) -> MapSpec {
         optional: false,
         render: MapRender::Agent,
         classes: vec![],
+        scene: None,
     }
 }
 

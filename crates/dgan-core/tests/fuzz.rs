@@ -56,6 +56,7 @@ fn spec(rng: &mut ChaCha8Rng, t_obs: usize) -> InputSpec {
         optional: true,
         render: if rng.random() { dgan_core::MapRender::Tiles } else { dgan_core::MapRender::Agent },
         classes: vec![],
+        scene: None,
     });
     InputSpec {
         dt_s: [0.1, 0.4, 1.0][rng.random_range(0..3)],

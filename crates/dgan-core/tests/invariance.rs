@@ -98,6 +98,7 @@ fn agent_centric_inputs_are_invariant_to_rigid_motions() {
             optional: false,
             render: dgan_core::MapRender::Agent,
             classes: vec![],
+            scene: None,
         }),
         prior: PriorSpec::constant_velocity(0.8),
         graph: GraphLayout::Padded,

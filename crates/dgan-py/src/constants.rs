@@ -45,11 +45,13 @@ pub(crate) fn contract(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
-/// Every input a model of a graph layout can take (with a map that may be absent), in the contract's order.
+/// Every input a model of a graph layout can take (with a map that may be absent, read as a scene), in the
+/// contract's order.
 fn all_inputs(layout: &str) -> dgan_core::Result<Vec<&'static str>> {
     let json = format!(
         r#"{{"dt_s": 1, "t_obs": 2, "t_f": 2, "classes": ["pedestrian"], "attention_lambda": 0, "graph": "{layout}",
-            "map": {{"height_px": 2, "width_px": 2, "resolution_m": 1, "agent_row": 1, "agent_col": 1, "optional": true}}}}"#
+            "map": {{"height_px": 2, "width_px": 2, "resolution_m": 1, "agent_row": 1, "agent_col": 1, "optional": true,
+                     "scene": {{"min_px": 4, "stride": 1}}}}}}"#
     );
     let spec = crate::preprocess::parse_spec(&json)?;
     Ok(c::expected_inputs(&spec).into_iter().map(|t| t.name).collect())

@@ -8,7 +8,10 @@ use ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
-fn poses(origins: &PyReadonlyArrayDyn<'_, f64>, headings: &PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<AgentPose>> {
+pub(crate) fn poses(
+    origins: &PyReadonlyArrayDyn<'_, f64>,
+    headings: &PyReadonlyArrayDyn<'_, f64>,
+) -> PyResult<Vec<AgentPose>> {
     let (o, h) = (origins.as_array(), headings.as_array());
     if o.ndim() != 2 || o.shape()[1] != 2 || h.ndim() != 1 || h.len() != o.shape()[0] {
         return Err(to_py(DganError::InvalidFrame(format!(

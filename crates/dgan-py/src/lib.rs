@@ -8,6 +8,7 @@ mod geometry;
 mod history;
 mod predictor;
 mod preprocess;
+mod scene;
 
 use pyo3::prelude::*;
 
@@ -39,6 +40,8 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(geometry::to_agent_frame, m)?)?;
     m.add_function(wrap_pyfunction!(geometry::to_world_frame, m)?)?;
     m.add_function(wrap_pyfunction!(geometry::attention_graph, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::scene_raster, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::crop_grid, m)?)?;
     m.add_function(wrap_pyfunction!(init_onnxruntime, m)?)?;
     m.add_function(wrap_pyfunction!(predictor::available_execution_providers, m)?)?;
     m.add_function(wrap_pyfunction!(predictor::seal_model, m)?)?;

@@ -60,6 +60,10 @@ pub fn preprocess<'py>(
     if let Some(m) = x.map_present {
         d.set_item("map_present", m.into_pyarray(py))?;
     }
+    if let (Some(g), Some(s)) = (x.map_grid, x.map_slot) {
+        d.set_item("map_grid", g.into_pyarray(py))?;
+        d.set_item("map_slot", s.into_pyarray(py))?;
+    }
     if let Some(nb) = x.neighbors {
         d.set_item("neighbor_index", nb.index.into_pyarray(py))?;
         d.set_item("neighbor_mask", nb.mask.into_pyarray(py))?;

@@ -527,7 +527,7 @@ def contract_cases(tmp: Path) -> list[Case]:
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 12, 99, "4", None, -1],
+        "contract_version": [0, 13, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",

@@ -14,7 +14,8 @@ import dgan
 from training.build import build_model, input_spec
 from training.config import Config
 from training.data.batches import INPUTS, to_tensors
-from training.modules.dgan import DGAN, MapEncoder
+from training.modules.dgan import DGAN
+from training.modules.scene import MapEncoder
 from training.soup import main, recompute_batchnorm, soup_checkpoint, soup_state
 
 ROOT = Path(__file__).resolve().parents[3]

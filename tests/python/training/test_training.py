@@ -18,7 +18,7 @@ from conftest import shared_data
 import dgan
 from training.build import build_model, input_spec
 from training.config import Config
-from training.data.batches import INPUTS
+from training.data.batches import INPUTS, forward_inputs
 from training.export import export_model, load_checkpoint
 from training.losses import Calibration, anchor_pool, class_weights, closest_anchor, decode_torch, dgan_loss
 from training.modules.dgan import DGAN
@@ -182,7 +182,7 @@ def assert_parity(
     for frame in frames:
         x = dgan.preprocess(frame, spec)
         with torch.no_grad():
-            cl, al, off = model(*[torch.from_numpy(x[k]) for k in INPUTS if k in x])
+            cl, al, off = model(*forward_inputs({k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in x.items()}))
             prior = torch.from_numpy(x["prior"])
             a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
             t = cal.anchor_temperatures(prior, spec.dt_s)
@@ -245,6 +245,8 @@ def randomised_batch_norm(model: DGAN) -> DGAN:
         ("hdmap", {"model.neighbor_groups": True}),
         ("apolloscape", {"model.neighbor_groups": True}),
         ("ethucy_zara1", {"data.prior": "none", "train.map_dropout": 0.0}),
+        ("ethucy_zara1", {"model.map_mode": "scene", "data.map_scene_px": 64}),
+        ("ethucy_zara1", {"model.map_mode": "scene", "data.map_scene_px": 64, "train.map_dropout": 0.0}),
     ],
 )
 @pytest.mark.slow

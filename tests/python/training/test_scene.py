@@ -1,0 +1,152 @@
+"""training.modules.scene: the map CNN shared by a window's agents (``model.map_mode = "scene"``, issue 26), the
+windows that carry its scene rasters and grids (``data.map_scene_px``), mirrored with their agents."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from conftest import shared_data
+
+import dgan
+from dgan.contract import SCENE_GRID_INPUTS
+from training.build import build_model, input_spec
+from training.config import Config
+from training.data.arrays import Windows, padded_grids
+from training.data.batches import forward_inputs, prepared_batch
+from training.data.recording import WindowSet
+from training.data.splits import located
+from training.data.windows import build_windows
+from training.export import export_model
+from training.modules.scene import SCENE_STRIDE, read_slots
+
+ROOT = Path(__file__).resolve().parents[3]
+CONFIG = ROOT / "training" / "configs" / "ethucy_zara1.toml"
+SCENE = {"model.map_mode": "scene", "data.map_scene_px": 64}
+
+
+def test_each_agent_reads_its_own_frame_s_features() -> None:
+    """One ``grid_sample`` over every frame's stacked grids (the engine's ``map_grid``, ``map_slot``) gives each agent
+    what a call on its own frame gives, frames without agents included."""
+    torch.manual_seed(0)
+    features = torch.randn(4, 5, 9, 11)
+    per_frame = np.array([2, 0, 3, 1])
+    grids = np.random.default_rng(0).uniform(-1.2, 1.2, (6, 3, 2, 2)).astype(np.float32)  # some outside: zeros
+    grid, slot = padded_grids(grids, per_frame)
+    assert grid.shape == (4, 3, 3, 2, 2)
+    np.testing.assert_array_equal(slot, [0, 1, 6, 7, 8, 9])
+    out = read_slots(features, torch.from_numpy(grid), torch.from_numpy(slot))
+    assert out.shape == (6, 5, 3, 2)
+    for i, f in enumerate(np.repeat(np.arange(4), per_frame)):
+        one = torch.nn.functional.grid_sample(
+            features[f : f + 1], torch.from_numpy(grids[i : i + 1]), align_corners=False
+        )
+        torch.testing.assert_close(out[i], one[0])
+    empty = padded_grids(grids[:0], np.zeros(2, int))
+    assert read_slots(features[:2], *map(torch.from_numpy, empty)).shape == (0, 5, 3, 2)
+
+
+def _scene_windows(cfg: Config) -> tuple[dgan.InputSpec, Windows]:
+    spec = input_spec(cfg)
+    found = located([WindowSet("ethucy", "val", fold="zara1")], shared_data("eth_ucy"), spec)[0]
+    return spec, build_windows(found.read()[:1], found.info, spec, stride=20, progress=False)
+
+
+def test_scene_windows_mirror_with_their_agents_and_train_the_network() -> None:
+    cfg = Config.load(CONFIG, SCENE)
+    spec, w = _scene_windows(cfg)
+    assert w.scene is not None
+    assert w.scene_grid is not None
+    assert w.scene.shape == (w.num_windows, 3, 64, 64)
+    assert w.scene_grid.shape == (len(w.target), 8, 8, 2)
+    assert w.map is not None  # the crops stay, for a teacher that reads them
+    idx = np.array([0, 1])
+    plain, flipped = w.batch(idx), w.batch(idx, flip=np.array([False, True]))
+    n0 = int(np.diff(w.agent_ptr)[0])
+    assert plain["crops"].shape[0] == len(plain["state"])  # the agents' crops, for a teacher
+    np.testing.assert_array_equal(flipped["map"][0], plain["map"][0])
+    np.testing.assert_array_equal(flipped["map"][1], plain["map"][1][..., ::-1])
+    np.testing.assert_array_equal(flipped["crops"][n0:], plain["crops"][n0:][..., ::-1])
+    # The flipped window's agents read their features mirrored: what they read before, columns reversed.
+    keys = ("map", *SCENE_GRID_INPUTS)
+    read = [read_slots(*(torch.from_numpy(np.ascontiguousarray(b[k])) for k in keys)) for b in (plain, flipped)]
+    torch.testing.assert_close(read[1][:n0], read[0][:n0])
+    torch.testing.assert_close(read[1][n0:], read[0][n0:].flip(-1), atol=1e-5, rtol=0)
+    assert read[0][n0:].abs().sum() > 0
+    # The network trains on them: gradients reach the scene CNN.
+    torch.manual_seed(0)
+    net = build_model(cfg, spec, 20)
+    b = prepared_batch(w, idx, spec, np.array([False, True]), 0.5, np.random.default_rng(0))
+    cl, al, off = net(*forward_inputs(b))
+    assert off.shape == (len(b["state"]), 20, spec.t_f, 2)
+    (cl.sum() + al.sum() + off.sum()).backward()
+    stem = net.map_enc.scene[0].weight.grad  # type: ignore[union-attr, index]
+    assert stem is not None
+    assert stem.abs().sum() > 0
+
+
+def test_scene_settings_that_do_not_go_together_are_clear_errors(tmp_path: Path) -> None:
+    cfg = Config.load(CONFIG, SCENE)
+    spec = input_spec(cfg)
+    with pytest.raises(ValueError, match="go together"):
+        build_model(replace(cfg, data=replace(cfg.data, map_scene_px=0)), spec, 20)
+    with pytest.raises(ValueError, match="go together"):
+        build_model(replace(cfg, model=replace(cfg.model, map_mode="crop")), spec, 20)
+    plain = Config.load(CONFIG)
+    with pytest.raises(ValueError, match="map_mode must be"):
+        build_model(replace(plain, model=replace(plain.model, map_mode="tiles")), input_spec(plain), 20)
+    anchors, class_of = np.zeros((20, spec.t_f, 2), np.float32), np.zeros(20, np.int64)
+    crops = input_spec(plain)
+    with pytest.raises(ValueError, match="reads the scene"):
+        export_model(build_model(cfg, spec, 20), crops, anchors, class_of, tmp_path / "m.onnx", "scene")
+    assert spec.map is not None
+    assert spec.map.scene == dgan.SceneSpec(64, SCENE_STRIDE)
+
+
+def test_a_crop_teacher_teaches_a_scene_student_on_the_agents_crops() -> None:
+    """The scene student's batches keep the agents' crops (``crops``): a teacher that reads crops runs on them,
+    exactly as on a crop student's batch of the same windows."""
+    from training.step import Teacher
+
+    cfg = Config.load(CONFIG, SCENE)
+    spec, w = _scene_windows(cfg)
+    teacher_path = str(ROOT / "training" / "checkpoints" / "teachers" / "zara1.pt")
+    teacher = Teacher.load(teacher_path, spec)
+    assert not teacher.own_map
+    crop_spec = replace(spec, map=replace(spec.map, scene=None)) if spec.map else spec
+    idx = np.array([0, 1])
+    scene_batch = prepared_batch(w, idx, spec)
+    crop_batch = prepared_batch(replace(w, scene=None, scene_grid=None), idx, crop_spec)
+    assert "map_grid" in scene_batch
+    assert "map_grid" not in crop_batch
+    torch.testing.assert_close(teacher.top_residual(scene_batch), teacher.top_residual(crop_batch), rtol=0, atol=0)
+
+
+def test_a_scene_model_predicts_a_batch_as_each_frame_alone(tmp_path: Path) -> None:
+    """Frames of one raster side run as one call (their rasters stacked, their grids padded), frames of another in
+    calls of their own; each agent gets what ``predict`` gives it."""
+    torch.manual_seed(0)
+    cfg = Config.load(CONFIG, SCENE)
+    spec = input_spec(cfg)
+    anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (8, spec.t_f, 2)), axis=1).astype(np.float32)
+    path = export_model(
+        build_model(cfg, spec, 8).eval(), spec, anchors, np.zeros(8, np.int64), tmp_path / "m.onnx", "s"
+    )
+    predictor = dgan.Predictor(path)
+    frame = dgan.demo.scene_for(predictor.spec).frame
+    far = dgan.Frame(frame.positions * 3.0, classes=frame.classes, map=frame.map)  # a larger raster
+    frames = [
+        frame,
+        frame.without_map(),
+        dgan.Frame(frame.positions[:2], classes=frame.classes[:2], map=frame.map),
+        far,
+    ]
+    sides = {dgan.preprocess(f, predictor.spec)["map"].shape[-1] for f in frames}
+    assert len(sides) >= 2  # the full frame with and without its map share one
+    for got, f in zip(predictor.predict_batch(frames), frames, strict=True):
+        one = predictor.predict(f)
+        np.testing.assert_allclose(got.trajectories, one.trajectories, atol=1e-4)
+        np.testing.assert_allclose(got.probabilities, one.probabilities, atol=1e-5)

@@ -1,0 +1,109 @@
+"""The map CNNs: over each agent's crop (:class:`MapEncoder`), or shared by every agent of a window
+(:class:`SceneMapEncoder`, ``model.map_mode = "scene"``; issue 26, the paper's own design).
+
+The crop encoder runs its whole CNN over each agent's crop, so the map's
+cost grows with the agents. Here its first two stages (the strided stem, the first residual block, the second strided
+convolution and residual block: everything at 1/2 and 1/4 of the crop's pixels) run once over the window's scene
+raster (:func:`dgan.scene_raster`), and each agent reads the quarter-resolution features at the centres of its crop's
+4 × 4 blocks (:func:`dgan.crop_grid`, bilinear ``grid_sample``); its last strided convolution and projection stay per
+agent, as in the crop encoder. Per agent that leaves about a tenth of the crop encoder's operations.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+
+class ResBlock(nn.Module):
+    def __init__(self, c: int) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Conv2d(c, c, 3, padding=1),
+            nn.BatchNorm2d(c),
+            nn.ReLU(),
+            nn.Conv2d(c, c, 3, padding=1),
+            nn.BatchNorm2d(c),
+        )
+
+    def forward(self, x: Tensor) -> Tensor:
+        out: Tensor = torch.relu(x + self.body(x))
+        return out
+
+
+class MapEncoder(nn.Module):
+    """A small ResNet over the ``(3, H, W)`` crop; the flattened 4× downsampled map keeps where things are."""
+
+    def __init__(self, c: int, out: int, h: int, w: int, res_blocks: int = 2) -> None:
+        super().__init__()
+        if not 0 <= res_blocks <= 2:
+            raise ValueError(f"model.map_res_blocks must be 0, 1 or 2, got {res_blocks}")
+        blocks = (
+            ResBlock(c) if res_blocks == 2 else nn.Identity(),
+            ResBlock(2 * c) if res_blocks >= 1 else nn.Identity(),
+        )
+        self.net = nn.Sequential(
+            nn.Conv2d(3, c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(c),
+            nn.ReLU(),
+            blocks[0],
+            nn.Conv2d(c, 2 * c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(2 * c),
+            nn.ReLU(),
+            blocks[1],
+            nn.Conv2d(2 * c, 2 * c, 3, stride=2, padding=1),
+            nn.ReLU(),
+        )
+        hh, ww = h, w
+        for _ in range(3):
+            hh, ww = (hh + 1) // 2, (ww + 1) // 2
+        self.proj = nn.Sequential(nn.Flatten(), nn.Linear(2 * c * hh * ww, out), nn.ReLU())
+
+    def forward(self, x: Tensor) -> Tensor:
+        out: Tensor = self.proj(self.net(x))
+        return out
+
+
+#: The scene CNN's downsampling: each agent reads it at the centres of its crop's blocks of this many pixels a side.
+SCENE_STRIDE = 4
+
+
+class SceneMapEncoder(nn.Module):
+    """``(W, 3, S, S)`` scene rasters, ``(A, gh, gw, 2)`` crop grids and ``(A,)`` each agent's window → ``(A, out)``."""
+
+    def __init__(self, c: int, out: int, grid_hw: tuple[int, int], res_blocks: int = 2) -> None:
+        super().__init__()
+        if not 0 <= res_blocks <= 2:
+            raise ValueError(f"model.map_res_blocks must be 0, 1 or 2, got {res_blocks}")
+        self.scene = nn.Sequential(
+            nn.Conv2d(3, c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(c),
+            nn.ReLU(),
+            ResBlock(c) if res_blocks == 2 else nn.Identity(),
+            nn.Conv2d(c, 2 * c, 3, stride=2, padding=1),
+            nn.BatchNorm2d(2 * c),
+            nn.ReLU(),
+            ResBlock(2 * c) if res_blocks >= 1 else nn.Identity(),
+        )
+        self.agent = nn.Sequential(nn.Conv2d(2 * c, 2 * c, 3, stride=2, padding=1), nn.ReLU())
+        hh, ww = (math.ceil(x / 2) for x in grid_hw)
+        self.proj = nn.Sequential(nn.Flatten(), nn.Linear(2 * c * hh * ww, out), nn.ReLU())
+
+    def forward(self, scene: Tensor, grid: Tensor, slot: Tensor) -> Tensor:
+        patches = read_slots(self.scene(scene), grid, slot)
+        out: Tensor = self.proj(self.agent(patches))
+        return out
+
+
+def read_slots(features: Tensor, grid: Tensor, slot: Tensor) -> Tensor:
+    """``(A, C, gh, gw)``: each agent's grid sampled bilinearly from its own frame's ``(F, C, h, w)`` features
+    (``align_corners=False``, zeros outside), ``grid`` ``(F, M, gh, gw, 2)`` each frame's agents padded to M (one
+    ``grid_sample`` call, the agents stacked along its rows) and ``slot`` ``(A,)`` each agent's row of it flattened:
+    the engine's layout (contract 12), in training and in the exported graph alike."""
+    f, c = features.shape[:2]
+    m, gh, gw = grid.shape[1:4]
+    read = nn.functional.grid_sample(features, grid.reshape(f, m * gh, gw, 2), align_corners=False)
+    rows = read.reshape(f, c, m, gh, gw).permute(0, 2, 1, 3, 4).reshape(f * m, c, gh, gw)
+    return rows.index_select(0, slot)
