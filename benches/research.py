@@ -22,6 +22,7 @@ benchmark's comparison pipeline, not an API: the engine is the one implementatio
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -307,22 +308,24 @@ def vector_crop(els: Elements, origin: Arr, heading: float, m: Any) -> Arr:
     return np.asarray(img)
 
 
-def draw_boxes(crops: Arr, states: dict[str, Arr], m: Any) -> None:
+def draw_boxes(crops: Arr, states: dict[str, Arr], m: Any, owners: tuple[Arr, Arr] | None = None) -> None:
     """Every agent as a blue box over every crop it reaches: the pixels whose centres lie inside it (no
-    anti-aliasing), each box tested only over the pixels around it."""
+    anti-aliasing), each box tested only over the pixels around it. The crops are the agents' own, or those placed
+    by ``owners`` (positions, headings: a scene raster's)."""
     pos, heading, res = states["position"], states["heading"], m.resolution_m
+    at, facing = owners if owners is not None else (pos, heading)
     half_l, half_w = states["length"] / 2, states["width"] / 2
     span = int(np.ceil(np.hypot(half_l, half_w).max(initial=0.0) / res)) + 1
     reach = np.hypot(m.height_px, m.width_px) * res + 2 * span * res
-    dist = np.hypot(*(pos[:, None, :] - pos[None]).transpose(2, 0, 1))
+    dist = np.hypot(*(at[:, None, :] - pos[None]).transpose(2, 0, 1))
     i, j = np.nonzero(dist <= reach)
-    centre = to_local(pos[j][:, None, :], pos[i], heading[i])[:, 0]  # agent j in crop i's frame
+    centre = to_local(pos[j][:, None, :], at[i], facing[i])[:, 0]  # agent j in crop i's frame
     offsets = np.arange(-span, span + 1)
     rows = np.rint(m.agent_row - centre[:, 0] / res).astype(np.int64)[:, None, None] + offsets[None, :, None]
     cols = np.rint(m.agent_col - centre[:, 1] / res).astype(np.int64)[:, None, None] + offsets[None, None, :]
     rows, cols = np.broadcast_arrays(rows, cols)
     local = np.stack([(m.agent_row - rows) * res, (m.agent_col - cols) * res], axis=-1)  # crop i's pixel centres
-    seen = to_local(to_world(local, pos[i], heading[i]), pos[j], heading[j])
+    seen = to_local(to_world(local, at[i], facing[i]), pos[j], heading[j])
     hit = (np.abs(seen[..., 0]) <= half_l[j][:, None, None]) & (np.abs(seen[..., 1]) <= half_w[j][:, None, None])
     hit &= (rows >= 0) & (rows < m.height_px) & (cols >= 0) & (cols < m.width_px)
     crops[np.broadcast_to(i[:, None, None], hit.shape)[hit], rows[hit], cols[hit]] = AGENT_COLOUR
@@ -344,6 +347,76 @@ def map_crops(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> Arr:
     crops[~readers] = 0
     out: Arr = (crops.astype(np.float32) / 255.0).transpose(0, 3, 1, 2)
     return np.ascontiguousarray(out)
+
+
+def groups_of(boxes: Arr) -> Arr:
+    """Each box's group ``(N,)``: boxes that intersect (touching counts), through any chain of them, share one; groups
+    numbered in the order of their lowest index."""
+    lo, hi = boxes[:, :2], boxes[:, 2:]
+    meet = ((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None])).all(axis=-1)
+    label = np.arange(len(boxes))
+    while True:
+        new = np.where(meet, label[None, :], len(boxes)).min(axis=1)
+        if (new == label).all():
+            break
+        label = new
+    out: Arr = np.unique(label, return_inverse=True)[1]
+    return out
+
+
+def layout(boxes: Arr, group: Arr, res: float, min_px: int) -> tuple[Arr, int]:
+    """Each group's raster centre (the middle of its box of crop corners) and the rasters' one side (the least multiple
+    of 32 at or above ``min_px`` and every group box's side in pixels + 2); one centre at 0 without agents."""
+    if not len(boxes):
+        return np.zeros((1, 2)), min(-(-min_px // 32) * 32, 2048)
+    count = int(group.max()) + 1
+    lo = np.array([boxes[group == g, :2].min(axis=0) for g in range(count)])
+    hi = np.array([boxes[group == g, 2:].max(axis=0) for g in range(count)])
+    need = max([min_px, *(int(np.ceil(v / res)) + 2 for v in (hi - lo).max(axis=1))])
+    return (lo + hi) / 2, min(-(-need // 32) * 32, 2048)
+
+
+def scene_inputs(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> tuple[Arr, Arr, Arr]:
+    """A scene model's rasters ``(G, 3, S, S)``, grids ``(G, M, gh, gw, 2)`` and slots ``(N,)`` (contract 12): one
+    north-up raster per group of agents whose crops meet, centred on the group's box of crop corners, S the least
+    multiple of 32 at or above ``min_px`` and every group box's side in pixels + 2; one raster of the whole frame
+    where that holds no more pixels."""
+    pos, heading, res, n = states["position"], states["heading"], m.resolution_m, len(states["position"])
+    edges = np.array([[0, 0], [0, m.width_px], [m.height_px, 0], [m.height_px, m.width_px]], dtype=np.float64)
+    corners = np.stack([(m.agent_row + 0.5 - edges[:, 0]) * res, (m.agent_col + 0.5 - edges[:, 1]) * res], axis=1)
+    world = to_world(np.broadcast_to(corners, (n, 4, 2)), pos, heading)
+    boxes = np.concatenate([world.min(axis=1), world.max(axis=1)], axis=1)
+    group = groups_of(boxes) if n else np.zeros(0, np.int64)
+    centre, side = layout(boxes, group, res, m.scene.min_px)
+    whole = layout(boxes, np.zeros(n, np.int64), res, m.scene.min_px)
+    if len(centre) > 1 and whole[1] ** 2 <= len(centre) * side**2:  # one raster where it holds fewer pixels
+        group, (centre, side) = np.zeros(n, np.int64), whole
+    count = len(centre)
+    north = np.full(count, np.pi / 2)
+    scene = dataclasses.replace(m, height_px=side, width_px=side, agent_row=side // 2, agent_col=side // 2)
+    raster = np.zeros((count, side, side, 3), dtype=np.uint8)
+    if isinstance(frame.map, dgan.RasterMap):
+        raster = raster_crops(frame.map, pixel_world({"position": centre, "heading": north}, scene))
+    elif frame.map is not None:
+        els = Elements(frame.map.elements())
+        raster = np.stack([vector_crop(els, c, np.pi / 2, scene) for c in centre])
+    if m.draw_agents and frame.map is not None:
+        draw_boxes(raster, states, scene, owners=(centre, north))
+    # Each crop block's centre (rows from the top, columns centred on the agent's) in its group's raster.
+    k = m.scene.stride
+    gh, gw = -(-m.height_px // k), -(-m.width_px // k)
+    rows = np.arange(gh) * k + k / 2
+    cols = m.agent_col + 0.5 + (np.arange(gw) - (gw - 1) / 2) * k
+    local = np.stack(np.meshgrid((m.agent_row + 0.5 - rows) * res, (m.agent_col + 0.5 - cols) * res, indexing="ij"), -1)
+    w = to_world(np.broadcast_to(local.reshape(-1, 2), (n, gh * gw, 2)), pos, heading) - centre[group][:, None]
+    u, v = side // 2 + 0.5 + w[..., 0] / res, side // 2 + 0.5 - w[..., 1] / res
+    cells = np.stack([2 * u / side - 1, 2 * v / side - 1], axis=-1).reshape(n, gh, gw, 2)
+    place = np.array([np.sum(group[:i] == group[i]) for i in range(n)], dtype=np.int64)
+    most = int(np.bincount(group).max()) if n else 0
+    grid = np.zeros((count, most, gh, gw, 2), dtype=np.float32)
+    grid[group, place] = cells
+    out: Arr = (raster.astype(np.float32) / 255.0).transpose(0, 3, 1, 2)
+    return np.ascontiguousarray(out), grid, (group * most + place).astype(np.int64)
 
 
 def preprocess(frame: dgan.Frame, spec: dgan.InputSpec) -> dict[str, Arr]:
@@ -378,7 +451,11 @@ def preprocess(frame: dgan.Frame, spec: dgan.InputSpec) -> dict[str, Arr]:
         "heading": heading,
     }
     x["prior"] = prior_rollout(x["trajectory"].astype(np.float64), mask, x["state"], spec).astype(np.float32)
-    if spec.map is not None:
+    if spec.map is not None and spec.map.scene is not None:
+        x["map"], x["map_grid"], x["map_slot"] = scene_inputs(frame, s, spec.map)
+        if spec.map.optional:
+            x["map_present"] = np.full(n, float(frame.map is not None), dtype=np.float32)
+    elif spec.map is not None:
         if frame.map is not None:
             x["map"] = map_crops(frame, s, spec.map)
         else:
@@ -431,6 +508,8 @@ def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
     model = load_checkpoint(ROOT / "training" / "checkpoints" / f"{name}.pt")[0]
     inputs = [k for k in contract.EDGE_LIST_INPUTS if k != "map" or spec.map is not None]
     inputs = [k for k in inputs if k != "map_present" or (spec.map is not None and spec.map.optional)]
+    scene = spec.map is not None and spec.map.scene is not None
+    inputs = [k for k in inputs if k not in contract.SCENE_GRID_INPUTS or scene]
 
     def run(frame: dgan.Frame) -> tuple[Arr, Arr]:
         x = preprocess(frame, spec)

@@ -7,7 +7,7 @@ import dgan
 from training.config import Config
 from training.data.datasets import DATASETS
 from training.modules.dgan import DGAN
-from training.modules.scene import SCENE_STRIDE
+from training.modules.scene import SCENE_MIN_PX, SCENE_STRIDE
 
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
@@ -27,7 +27,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
             optional=cfg.train.map_dropout > 0,
             render=d.map_render,
             classes=tuple(x.strip() for x in cfg.model.map_classes.split(",") if x.strip()),
-            scene=dgan.SceneSpec(d.map_scene_px, SCENE_STRIDE) if cfg.model.map_mode == "scene" else None,
+            scene=dgan.SceneSpec(SCENE_MIN_PX, SCENE_STRIDE) if cfg.model.map_mode == "scene" else None,
         )
     return dgan.InputSpec(
         dt_s=info.dt_s,

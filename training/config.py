@@ -29,9 +29,10 @@ class DataConfig:
     # How a vector map becomes the crops (dgan.MapSpec.render): "agent" (each crop drawn from the elements) or "tiles"
     # (the map drawn once into tiles kept with it, each crop resampled from them: the map's cost stops growing with N).
     map_render: str = "agent"
-    # > 0: each window also carries its scene raster of this many pixels a side (dgan.scene_raster, at the crops'
-    # resolution, centred on its agents, turned at random) and each agent its crop's grid in it (dgan.crop_grid), for
-    # model.map_mode = "scene" (issue 26). 0: none.
+    # > 0: each training window also carries its scene raster of this many pixels a side (dgan.scene_raster, at the
+    # crops' resolution, centred on its agents, turned at random) and each agent its crop's grid in it (dgan.crop_grid),
+    # for model.map_mode = "scene" (issue 26); the exported model's rasters just hold each group of crops (contract 12,
+    # training.modules.scene.SCENE_MIN_PX at least). 0: none.
     map_scene_px: int = 0
     # The kinematic prior the network refines (dgan.PriorSpec): "none" (absolute anchors, contract 1) or
     # "constant_velocity"; prior_window_s > 0 estimates its velocity over that many seconds of observed positions.

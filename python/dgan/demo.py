@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -235,12 +235,13 @@ def draw_crop(scene: DemoScene, predictor: Predictor, pred: Prediction, out: Pat
     from dgan.spec import preprocess, to_agent_frame
     from dgan.viz import MODE_COLOURS, SATURATION
 
-    spec = predictor.spec
-    assert spec.map is not None
+    m = predictor.spec.map
+    assert m is not None
+    # A scene model (contract 12) reads its raster over the ground of this crop.
+    spec = replace(predictor.spec, map=replace(m, scene=None))
     x = preprocess(scene.frame, spec)
-    i = crop_agent(scene, spec.map.classes)
+    i = crop_agent(scene, m.classes)
     pid = int(scene.frame.ids[i])
-    m = spec.map
     origin, heading = x["origin"][i : i + 1], x["heading"][i : i + 1]
 
     def px(world: Arr) -> Arr:

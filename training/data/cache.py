@@ -22,7 +22,7 @@ from training.data.recording import Located
 from training.data.windows import build_windows
 
 
-def cache_path(found: Located, spec: dgan.InputSpec, cache_dir: Path) -> Path:
+def cache_path(found: Located, spec: dgan.InputSpec, cache_dir: Path, scene_px: int = 0) -> Path:
     """Where ``found``'s windows for ``spec`` are cached: a stem naming the set and a key of its content."""
     part, info = found.part, found.info
     if part.pedestrians:
@@ -35,6 +35,8 @@ def cache_path(found: Located, spec: dgan.InputSpec, cache_dir: Path) -> Path:
             version += f"-noise{part.noise[0]:g}-drop{part.noise[1]:g}"
         if part.hold > 0:
             version += f"-hold{part.hold:g}"
+    if scene_px > 0 and spec.map is not None and spec.map.scene is not None:
+        version += f"-scene{scene_px}"
     files_key = [(f.name, f.stat().st_size) for f in found.files]
     content = json.dumps([spec.to_json(), files_key, part.stride, version, CACHE_KEY])
     return cache_dir / f"{stem}_{hashlib.sha256(content.encode()).hexdigest()[:16]}.npz"
@@ -52,16 +54,22 @@ def read_windows(path: Path) -> Windows:
     return Windows(**d)
 
 
-def cached(found: Sequence[Located], spec: dgan.InputSpec, cache_dir: Path, progress: bool = True) -> list[Windows]:
+def cached(
+    found: Sequence[Located], spec: dgan.InputSpec, cache_dir: Path, progress: bool = True, scene_px: int = 0
+) -> list[Windows]:
     """The windows of each set of ``found``, in order: read from ``cache_dir`` when cached, else built by
-    :func:`~training.data.windows.build_windows` from the set's recordings and saved."""
+    :func:`~training.data.windows.build_windows` from the set's recordings and saved (a scene model's with rasters of
+    ``scene_px``, ``data.map_scene_px``)."""
+    from training.modules.scene import SCENE_TRAIN_PX
+
+    scene_px = scene_px or SCENE_TRAIN_PX
     out = []
     for f in found:
-        path = cache_path(f, spec, cache_dir)
+        path = cache_path(f, spec, cache_dir, scene_px)
         if path.is_file():
             out.append(read_windows(path))
             continue
-        w = build_windows(f.read(), f.info, spec, f.part.stride, progress, f.part.noise, f.part.hold)
+        w = build_windows(f.read(), f.info, spec, f.part.stride, progress, f.part.noise, f.part.hold, scene_px)
         cache_dir.mkdir(parents=True, exist_ok=True)
         arrays = {k: v for k, v in vars(w).items() if isinstance(v, np.ndarray)}
         np.savez(path, files=np.array(w.files), **arrays)  # type: ignore[arg-type]

@@ -57,7 +57,7 @@ def set_windows(d: DataConfig, sets: list[WindowSet], spec: dgan.InputSpec, prog
     """The windows of each of ``sets``, located under ``data.root`` and cached under ``data.cache_dir``."""
     root, cache = Path(d.root).expanduser(), Path(d.cache_dir).expanduser()
     found = located(sets, root, spec)
-    windows = cached(found, spec, cache, progress)
+    windows = cached(found, spec, cache, progress, d.map_scene_px)
     # A noisy copy's agents are flagged (train.distill_noisy = false keeps the teacher off them).
     return [
         replace(w, noisy=np.ones(len(w.target), bool)) if part.noise != (0.0, 0.0) or part.hold > 0 else w

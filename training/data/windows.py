@@ -119,12 +119,14 @@ def build_windows(
     progress: bool = True,
     noise: tuple[float, float] = (0.0, 0.0),
     hold: float = 0.0,
+    scene_px: int = 128,  # training.modules.scene.SCENE_TRAIN_PX
 ) -> Windows:
     """Preprocesses every window of ``recs`` through the engine; ``noise = (sigma_m, drop)`` first corrupts the
     observed histories as a tracker would (:func:`training.data.augment.tracker_noise`, seeded by the recording's
     order), ``hold`` (metres) holds their still agents where they are (:func:`training.data.augment.held_still`), the
     futures staying as recorded. A scene model's windows (``spec.map.scene``, contract 12) also hold their scene
-    rasters and their agents' grids (:func:`scene_inputs`), beside the agents' crops that a teacher reads."""
+    rasters of ``scene_px`` a side and their agents' grids (:func:`scene_inputs`), beside the agents' crops that a
+    teacher reads."""
     from tqdm import tqdm
 
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
@@ -147,7 +149,8 @@ def build_windows(
             frame = w.frame(info, spec.t_obs, with_map=spec.map is not None)
             x = dgan.preprocess(frame, crops)
             if scene is not None:
-                scene_raster, grid = scene_inputs(frame, crops, x, scene, float(turns.uniform(-np.pi, np.pi)))
+                turn = float(turns.uniform(-np.pi, np.pi))
+                scene_raster, grid = scene_inputs(frame, crops, x, scene_px, scene.stride, turn)
                 parts["scene"].append(scene_raster[None])
                 parts["scene_grid"].append(grid)
             fut = np.where(w.mask[:, spec.t_obs :, None], w.positions[:, spec.t_obs :], 0.0)
@@ -177,14 +180,14 @@ def build_windows(
 
 
 def scene_inputs(
-    frame: dgan.Frame, spec: dgan.InputSpec, x: dict[str, Arr], scene: dgan.SceneSpec, heading: float
+    frame: dgan.Frame, spec: dgan.InputSpec, x: dict[str, Arr], size_px: int, stride: int, heading: float
 ) -> tuple[Arr, Arr]:
-    """A window's scene raster ``(3, S, S)`` u8 (S = ``scene.min_px``), centred on its agents' mean position and
-    turned to ``heading`` (the CNN learns the map whichever way the scene lies; the engine's lies north up, centred on
-    the agents' crops and grown to hold them), and each agent's crop grid in it ``(N, gh, gw, 2)``."""
+    """A window's scene raster ``(3, S, S)`` u8 (S = ``size_px``), centred on its agents' mean position and turned to
+    ``heading`` (the CNN learns the map whichever way the scene lies; the engine's lie north up, each holding a group
+    of crops), and each agent's crop grid in it ``(N, gh, gw, 2)``."""
     centre = x["origin"].mean(axis=0) if len(x["origin"]) else np.zeros(2)
-    raster = dgan.scene_raster(frame, spec, scene.min_px, centre, heading)
-    grid = dgan.crop_grid(x["origin"], x["heading"], spec, scene.stride, scene.min_px, centre, heading)
+    raster = dgan.scene_raster(frame, spec, size_px, centre, heading)
+    grid = dgan.crop_grid(x["origin"], x["heading"], spec, stride, size_px, centre, heading)
     return np.round(raster * 255).astype(np.uint8), grid
 
 

@@ -97,15 +97,8 @@ class DGAN(nn.Module):
             nn.Linear(cfg.state_dim_out, cfg.state_dim_out),
             nn.ReLU(),
         )
-        if cfg.map_mode not in ("crop", "scene"):
-            raise ValueError(f'model.map_mode must be "crop" or "scene", got {cfg.map_mode!r}')
         self.scene = cfg.map_mode == "scene"
-        self.map_enc: nn.Module | None = None
-        if cfg.use_map and map_hw and self.scene:
-            grid_hw = (math.ceil(map_hw[0] / SCENE_STRIDE), math.ceil(map_hw[1] / SCENE_STRIDE))
-            self.map_enc = SceneMapEncoder(cfg.map_channels, cfg.map_dim, grid_hw, cfg.map_res_blocks)
-        elif cfg.use_map and map_hw:
-            self.map_enc = MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw, res_blocks=cfg.map_res_blocks)
+        self.map_enc = map_encoder(cfg, map_hw)
         # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
         # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
         self.map_optional = map_optional and self.map_enc is not None
@@ -259,6 +252,19 @@ class DGAN(nn.Module):
             unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
             p = unused * 0.0
         return self.heads(p, v)
+
+
+def map_encoder(cfg: ModelConfig, map_hw: tuple[int, int] | None) -> nn.Module | None:
+    """The map CNN of ``model.map_mode``: over each agent's ``map_hw`` crop, or over the scene's raster read at the
+    crop's blocks (:class:`~training.modules.scene.SceneMapEncoder`); None without a map."""
+    if cfg.map_mode not in ("crop", "scene"):
+        raise ValueError(f'model.map_mode must be "crop" or "scene", got {cfg.map_mode!r}')
+    if not (cfg.use_map and map_hw):
+        return None
+    if cfg.map_mode == "scene":
+        grid_hw = (math.ceil(map_hw[0] / SCENE_STRIDE), math.ceil(map_hw[1] / SCENE_STRIDE))
+        return SceneMapEncoder(cfg.map_channels, cfg.map_dim, grid_hw, cfg.map_res_blocks)
+    return MapEncoder(cfg.map_channels, cfg.map_dim, *map_hw, res_blocks=cfg.map_res_blocks)
 
 
 def entropy_tempered(anchor_logits: Tensor, classes: int, a: Tensor | float, b: Tensor | float) -> Tensor:

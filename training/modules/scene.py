@@ -68,6 +68,13 @@ class MapEncoder(nn.Module):
 
 #: The scene CNN's downsampling: each agent reads it at the centres of its crop's blocks of this many pixels a side.
 SCENE_STRIDE = 4
+#: The least raster side a scene model asks of the engine (``map.scene.min_px``): the engine's rasters just hold the
+#: crops (zara1's validation top-1 with 32, 64 and 128: 0.381077, 0.381077, 0.381076 m; docs/results.md), while
+#: training draws each window's raster at ``data.map_scene_px``.
+SCENE_MIN_PX = 32
+#: A training window's raster side where ``data.map_scene_px`` leaves it unset (a scene model's spec, e.g. a bundled
+#: one's, with a data configuration of its own).
+SCENE_TRAIN_PX = 128
 
 
 class SceneMapEncoder(nn.Module):

@@ -223,12 +223,12 @@ training.
 
 - **Data**: ETH/UCY in the Social-GAN layout (metres, 0.4 s steps). Trained on the train split of {others}; the best
   epoch chosen on their val split. Each scene's semantic mask, colourised (`dgan.scenes.MASK_PALETTE`), is the raster
-  map: {cfg["data"]["map_height_px"]}×{cfg["data"]["map_width_px"]} px crops at {cfg["data"]["map_resolution_m"]} m/px,
-  heading-aligned. Use it on new frames of a scene with `dgan.scene_map("{scene}")`.{extra_data_line(cfg)}
+  map: {map_words(cfg)}. Use it on new frames of a scene with `dgan.scene_map("{scene}")`.{extra_data_line(cfg)}
 - **Protocol**: 8 observed steps (3.2 s), 12 predicted (4.8 s); every start frame; all agents seen at t_obs are in the
   graph; targets are the agents present at all 20 steps, in windows with at least two of them.
 - **Model**: LSTM({m["lstm_dim"]}) over MLP-embedded positions, traffic-state MLP, map CNN (ResNet-style, width
-  {m["map_channels"]}), {m["gat_layers"]} GAT layers × {m["gat_heads"]} heads over the attention-zone graph (λ = 0.5)
+  {m["map_channels"]}{scene_words(cfg)}),
+  {m["gat_layers"]} GAT layers × {m["gat_heads"]} heads over the attention-zone graph (λ = 0.5)
   with neighbour geometry on the edges, {cfg["train"]["anchors_per_class"]} k-means anchors with offset regression.
   Loss: {classification_words(cfg)} and closest-anchor regression (α = {cfg["train"]["alpha"]}), plus
   β = {cfg["train"]["beta"]} times the error of the most probable mode (see `docs/results.md`).
@@ -247,6 +247,29 @@ training.
 - **Reproduce**: `python -m training.results --train` (all five folds) or
   `python -m training.train --config training/configs/ethucy_{scene}.toml --out runs/ethucy_{scene}`.
 """
+
+
+def map_words(cfg: dict[str, Any]) -> str:
+    """The card's words for the map's geometry: each agent's crop, or the scene raster it reads (contract 12)."""
+    d = cfg["data"]
+    crop = f"{d['map_height_px']}×{d['map_width_px']} px crops at {d['map_resolution_m']} m/px,\n  heading-aligned"
+    if cfg.get("model", {}).get("map_mode", "crop") != "scene":
+        return crop
+    return (
+        f"one north-up raster of the scene at {d['map_resolution_m']} m/px for each group of agents whose crops meet "
+        f"({d['map_scene_px']} px a side in\n  training), each agent reading it over its "
+        f"{d['map_height_px']}×{d['map_width_px']} px heading-aligned crop"
+    )
+
+
+def scene_words(cfg: dict[str, Any]) -> str:
+    """The map CNN's reading of a scene model (``model.map_mode = "scene"``, contract 12); "" for a crop model."""
+    if cfg.get("model", {}).get("map_mode", "crop") != "scene":
+        return ""
+    return (
+        ", its first stages run once per frame over the scene's raster, each agent reading their features at its "
+        "crop's 4 × 4 blocks: the map's cost does not grow with the agents"
+    )
 
 
 def distill_words(name: str, cfg: dict[str, Any]) -> str:

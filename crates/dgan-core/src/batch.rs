@@ -48,19 +48,28 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
     } else {
         None
     };
+    // A scene model's rasters (each frame's groups) stack; their grids pad to the largest group, slots follow.
     let (map_grid, map_slot) = if same_presence(parts, |p| p.map_grid.as_ref(), "map_grid")? {
-        let grids: Vec<&Array5<f32>> = parts.iter().filter_map(|p| p.map_grid.as_ref()).collect();
-        let most = grids.iter().map(|g| g.dim().1).max().unwrap_or(0);
-        let (_, _, gh, gw, _) = grids[0].dim();
-        let mut grid = Array5::<f32>::zeros((grids.len(), most, gh, gw, 2));
+        let grids: Vec<(&Array5<f32>, &Array1<i64>)> = parts
+            .iter()
+            .map(|p| p.map_grid.as_ref().zip(p.map_slot.as_ref()))
+            .collect::<Option<_>>()
+            .ok_or_else(|| DganError::InvalidSpec("map_grid without map_slot".into()))?;
+        let most = grids.iter().map(|(g, _)| g.dim().1).max().unwrap_or(0);
+        let (_, _, gh, gw, _) = grids[0].0.dim();
+        let rasters: usize = grids.iter().map(|(g, _)| g.dim().0).sum();
+        let mut grid = Array5::<f32>::zeros((rasters, most, gh, gw, 2));
         let mut slot = Vec::with_capacity(agent_ptr.last().copied().unwrap_or(0));
-        for (f, g) in grids.iter().enumerate() {
-            if g.dim().0 != 1 || (g.dim().2, g.dim().3) != (gh, gw) {
+        let mut base = 0;
+        for (g, s) in &grids {
+            let (c, m, h, w, _) = g.dim();
+            if (h, w) != (gh, gw) {
                 return Err(DganError::InvalidSpec(format!("cannot join map_grid of shape {:?}", g.dim())));
             }
-            let rows = g.dim().1;
-            grid.slice_mut(ndarray::s![f, ..rows, .., .., ..]).assign(&g.index_axis(Axis(0), 0));
-            slot.extend((0..rows).map(|r| (f * most + r) as i64));
+            grid.slice_mut(ndarray::s![base..base + c, ..m, .., .., ..]).assign(g);
+            let m = m.max(1) as i64;
+            slot.extend(s.iter().map(|&v| (base as i64 + v / m) * most as i64 + v % m));
+            base += c;
         }
         (Some(grid), Some(Array1::from(slot)))
     } else {
@@ -146,14 +155,14 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
         state: inputs.state.select(Axis(0), rows),
         edge_features: inputs.edge_features.select(Axis(0), &kept),
         edge_index,
-        // A scene model's raster stays whole; the part's agents keep their grids, in a frame of their own.
+        // A scene model's rasters and grids stay whole; the part's agents keep their slots.
         map: match &inputs.map_grid {
             Some(_) => inputs.map.clone(),
             None => inputs.map.as_ref().map(|m| m.select(Axis(0), rows)),
         },
         map_present: inputs.map_present.as_ref().map(|m| m.select(Axis(0), rows)),
-        map_grid: inputs.map_grid.as_ref().map(|g| g.select(Axis(1), rows)),
-        map_slot: inputs.map_grid.as_ref().map(|_| Array1::from_iter(0..rows.len() as i64)),
+        map_grid: inputs.map_grid.clone(),
+        map_slot: inputs.map_slot.as_ref().map(|s| s.select(Axis(0), rows)),
         neighbors,
     })
 }
@@ -258,11 +267,19 @@ mod tests {
             slot.iter().map(|&s| [flat[[s as usize, 0, 0, 0]], flat[[s as usize, 0, 0, 1]]]).collect();
         assert_eq!(read, vec![[0.0, 20.0], [1.0, 20.0], [0.0, 30.0], [1.0, 30.0], [2.0, 30.0], [0.0, 10.0]]);
         assert_eq!(flat[[2, 0, 0, 1]], 0.0);
-        // A part of a scene frame keeps the whole raster and its agents' grids, in a frame of its own.
+        // A part of a scene frame keeps its rasters and grids whole, and its agents' slots.
         let part = take(&scene_inputs(3), &[2]).unwrap();
         assert_eq!(part.map.unwrap().dim(), (1, 3, 4, 4));
-        assert_eq!(part.map_grid.unwrap().into_raw_vec_and_offset().0, vec![2.0, 30.0]);
-        assert_eq!(part.map_slot.unwrap().to_vec(), vec![0]);
+        assert_eq!(part.map_grid.unwrap().dim(), (1, 3, 1, 1, 2));
+        assert_eq!(part.map_slot.unwrap().to_vec(), vec![2]);
+        // A frame of two groups (two rasters, slots 0, 2, 1 of M = 2) joined after one of three agents.
+        let mut two = scene_inputs(3);
+        two.map = Some(Array4::from_elem((2, 3, 4, 4), 7.0));
+        two.map_grid = Some(ndarray::Array5::zeros((2, 2, 1, 1, 2)));
+        two.map_slot = Some(Array1::from(vec![0, 2, 1]));
+        let j = join(&[scene_inputs(3), two]).unwrap().inputs;
+        assert_eq!(j.map.unwrap().dim(), (3, 3, 4, 4));
+        assert_eq!(j.map_slot.unwrap().to_vec(), vec![0, 1, 2, 3, 6, 4]);
         // Rasters of different sides do not stack: the predictor joins only frames of one side.
         let mut other = scene_inputs(1);
         other.map = Some(Array4::zeros((1, 3, 8, 8)));

@@ -467,12 +467,16 @@ fn build(
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
         (Some(m), present) if m.scene.is_some() && (present.is_some() || m.optional || n == 0) => {
-            let scene = m.scene.ok_or_else(|| DganError::InvalidSpec("map.scene".into()))?;
-            let (raster, grid) = crate::scene::scene_inputs(frame, &states, m, scene)?;
-            map_grid = Some(grid);
-            map_slot = Some(Array1::from_iter(0..n as i64));
             let flag = if present.is_some() { 1.0 } else { 0.0 };
-            (Some(raster), m.optional.then(|| Array1::from_elem(n, flag)))
+            let drawn = match (crops, m.scene) {
+                (true, Some(scene)) => Some(crate::scene::scene_inputs(frame, &states, m, scene)?),
+                _ => None,
+            };
+            let raster = drawn.map(|(raster, grid, slot)| {
+                (map_grid, map_slot) = (Some(grid), Some(slot));
+                raster
+            });
+            (raster, m.optional.then(|| Array1::from_elem(n, flag)))
         }
         (Some(m), Some(_)) => {
             let drawn = crops.then(|| rasterize_on(frame, &states, m, threads)).transpose()?;

@@ -537,8 +537,14 @@ impl Predictor {
             }
         }
         if let (true, Some(m)) = (later, &spec.map) {
-            let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
-            pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
+            if let Some(scene) = m.scene {
+                // A scene model's rasters and grids (contract 12), timed as the crops they stand for.
+                let (raster, grid, slot) = crate::scene::scene_inputs(frame, &pre.states, m, scene)?;
+                (pre.inputs.map, pre.inputs.map_grid, pre.inputs.map_slot) = (Some(raster), Some(grid), Some(slot));
+            } else {
+                let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
+                pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
+            }
             times.crops = started.elapsed().saturating_sub(times.preprocess);
         }
         // A small frame on a lane: waking intra-op workers costs more than they give there.
@@ -573,7 +579,8 @@ impl Predictor {
     fn split(&self, pre: &Preprocessed) -> Option<Vec<Vec<usize>>> {
         let (n, lanes) = (pre.poses.len(), self.lanes.len());
         // A scene model's map CNN runs once over the frame's raster: each part would run it again.
-        if lanes < 2 || n < SPLIT_MIN_AGENTS || pre.inputs.map_grid.is_some() {
+        let scene = self.contract.input.map.as_ref().is_some_and(|m| m.scene.is_some());
+        if lanes < 2 || n < SPLIT_MIN_AGENTS || scene {
             return None;
         }
         let parts = balanced_parts(n, &pre.edges, lanes);

@@ -8,18 +8,41 @@
 //! `grid_sample`, `align_corners = false`), in its own heading-aligned frame. Training and the engine both take the
 //! raster and the grid from here.
 
-use crate::canvas::world_bounds;
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
 use crate::map::SceneMap;
 use crate::spec::{MapRender, MapSpec, SceneSpec};
 use crate::state::TrafficState;
 use crate::transform::AgentPose;
-use ndarray::{Array3, Array4, Array5, Axis};
+use ndarray::{Array1, Array3, Array4, Array5, Axis};
 use std::f64::consts::FRAC_PI_2;
 
-/// The most pixels a scene raster may have a side.
-pub const MAX_SCENE_PX: usize = 2048;
+pub use crate::spec::MAX_SCENE_PX;
+
+/// [`scene_raster`] with the boxes of `drawn` alone (the agents within reach of it).
+fn scene_raster_of(
+    frame: &Frame,
+    drawn: &[TrafficState],
+    crop: &MapSpec,
+    size_px: usize,
+    pose: AgentPose,
+) -> Result<Array3<f32>> {
+    let spec = scene_spec(crop, size_px)?;
+    let mut canvas = crate::canvas::Canvas::new(&spec, pose)
+        .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {size_px}×{size_px} scene raster")))?;
+    match frame.map() {
+        Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
+        Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
+        None => {}
+    }
+    if crop.draw_agents {
+        canvas.draw_boxes(drawn.iter());
+    }
+    let mut out = Array3::<f32>::zeros((3, size_px, size_px));
+    let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("scene raster is not contiguous".into()))?;
+    canvas.write_chw(flat);
+    Ok(out)
+}
 
 /// The square scene raster of `size_px` pixels a side at the crop's resolution (`crop.resolution_m`), centred on
 /// `pose`'s origin with its image-up along `pose`'s heading (a heading of π/2 puts world north up), `(3, size_px,
@@ -33,59 +56,145 @@ pub fn scene_raster(
     size_px: usize,
     pose: AgentPose,
 ) -> Result<Array3<f32>> {
-    let spec = scene_spec(crop, size_px)?;
     if states.len() != frame.len() {
         return Err(DganError::InvalidFrame(format!("{} states for {} agents", states.len(), frame.len())));
     }
-    let mut canvas = crate::canvas::Canvas::new(&spec, pose)
-        .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {size_px}×{size_px} scene raster")))?;
-    match frame.map() {
-        Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
-        Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
-        None => {}
-    }
-    if crop.draw_agents {
-        canvas.draw_boxes(states.iter());
-    }
-    let mut out = Array3::<f32>::zeros((3, size_px, size_px));
-    let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("scene raster is not contiguous".into()))?;
-    canvas.write_chw(flat);
-    Ok(out)
+    scene_raster_of(frame, states, crop, size_px, pose)
 }
 
 /// A scene raster's side grows in steps of this many pixels (so that frames of one batch mostly share it).
 pub const SCENE_STEP_PX: usize = 32;
 
-/// A frame's inputs under a scene model (contract 12): its raster `(1, 3, S, S)`, north up and centred on the middle
-/// of its agents' crops, S the least multiple of [`SCENE_STEP_PX`] at or above `scene.min_px` that holds every crop
-/// (at most [`MAX_SCENE_PX`]: beyond it an agent reads zeros, as without a map), blank where the frame has no map;
-/// and each agent's grid in it `(1, N, gh, gw, 2)` ([`crop_grid`]).
+/// A frame's inputs under a scene model (contract 12). Its agents fall into groups whose crops meet (two agents are
+/// in one group when the boxes of their crops' corners intersect, and so on through the group), so that a frame of
+/// scattered groups is not one raster mostly empty: each group gets its own raster, north up and centred on the middle
+/// of its box, every raster of one side S, the least multiple of [`SCENE_STEP_PX`] at or above both `scene.min_px` and
+/// each group box's longer side in pixels plus 2 (at most [`MAX_SCENE_PX`]: beyond it an agent reads zeros, as
+/// without a map); where one raster of the whole frame (the same rule, one group) holds no more pixels than the
+/// groups' together, that one. Each is blank where the frame has no map, with the boxes of the agents within reach. Returns the
+/// rasters `(G, 3, S, S)` (groups in the order of their first agent; one blank raster for a frame without agents),
+/// each group's agents' grids in its raster `(G, M, gh, gw, 2)` ([`crop_grid`]; zeros past a group's agents, M the
+/// largest group) and each agent's row of them flattened `(N,)`: its group · M + its place in the group.
 pub fn scene_inputs(
     frame: &Frame,
     states: &[TrafficState],
     crop: &MapSpec,
     scene: SceneSpec,
-) -> Result<(Array4<f32>, Array5<f32>)> {
+) -> Result<(Array4<f32>, Array5<f32>, Array1<i64>)> {
     let poses: Vec<AgentPose> = states.iter().map(TrafficState::pose).collect();
-    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
-    for pose in &poses {
-        let v = world_bounds(crop, pose);
-        b = [b[0].min(v[0]), b[1].min(v[1]), b[2].max(v[2]), b[3].max(v[3])];
+    let boxes: Vec<[f64; 4]> = poses.iter().map(|p| crop_box(crop, p)).collect();
+    let (mut groups, mut centres, mut side) = layout(&boxes, groups_of(&boxes), crop.resolution_m, scene.min_px);
+    // One raster for the whole frame where the groups' rasters would hold more pixels (groups of unequal reach).
+    let whole = layout(&boxes, vec![(0..boxes.len()).collect()], crop.resolution_m, scene.min_px);
+    if groups.len() > 1 && whole.2 * whole.2 <= groups.len() * side * side {
+        (groups, centres, side) = whole;
     }
-    let (centre, reach) = if poses.is_empty() {
-        ([0.0, 0.0], 0.0)
-    } else {
-        ([(b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0], (b[2] - b[0]).max(b[3] - b[1]) / crop.resolution_m)
-    };
-    let needed = (reach.ceil() as usize).saturating_add(2).max(scene.min_px);
-    let side = needed.div_ceil(SCENE_STEP_PX).saturating_mul(SCENE_STEP_PX).min(MAX_SCENE_PX);
-    let pose = AgentPose::new(centre, FRAC_PI_2);
-    let raster = match frame.map() {
-        Some(_) => scene_raster(frame, states, crop, side, pose)?,
-        None => Array3::zeros((3, side, side)),
-    };
-    let grid = crop_grid(&poses, crop, scene.stride, side, &pose)?;
-    Ok((raster.insert_axis(Axis(0)), grid.insert_axis(Axis(0))))
+    if centres.is_empty() {
+        centres.push([0.0, 0.0]);
+    }
+    let most = groups.iter().map(Vec::len).max().unwrap_or(0);
+    let (gh, gw) =
+        crop.scene_grid().unwrap_or((crop.height_px.div_ceil(scene.stride), crop.width_px.div_ceil(scene.stride)));
+    let mut rasters = Array4::<f32>::zeros((centres.len(), 3, side, side));
+    let mut grids = Array5::<f32>::zeros((centres.len(), most, gh, gw, 2));
+    let mut slots = Array1::<i64>::zeros(poses.len());
+    // Every agent's box reaches at most this far from its position.
+    let reach =
+        states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max) + side as f64 * crop.resolution_m;
+    for (k, centre) in centres.iter().enumerate() {
+        let pose = AgentPose::new(*centre, FRAC_PI_2);
+        if frame.map().is_some() {
+            let near: Vec<TrafficState> = states
+                .iter()
+                .filter(|s| (s.position[0] - centre[0]).abs() <= reach && (s.position[1] - centre[1]).abs() <= reach)
+                .copied()
+                .collect();
+            let raster = scene_raster_of(frame, &near, crop, side, pose)?;
+            rasters.index_axis_mut(Axis(0), k).assign(&raster);
+        }
+        let Some(members) = groups.get(k) else { continue };
+        let mine: Vec<AgentPose> = members.iter().map(|&i| poses[i]).collect();
+        let grid = crop_grid(&mine, crop, scene.stride, side, &pose)?;
+        grids.slice_mut(ndarray::s![k, ..members.len(), .., .., ..]).assign(&grid);
+        for (place, &i) in members.iter().enumerate() {
+            slots[i] = (k * most + place) as i64;
+        }
+    }
+    Ok((rasters, grids, slots))
+}
+
+/// `groups` of agents with each one's raster centre (the middle of its box of crop corners) and their rasters' one
+/// side: the least multiple of [`SCENE_STEP_PX`] at or above `min_px` and every group box's longer side in pixels
+/// plus 2, at most [`MAX_SCENE_PX`]. Groups without agents are dropped.
+fn layout(
+    boxes: &[[f64; 4]],
+    groups: Vec<Vec<usize>>,
+    resolution_m: f64,
+    min_px: usize,
+) -> (Vec<Vec<usize>>, Vec<[f64; 2]>, usize) {
+    let groups: Vec<Vec<usize>> = groups.into_iter().filter(|g| !g.is_empty()).collect();
+    let mut side = min_px;
+    let mut centres = Vec::with_capacity(groups.len());
+    for g in &groups {
+        let b = g.iter().fold([f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY], |b, &i| {
+            let v = boxes[i];
+            [b[0].min(v[0]), b[1].min(v[1]), b[2].max(v[2]), b[3].max(v[3])]
+        });
+        side = side.max((((b[2] - b[0]).max(b[3] - b[1]) / resolution_m).ceil() as usize).saturating_add(2));
+        centres.push([(b[0] + b[2]) / 2.0, (b[1] + b[3]) / 2.0]);
+    }
+    (groups, centres, side.div_ceil(SCENE_STEP_PX).saturating_mul(SCENE_STEP_PX).min(MAX_SCENE_PX))
+}
+
+/// The box `[min_x, min_y, max_x, max_y]` of the corners of an agent's crop (its outer pixel edges).
+fn crop_box(crop: &MapSpec, pose: &AgentPose) -> [f64; 4] {
+    let (h, w, r) = (crop.height_px as f64, crop.width_px as f64, crop.resolution_m);
+    let (row, col) = (crop.agent_row as f64 + 0.5, crop.agent_col as f64 + 0.5);
+    let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for (y, x) in [(0.0, 0.0), (0.0, w), (h, 0.0), (h, w)] {
+        let p = pose.to_world([(row - y) * r, (col - x) * r]);
+        b = [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])];
+    }
+    b
+}
+
+/// The groups of boxes that intersect (touching counts), through any chain of them: each group's indices ascending,
+/// the groups in the order of their lowest index.
+pub fn groups_of(boxes: &[[f64; 4]]) -> Vec<Vec<usize>> {
+    let n = boxes.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    // Sweep along x: each box meets the boxes that start before it ends.
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| boxes[a][0].total_cmp(&boxes[b][0]));
+    for (k, &a) in order.iter().enumerate() {
+        for &b in &order[k + 1..] {
+            if boxes[b][0] > boxes[a][2] {
+                break;
+            }
+            if boxes[b][1] <= boxes[a][3] && boxes[a][1] <= boxes[b][3] {
+                let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    let mut index = vec![usize::MAX; n];
+    let mut groups: Vec<Vec<usize>> = vec![];
+    for i in 0..n {
+        let r = root(&mut parent, i);
+        if index[r] == usize::MAX {
+            index[r] = groups.len();
+            groups.push(vec![]);
+        }
+        groups[index[r]].push(i);
+    }
+    groups
 }
 
 /// The scene raster's own geometry: `crop`'s resolution and drawing, `size_px` square, centred.
@@ -280,24 +389,33 @@ mod tests {
         let spec = crop(false);
         let scene = SceneSpec { min_px: 64, stride: 4 };
         let (f, s) = gradient_frame(&[0.0, 1.0]);
-        let (raster, grid) = scene_inputs(&f, &s, &spec, scene).unwrap();
+        let (raster, grid, slot) = scene_inputs(&f, &s, &spec, scene).unwrap();
         assert_eq!(raster.dim(), (1, 3, 64, 64));
         assert_eq!(grid.dim(), (1, 2, 8, 8, 2));
+        assert_eq!(slot.to_vec(), vec![0, 1]);
         assert!(raster.iter().any(|&v| v > 0.0));
-        // Agents 60 m apart heading east: their crops span about 80 m (4 m behind the first, 12 m ahead of the
-        // second) and a few pixels' margin, so a raster of 192 px (the least multiple of 32 holding them at 0.5 m),
-        // every block of every crop inside it.
-        let p = Array3::from_shape_fn((2, 2, 2), |(i, t, d)| [20.0 + 60.0 * i as f64 + t as f64, 20.0][d]);
-        let far = Frame::new(p, None, vec![AgentClass::Pedestrian; 2]).unwrap();
+        // Three agents heading east, the first two 10 m apart (their crops meet), the third 60 m on: two groups, two
+        // rasters of one side; the first group's crops span 26 m (4 m behind the first to 12 m ahead of the
+        // second), 52 px at 0.5 m, so the least side, 64; every block of every crop inside its group's raster.
+        let xs = [20.0, 30.0, 90.0];
+        let p = Array3::from_shape_fn((3, 2, 2), |(i, t, d)| [xs[i] + t as f64, 20.0][d]);
+        let far = Frame::new(p, None, vec![AgentClass::Pedestrian; 3]).unwrap();
         let states = traffic_states(&far, 1.0);
-        let (raster, grid) = scene_inputs(&far, &states, &spec, scene).unwrap();
-        assert_eq!(raster.dim(), (1, 3, 192, 192));
-        assert!(grid.iter().all(|v| v.abs() < 1.0), "{grid:?}");
-        // No map: a blank raster; no agents: the least raster and an empty grid.
+        let (raster, grid, slot) = scene_inputs(&far, &states, &spec, scene).unwrap();
+        assert_eq!((raster.dim(), grid.dim()), ((2, 3, 64, 64), (2, 2, 8, 8, 2)));
+        assert_eq!(slot.to_vec(), vec![0, 1, 2]);
+        assert!(grid.slice(ndarray::s![.., ..1, .., .., ..]).iter().all(|v| v.abs() < 1.0), "{grid:?}");
+        assert!(grid.slice(ndarray::s![0, 1, .., .., ..]).iter().all(|v| v.abs() < 1.0), "{grid:?}");
+        // Groups farther apart than the most a raster holds: a larger side for the group that needs it.
+        let wide = Array3::from_shape_fn((2, 2, 2), |(i, t, d)| [20.0 + 16.0 * i as f64 + t as f64, 20.0][d]);
+        let wide = Frame::new(wide, None, vec![AgentClass::Pedestrian; 2]).unwrap();
+        let (raster, _, _) = scene_inputs(&wide, &traffic_states(&wide, 1.0), &spec, scene).unwrap();
+        assert_eq!(raster.dim(), (1, 3, 96, 96)); // boxes touching at x = 33: 32 m, 64 + 2 px
+                                                  // No map: blank rasters; no agents: one least raster and an empty grid.
         assert!(raster.iter().all(|&v| v == 0.0));
         let none = Frame::new(Array3::zeros((0, 2, 2)), None, vec![]).unwrap();
-        let (raster, grid) = scene_inputs(&none, &[], &spec, scene).unwrap();
-        assert_eq!((raster.dim(), grid.dim()), ((1, 3, 64, 64), (1, 0, 8, 8, 2)));
+        let (raster, grid, slot) = scene_inputs(&none, &[], &spec, scene).unwrap();
+        assert_eq!((raster.dim(), grid.dim(), slot.len()), ((1, 3, 64, 64), (1, 0, 8, 8, 2), 0));
     }
 
     #[test]

@@ -47,9 +47,12 @@ pub struct MapSpec {
     pub scene: Option<SceneSpec>,
 }
 
+/// The most pixels a scene raster may have a side ([`SceneSpec`], [`crate::scene`]).
+pub const MAX_SCENE_PX: usize = 2048;
+
 /// How a model's map CNN reads the scene (contract 12): a square raster of the frame at the crops' resolution,
 /// centred on its agents, north up, at least `min_px` pixels a side and larger where the agents' crops reach farther
-/// (up to [`crate::scene::MAX_SCENE_PX`]; beyond, an agent reads no map); each agent reads the network's features at
+/// (up to [`MAX_SCENE_PX`]; beyond, an agent reads no map); each agent reads the network's features at
 /// the centres of its crop's `stride × stride` blocks ([`crate::scene::crop_grid`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct SceneSpec {
@@ -116,7 +119,7 @@ impl MapSpec {
                     scene.stride
                 ));
             }
-            let most = crate::scene::MAX_SCENE_PX;
+            let most = MAX_SCENE_PX;
             if !(1..=most).contains(&scene.min_px) {
                 return bad(format!("map.scene.min_px must be 1..={most} pixels, got {}", scene.min_px));
             }

@@ -33,13 +33,19 @@ def test_the_network_inputs_are_the_engines(name: str) -> None:
 
 @pytest.mark.parametrize("name", ["zara1", "sdd"])
 def test_raster_crops_are_the_engines(name: str) -> None:
+    """The crops (or a scene model's raster and grids, contract 12: ``zara1``) of a raster map."""
     frame, spec = frame_and_spec(name)
     assert spec.map is not None
     bare = dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=False))
     np.testing.assert_array_equal(research.preprocess(frame, bare)["map"], dgan.preprocess(frame, bare)["map"])
     # With the agents' boxes: the engine's are anti-aliased, ours cover the pixel centres inside them.
-    diff = np.abs(research.preprocess(frame, spec)["map"] - dgan.preprocess(frame, spec)["map"])
+    engine, ours = dgan.preprocess(frame, spec), research.preprocess(frame, spec)
+    diff = np.abs(ours["map"] - engine["map"])
     assert (diff > 1.01 / 255).mean() < 0.05
+    assert ("map_grid" in engine) == (spec.map.scene is not None) == ("map_grid" in ours)
+    if spec.map.scene is not None:
+        np.testing.assert_allclose(ours["map_grid"], engine["map_grid"], atol=1e-5)
+        np.testing.assert_array_equal(ours["map_slot"], engine["map_slot"])
 
 
 def test_vector_crops_light_the_engines_pixels() -> None:
@@ -90,3 +96,20 @@ def test_the_pipeline_predicts_what_the_engine_does(name: str, atol: float) -> N
     # The same network in PyTorch and ONNX Runtime (zara1: on crops whose agents' box edges differ).
     np.testing.assert_allclose(trajectories[:, 0], engine.trajectories[:, 0], atol=atol)
     np.testing.assert_allclose(probabilities[:, :modes], engine.probabilities, atol=atol)
+
+
+def test_a_scene_models_groups_are_the_engines() -> None:
+    """A frame of scattered groups (the bundled scene tiled 60 m apart): one raster per group of agents whose crops
+    meet, of one side, each agent's grid in its group's raster (contract 12)."""
+    from benches.bench import tiled
+
+    frame, spec = frame_and_spec("zara1")
+    assert spec.map is not None
+    assert spec.map.scene is not None
+    big = tiled(frame, 32)
+    bare = dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=False))
+    engine, ours = dgan.preprocess(big, bare), research.preprocess(big, bare)
+    assert engine["map"].shape[0] > 1
+    np.testing.assert_array_equal(ours["map"], engine["map"])
+    np.testing.assert_array_equal(ours["map_slot"], engine["map_slot"])
+    np.testing.assert_allclose(ours["map_grid"], engine["map_grid"], atol=1e-5)

@@ -565,9 +565,23 @@ def readers_cases(tmp: Path) -> list[Case]:
         ("as a string", 11, "pedestrian", "invalid type"),
         ("repeated", 11, ["pedestrian", "pedestrian"], "map.classes repeat"),
     ]:
-        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, map={**meta["map"], "classes": classes})
+        crops = {k: v for k, v in meta["map"].items() if k != "scene"}  # the bundled zara1 reads the scene
+        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, map={**crops, "classes": classes})
         path = sealed_with(src, bad, tmp / f"readers_{len(cases)}.onnx")
         cases.append((f"contract map.classes {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
+    # Contract 12's map.scene: not in an older contract, nor with a stride or side out of range, nor with readers.
+    for label, version, scene, extra, msg in [
+        ("in a contract-11 model", 11, {"min_px": 32, "stride": 4}, {}, "map.scene is a contract-12 key"),
+        ("with stride 0", 12, {"min_px": 32, "stride": 0}, {}, "map.scene.stride must be"),
+        ("of 10^6 px", 12, {"min_px": 10**6, "stride": 4}, {}, "map.scene.min_px must be"),
+        ("with readers", 12, {"min_px": 32, "stride": 4}, {"classes": ["pedestrian"]}, "do not apply"),
+        ("without its stride", 12, {"min_px": 32}, {}, "missing field `stride`"),
+    ]:
+        bad = dict(
+            meta, weights_sha256="0" * 64, contract_version=version, map={**meta["map"], "scene": scene, **extra}
+        )
+        path = sealed_with(src, bad, tmp / f"scene_{len(cases)}.onnx")
+        cases.append((f"contract map.scene {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
     return cases
 
 

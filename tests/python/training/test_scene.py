@@ -21,7 +21,7 @@ from training.data.recording import WindowSet
 from training.data.splits import located
 from training.data.windows import build_windows
 from training.export import export_model
-from training.modules.scene import SCENE_STRIDE, read_slots
+from training.modules.scene import SCENE_MIN_PX, SCENE_STRIDE, read_slots
 
 ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "training" / "configs" / "ethucy_zara1.toml"
@@ -52,7 +52,7 @@ def test_each_agent_reads_its_own_frame_s_features() -> None:
 def _scene_windows(cfg: Config) -> tuple[dgan.InputSpec, Windows]:
     spec = input_spec(cfg)
     found = located([WindowSet("ethucy", "val", fold="zara1")], shared_data("eth_ucy"), spec)[0]
-    return spec, build_windows(found.read()[:1], found.info, spec, stride=20, progress=False)
+    return spec, build_windows(found.read()[:1], found.info, spec, stride=20, progress=False, scene_px=64)
 
 
 def test_scene_windows_mirror_with_their_agents_and_train_the_network() -> None:
@@ -103,7 +103,7 @@ def test_scene_settings_that_do_not_go_together_are_clear_errors(tmp_path: Path)
     with pytest.raises(ValueError, match="reads the scene"):
         export_model(build_model(cfg, spec, 20), crops, anchors, class_of, tmp_path / "m.onnx", "scene")
     assert spec.map is not None
-    assert spec.map.scene == dgan.SceneSpec(64, SCENE_STRIDE)
+    assert spec.map.scene == dgan.SceneSpec(SCENE_MIN_PX, SCENE_STRIDE)
 
 
 def test_a_crop_teacher_teaches_a_scene_student_on_the_agents_crops() -> None:
