@@ -182,6 +182,10 @@ pub const INTRA_MIN_AGENTS: usize = 16;
 /// `predict` on two threads took 1.14, 1.07, 0.99 and 0.87 of one thread's time at 16, 24, 32 and 48 agents (bare
 /// network 1.12, 1.03, 0.97, 0.83), where map models gain from 16 (`zara1` 0.71, `sdd` 0.92; docs/speed.md).
 pub const INTRA_MIN_AGENTS_WITHOUT_MAP: usize = 32;
+/// [`INTRA_MIN_AGENTS`] for a scene model (contract 12), whose frame runs as one call: `zara1`'s `predict` on two
+/// intra-op threads took 1.02, 0.99, 0.98, 0.95, 0.88 and 0.85 of one thread's time at 16, 32, 48, 64, 96 and 256
+/// agents (docs/speed.md).
+pub const INTRA_MIN_AGENTS_SCENE: usize = 64;
 
 /// The prediction for every agent of a frame.
 #[derive(Debug, Clone)]
@@ -561,10 +565,10 @@ impl Predictor {
 
     /// The fewest agents of a frame that does not split for its network call to take the intra-op threads.
     fn intra_min_agents(&self) -> usize {
-        if self.contract.input.map.is_some() {
-            INTRA_MIN_AGENTS
-        } else {
-            INTRA_MIN_AGENTS_WITHOUT_MAP
+        match &self.contract.input.map {
+            Some(m) if m.scene.is_some() => INTRA_MIN_AGENTS_SCENE,
+            Some(_) => INTRA_MIN_AGENTS,
+            None => INTRA_MIN_AGENTS_WITHOUT_MAP,
         }
     }
 
