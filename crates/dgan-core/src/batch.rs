@@ -141,6 +141,25 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
     };
     let kept: Vec<usize> =
         (0..inputs.edge_index.nrows()).filter(|&e| inside(inputs.edge_index[[e, 0]]).is_some()).collect();
+    // A scene model's part keeps the rasters (and grids) of its agents' groups, in their order, its agents' slots
+    // pointing into them: whole groups, as the predictor's parts take them.
+    let scene = match (&inputs.map_grid, &inputs.map_slot) {
+        (Some(g), Some(s)) => {
+            let most = g.dim().1.max(1) as i64;
+            let mut groups: Vec<usize> = rows.iter().map(|&r| (s[r] / most) as usize).collect();
+            groups.sort_unstable();
+            groups.dedup();
+            let slots = rows
+                .iter()
+                .map(|&r| {
+                    let k = groups.binary_search(&((s[r] / most) as usize)).unwrap_or(0) as i64;
+                    k * most + s[r] % most
+                })
+                .collect::<Array1<i64>>();
+            Some((groups, slots))
+        }
+        _ => None,
+    };
     let edge_index = remapped(inputs.edge_index.select(Axis(0), &kept))?;
     let neighbors = match &inputs.neighbors {
         Some(nb) => {
@@ -155,14 +174,17 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
         state: inputs.state.select(Axis(0), rows),
         edge_features: inputs.edge_features.select(Axis(0), &kept),
         edge_index,
-        // A scene model's rasters and grids stay whole; the part's agents keep their slots.
-        map: match &inputs.map_grid {
-            Some(_) => inputs.map.clone(),
-            None => inputs.map.as_ref().map(|m| m.select(Axis(0), rows)),
+        map: match (&scene, &inputs.map) {
+            (Some((groups, _)), Some(m)) => Some(m.select(Axis(0), groups)),
+            (None, Some(m)) => Some(m.select(Axis(0), rows)),
+            (_, None) => None,
         },
         map_present: inputs.map_present.as_ref().map(|m| m.select(Axis(0), rows)),
-        map_grid: inputs.map_grid.clone(),
-        map_slot: inputs.map_slot.as_ref().map(|s| s.select(Axis(0), rows)),
+        map_grid: match (&scene, &inputs.map_grid) {
+            (Some((groups, _)), Some(g)) => Some(g.select(Axis(0), groups)),
+            _ => None,
+        },
+        map_slot: scene.map(|(_, slots)| slots),
         neighbors,
     })
 }
@@ -267,11 +289,19 @@ mod tests {
             slot.iter().map(|&s| [flat[[s as usize, 0, 0, 0]], flat[[s as usize, 0, 0, 1]]]).collect();
         assert_eq!(read, vec![[0.0, 20.0], [1.0, 20.0], [0.0, 30.0], [1.0, 30.0], [2.0, 30.0], [0.0, 10.0]]);
         assert_eq!(flat[[2, 0, 0, 1]], 0.0);
-        // A part of a scene frame keeps its rasters and grids whole, and its agents' slots.
+        // A part of a scene frame keeps its groups' rasters and grids, its agents' slots pointing into them.
         let part = take(&scene_inputs(3), &[2]).unwrap();
         assert_eq!(part.map.unwrap().dim(), (1, 3, 4, 4));
         assert_eq!(part.map_grid.unwrap().dim(), (1, 3, 1, 1, 2));
         assert_eq!(part.map_slot.unwrap().to_vec(), vec![2]);
+        let mut groups = scene_inputs(3);
+        groups.map = Some(Array4::from_shape_fn((2, 3, 4, 4), |(g, _, _, _)| g as f32));
+        groups.map_grid = Some(ndarray::Array5::from_shape_fn((2, 2, 1, 1, 2), |(g, _, _, _, _)| g as f32));
+        groups.map_slot = Some(Array1::from(vec![0, 2, 1]));
+        let second = take(&groups, &[1]).unwrap();
+        assert_eq!(second.map.unwrap().iter().copied().fold(0.0, f32::max), 1.0);
+        assert_eq!(second.map_grid.unwrap().dim(), (1, 2, 1, 1, 2));
+        assert_eq!(second.map_slot.unwrap().to_vec(), vec![0]);
         // A frame of two groups (two rasters, slots 0, 2, 1 of M = 2) joined after one of three agents.
         let mut two = scene_inputs(3);
         two.map = Some(Array4::from_elem((2, 3, 4, 4), 7.0));

@@ -182,9 +182,9 @@ pub const INTRA_MIN_AGENTS: usize = 16;
 /// `predict` on two threads took 1.14, 1.07, 0.99 and 0.87 of one thread's time at 16, 24, 32 and 48 agents (bare
 /// network 1.12, 1.03, 0.97, 0.83), where map models gain from 16 (`zara1` 0.71, `sdd` 0.92; docs/speed.md).
 pub const INTRA_MIN_AGENTS_WITHOUT_MAP: usize = 32;
-/// [`INTRA_MIN_AGENTS`] for a scene model (contract 12), whose frame runs as one call: `zara1`'s `predict` on two
+/// [`INTRA_MIN_AGENTS`] for a scene model (contract 12) whose frame does not split: `zara1`'s `predict` on two
 /// intra-op threads took 1.02, 0.99, 0.98, 0.95, 0.88 and 0.85 of one thread's time at 16, 32, 48, 64, 96 and 256
-/// agents (docs/speed.md).
+/// agents in one call (docs/speed.md).
 pub const INTRA_MIN_AGENTS_SCENE: usize = 64;
 
 /// The prediction for every agent of a frame.
@@ -529,8 +529,18 @@ impl Predictor {
         let spec = &self.contract.input;
         // The crops wait until the frame's parts are known (a split frame's are drawn on its parts' threads); a whole
         // frame's are drawn into the memory of the last call's.
-        let (mut pre, later) = preprocess_without_crops(frame, spec, &self.limits, self.threads)?;
+        let (mut pre, mut later) = preprocess_without_crops(frame, spec, &self.limits, self.threads)?;
         times.preprocess = started.elapsed();
+        if let (true, Some(m)) = (later, &spec.map) {
+            if let Some(scene) = m.scene {
+                // A scene model's rasters and grids (contract 12), timed as the crops they stand for: drawn before
+                // the parts are known, since a part takes whole groups of them.
+                let (raster, grid, slot) = crate::scene::scene_inputs(frame, &pre.states, m, scene)?;
+                (pre.inputs.map, pre.inputs.map_grid, pre.inputs.map_slot) = (Some(raster), Some(grid), Some(slot));
+                times.crops = started.elapsed().saturating_sub(times.preprocess);
+                later = false;
+            }
+        }
         if self.lanes.len() >= 2 {
             if let Some(parts) = self.split(&pre) {
                 let out = self.run_split(frame, pre, parts, later, modes)?;
@@ -541,14 +551,8 @@ impl Predictor {
             }
         }
         if let (true, Some(m)) = (later, &spec.map) {
-            if let Some(scene) = m.scene {
-                // A scene model's rasters and grids (contract 12), timed as the crops they stand for.
-                let (raster, grid, slot) = crate::scene::scene_inputs(frame, &pre.states, m, scene)?;
-                (pre.inputs.map, pre.inputs.map_grid, pre.inputs.map_slot) = (Some(raster), Some(grid), Some(slot));
-            } else {
-                let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
-                pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
-            }
+            let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
+            pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
             times.crops = started.elapsed().saturating_sub(times.preprocess);
         }
         // A small frame on a lane: waking intra-op workers costs more than they give there.
@@ -582,12 +586,22 @@ impl Predictor {
     /// call on `threads` intra-op threads.
     fn split(&self, pre: &Preprocessed) -> Option<Vec<Vec<usize>>> {
         let (n, lanes) = (pre.poses.len(), self.lanes.len());
-        // A scene model's map CNN runs once over the frame's raster: each part would run it again.
-        let scene = self.contract.input.map.as_ref().is_some_and(|m| m.scene.is_some());
-        if lanes < 2 || n < SPLIT_MIN_AGENTS || scene {
+        if lanes < 2 || n < SPLIT_MIN_AGENTS {
             return None;
         }
-        let parts = balanced_parts(n, &pre.edges, lanes);
+        // A scene model's part takes whole groups of its rasters (each group's agents joined as if by edges).
+        let mut edges = pre.edges.clone();
+        if let (Some(grid), Some(slot)) = (&pre.inputs.map_grid, &pre.inputs.map_slot) {
+            let most = grid.dim().1.max(1) as i64;
+            let mut first: std::collections::HashMap<i64, u32> = std::collections::HashMap::new();
+            for (i, s) in slot.iter().enumerate() {
+                let f = *first.entry(s / most).or_insert(i as u32);
+                if f != i as u32 {
+                    edges.push([f, i as u32]);
+                }
+            }
+        }
+        let parts = balanced_parts(n, &edges, lanes);
         let largest = parts.iter().map(Vec::len).max().unwrap_or(n);
         (largest as f64 <= SPLIT_MAX_LOAD * n as f64 / lanes as f64).then_some(parts)
     }

@@ -150,3 +150,20 @@ def test_a_scene_model_predicts_a_batch_as_each_frame_alone(tmp_path: Path) -> N
         one = predictor.predict(f)
         np.testing.assert_allclose(got.trajectories, one.trajectories, atol=1e-4)
         np.testing.assert_allclose(got.probabilities, one.probabilities, atol=1e-5)
+
+
+def test_a_scene_frame_split_across_lanes_equals_one_call() -> None:
+    """On two threads a scene frame of scattered groups runs as parts that take whole groups of rasters (with their
+    agents' graph components): each agent gets exactly what one call on one thread gives it."""
+    from benches.bench import tiled
+
+    one, two = dgan.Predictor("zara1", threads=1), dgan.Predictor("zara1", threads=2)
+    assert one.spec.map is not None
+    assert one.spec.map.scene is not None
+    frame = tiled(dgan.demo.scene_for(one.spec).frame, 128)
+    a, b = one.predict(frame), two.predict(frame)
+    timings = two.last_timings
+    assert timings is not None
+    assert timings["parts"] > 0.0  # it did split
+    np.testing.assert_allclose(b.trajectories, a.trajectories, atol=1e-5)
+    np.testing.assert_allclose(b.probabilities, a.probabilities, atol=1e-6)
