@@ -27,10 +27,10 @@ def _class_names(value: Any, key: str) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class SceneSpec:
-    """How a scene model's map CNN reads the map (contract 12): once per frame, over a square north-up raster of the
-    scene at the crops' resolution (:func:`scene_raster`), at least ``min_px`` pixels a side and larger where the
-    agents' crops reach farther; each agent reads the network's features at the centres of its crop's
-    ``stride × stride`` blocks (:func:`crop_grid`)."""
+    """How a scene model's map CNN reads the map (contract 12): once per group of agents whose crops meet, over a
+    square north-up raster of the scene at the crops' resolution (:func:`scene_raster`), at least ``min_px`` pixels a
+    side and larger where a group's crops reach farther; each agent reads the network's features at the centres of
+    its crop's ``stride × stride`` blocks (:func:`crop_grid`)."""
 
     min_px: int = 128
     stride: int = 4
@@ -59,8 +59,8 @@ class MapSpec:
     #: Contract 11: the classes whose agents read the map, when the network reads it for them alone (e.g.
     #: ``("cyclist", "pedestrian")``); the other agents' crops are left blank instead of drawn. Empty: every agent's.
     classes: Sequence[str] = ()
-    #: Contract 12: the map CNN reads one raster of the scene per frame instead of a crop per agent (the crop's
-    #: geometry then says where each agent reads it); None, a crop per agent.
+    #: Contract 12: the map CNN reads rasters of the scene, one per group of agents, instead of a crop per agent (the
+    #: crop's geometry then says where each agent reads them); None, a crop per agent.
     scene: SceneSpec | None = None
 
     def __post_init__(self) -> None:
@@ -201,8 +201,8 @@ def preprocess(frame: Frame, spec: InputSpec, threads: int | None = None) -> dic
     Returns ``trajectory (N, T_obs, 2)``, ``trajectory_mask (N, T_obs)``, ``state (N, 7 + C)``,
     ``edge_index (E, 2)``, ``edge_features (E, 6)`` (and for the padded layout ``neighbor_index (N, D)``,
     ``neighbor_mask (N, D)``, ``neighbor_features (N, D, 6)``), ``map (N, 3, H, W)`` for map models,
-    ``map_present (N,)`` for models whose map is optional (a scene model's ``map`` is the frame's raster
-    ``(1, 3, S, S)``, with ``map_grid (1, N, gh, gw, 2)`` and ``map_slot (N,)``), the kinematic
+    ``map_present (N,)`` for models whose map is optional (a scene model's ``map`` is the frame's rasters
+    ``(G, 3, S, S)``, with ``map_grid (G, M, gh, gw, 2)`` and ``map_slot (N,)``), the kinematic
     ``prior (N, T_f, 2)`` in each agent's frame, and ``origin (N, 2)``, ``heading (N,)`` (each agent's frame),
     ``speed (N,)``, ``radius (N,)`` and undirected ``edges``. The map crops are drawn on at most ``threads``
     threads (default: every core; a ``Predictor`` draws them on its own ``threads``); the tensors are the same

@@ -17,7 +17,7 @@ use std::collections::BTreeMap;
 /// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`); version 9 a temperature that grows
 /// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`);
 /// version 10 histories denoised before preprocessing (`denoise_gate_m`); version 11 the classes that read the map
-/// (`map.classes`); version 12 one raster of the scene per frame for the map CNN (`map.scene`: `map_grid`, `map_slot`).
+/// (`map.classes`); version 12 rasters of the scene for the map CNN (`map.scene`: `map_grid`, `map_slot`).
 pub const CONTRACT_VERSION: u32 = 12;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
@@ -44,10 +44,10 @@ pub const INPUT_EDGE_INDEX: &str = "edge_index";
 /// Input: per-edge geometry `(E, 6)` f32, the sender seen from the receiver's frame.
 pub const INPUT_EDGE_FEATURES: &str = "edge_features";
 /// Input (map models only): agent-centric RGB crops `(N, 3, H, W)` f32 in [0, 1]; of a scene model (contract 12),
-/// each frame's scene raster `(F, 3, S, S)`.
+/// the call's scene rasters `(F, 3, S, S)`.
 pub const INPUT_MAP: &str = "map";
-/// Input (scene models, contract 12): `(F, M, gh, gw, 2)` f32, where the agents of each frame read its raster
-/// (`grid_sample` coordinates of each crop block's centre), padded to the frame with the most agents, M.
+/// Input (scene models, contract 12): `(F, M, gh, gw, 2)` f32, where the agents of each raster read it
+/// (`grid_sample` coordinates of each crop block's centre), padded to the raster with the most agents, M.
 pub const INPUT_MAP_GRID: &str = "map_grid";
 /// Input (scene models, contract 12): `(N,)` i64, each agent's row of `map_grid` flattened to `(F · M, ..)`.
 pub const INPUT_MAP_SLOT: &str = "map_slot";
@@ -445,7 +445,7 @@ pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
             None => vec![Dim::Agents, Dim::Fixed(3), Dim::Fixed(m.height_px), Dim::Fixed(m.width_px)],
             Some(_) => {
                 let side = Dim::Dynamic("the scene raster's side");
-                vec![Dim::Dynamic("the frames F"), Dim::Fixed(3), side, side]
+                vec![Dim::Dynamic("the rasters F"), Dim::Fixed(3), side, side]
             }
         };
         v.push(TensorSpec { name: INPUT_MAP, dtype: DType::F32, dims });
@@ -453,7 +453,7 @@ pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
             v.push(TensorSpec { name: INPUT_MAP_PRESENT, dtype: DType::F32, dims: vec![Dim::Agents] });
         }
         if let Some((gh, gw)) = m.scene_grid() {
-            let (frames, most) = (Dim::Dynamic("the frames F"), Dim::Dynamic("a frame's most agents M"));
+            let (frames, most) = (Dim::Dynamic("the rasters F"), Dim::Dynamic("a raster's most agents M"));
             let dims = vec![frames, most, Dim::Fixed(gh), Dim::Fixed(gw), Dim::Fixed(2)];
             v.push(TensorSpec { name: INPUT_MAP_GRID, dtype: DType::F32, dims });
             v.push(TensorSpec { name: INPUT_MAP_SLOT, dtype: DType::I64, dims: vec![Dim::Agents] });

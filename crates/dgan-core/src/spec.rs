@@ -40,9 +40,9 @@ pub struct MapSpec {
     /// default): every agent's crop is drawn.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub classes: Vec<AgentClass>,
-    /// Contract 12: the network's map CNN reads one raster of the scene per frame instead of a crop per agent
-    /// ([`crate::scene`]); the crop's size, resolution and agent pixel then say where each agent reads it. None
-    /// (the default): a crop per agent.
+    /// Contract 12: the network's map CNN reads rasters of the scene (one per group of agents) instead of a crop per
+    /// agent ([`crate::scene`]); the crop's size, resolution and agent pixel then say where each agent reads them.
+    /// None (the default): a crop per agent.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scene: Option<SceneSpec>,
 }
@@ -50,10 +50,10 @@ pub struct MapSpec {
 /// The most pixels a scene raster may have a side ([`SceneSpec`], [`crate::scene`]).
 pub const MAX_SCENE_PX: usize = 2048;
 
-/// How a model's map CNN reads the scene (contract 12): a square raster of the frame at the crops' resolution,
-/// centred on its agents, north up, at least `min_px` pixels a side and larger where the agents' crops reach farther
-/// (up to [`MAX_SCENE_PX`]; beyond, an agent reads no map); each agent reads the network's features at
-/// the centres of its crop's `stride × stride` blocks ([`crate::scene::crop_grid`]).
+/// How a model's map CNN reads the scene (contract 12): square rasters at the crops' resolution, north up, one per
+/// group of agents whose crops meet ([`crate::scene::scene_inputs`]), at least `min_px` pixels a side and larger
+/// where a group's crops reach farther (up to [`MAX_SCENE_PX`]; beyond, an agent reads no map); each agent reads the
+/// network's features at the centres of its crop's `stride × stride` blocks ([`crate::scene::crop_grid`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct SceneSpec {
     /// The raster's least side, pixels.
