@@ -20,6 +20,7 @@ from dgan.contract import CACHE_KEY
 from training.data.arrays import Windows
 from training.data.recording import Located
 from training.data.windows import build_windows
+from training.modules.scene import SCENE_TRAIN_PX
 
 
 def cache_path(found: Located, spec: dgan.InputSpec, cache_dir: Path, scene_px: int = 0) -> Path:
@@ -60,8 +61,6 @@ def cached(
     """The windows of each set of ``found``, in order: read from ``cache_dir`` when cached, else built by
     :func:`~training.data.windows.build_windows` from the set's recordings and saved (a scene model's with rasters of
     ``scene_px``, ``data.map_scene_px``)."""
-    from training.modules.scene import SCENE_TRAIN_PX
-
     scene_px = scene_px or SCENE_TRAIN_PX
     out = []
     for f in found:

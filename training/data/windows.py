@@ -20,6 +20,7 @@ import dgan
 from training.data.arrays import Windows
 from training.data.augment import held_still, tracker_noise
 from training.data.recording import DatasetInfo, Recording
+from training.modules.scene import SCENE_TRAIN_PX
 
 Arr = npt.NDArray[Any]
 
@@ -119,7 +120,7 @@ def build_windows(
     progress: bool = True,
     noise: tuple[float, float] = (0.0, 0.0),
     hold: float = 0.0,
-    scene_px: int = 128,  # training.modules.scene.SCENE_TRAIN_PX
+    scene_px: int = SCENE_TRAIN_PX,
 ) -> Windows:
     """Preprocesses every window of ``recs`` through the engine; ``noise = (sigma_m, drop)`` first corrupts the
     observed histories as a tracker would (:func:`training.data.augment.tracker_noise`, seeded by the recording's

@@ -192,33 +192,7 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
 /// The attention graph's components as parts for `parts` concurrent calls: each component whole, the largest first
 /// to the part with the fewest agents; each part's rows ascending. Parts may be empty.
 pub fn balanced_parts(n: usize, edges: &[[u32; 2]], parts: usize) -> Vec<Vec<usize>> {
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn root(parent: &mut [usize], mut x: usize) -> usize {
-        while parent[x] != x {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        x
-    }
-    for &[a, b] in edges {
-        let (a, b) = (a as usize, b as usize);
-        if a < n && b < n {
-            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-            if ra != rb {
-                parent[ra.max(rb)] = ra.min(rb);
-            }
-        }
-    }
-    let mut components: Vec<Vec<usize>> = vec![];
-    let mut slot = vec![usize::MAX; n];
-    for i in 0..n {
-        let r = root(&mut parent, i);
-        if slot[r] == usize::MAX {
-            slot[r] = components.len();
-            components.push(vec![]);
-        }
-        components[slot[r]].push(i);
-    }
+    let mut components = crate::graph::components(n, edges.iter().map(|&[a, b]| (a as usize, b as usize)));
     // Largest first; ties in order of their first agent (the sort is stable), so the parts are deterministic.
     components.sort_by_key(|c| std::cmp::Reverse(c.len()));
     let mut out = vec![vec![]; parts.max(1)];

@@ -130,9 +130,46 @@ pub fn attention_zone_edges_brute_force(centres: &[[f64; 2]], radii: &[f64]) -> 
     Ok(out)
 }
 
+/// The connected components of `n` nodes joined by `pairs` (pairs naming a node `>= n` are ignored): each
+/// component's nodes ascending, the components in the order of their lowest node.
+pub fn components(n: usize, pairs: impl IntoIterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    for (a, b) in pairs {
+        if a < n && b < n {
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            parent[ra.max(rb)] = ra.min(rb);
+        }
+    }
+    let mut index = vec![usize::MAX; n];
+    let mut out: Vec<Vec<usize>> = vec![];
+    for i in 0..n {
+        let r = root(&mut parent, i);
+        if index[r] == usize::MAX {
+            index[r] = out.len();
+            out.push(vec![]);
+        }
+        out[index[r]].push(i);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn components_follow_every_chain_and_ignore_pairs_out_of_range() {
+        let got = components(6, [(4, 3), (0, 2), (2, 5), (9, 1)]);
+        assert_eq!(got, vec![vec![0, 2, 5], vec![1], vec![3, 4]]);
+        assert!(components(0, []).is_empty());
+    }
 
     #[test]
     fn touching_circles_are_joined() {

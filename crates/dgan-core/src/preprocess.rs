@@ -6,7 +6,7 @@ use crate::frame::Frame;
 use crate::graph::{attention_radius, attention_zone_edges_on};
 use crate::limits::share_jobs;
 use crate::raster::{rasterize_on, threads_in_flight};
-use crate::spec::{GraphLayout, InputSpec, EDGE_FEATURES, STATE_FEATURES};
+use crate::spec::{GraphLayout, InputSpec, MapSpec, EDGE_FEATURES, STATE_FEATURES};
 use crate::state::{traffic_states_with, TrafficState};
 use crate::transform::{wrap_angle, AgentPose};
 use ndarray::{Array1, Array2, Array3, Array4, Array5};
@@ -463,20 +463,12 @@ fn build(
     let (edge_index, edge_features) = edge_rows(graph, &states, &poses, shared)?;
 
     let prior = prior_rows(spec, &trajectory, &trajectory_mask, &state, shared)?;
-    let (mut map_grid, mut map_slot) = (None, None);
     let (map, map_present) = match (&spec.map, frame.map()) {
         (None, _) => (None, None),
+        // A scene model's rasters are drawn below, once the inputs hold the states (NetworkInputs::draw_scene).
         (Some(m), present) if m.scene.is_some() && (present.is_some() || m.optional || n == 0) => {
             let flag = if present.is_some() { 1.0 } else { 0.0 };
-            let drawn = match (crops, m.scene) {
-                (true, Some(scene)) => Some(crate::scene::scene_inputs(frame, &states, m, scene)?),
-                _ => None,
-            };
-            let raster = drawn.map(|(raster, grid, slot)| {
-                (map_grid, map_slot) = (Some(grid), Some(slot));
-                raster
-            });
-            (raster, m.optional.then(|| Array1::from_elem(n, flag)))
+            (None, m.optional.then(|| Array1::from_elem(n, flag)))
         }
         (Some(m), Some(_)) => {
             let drawn = crops.then(|| rasterize_on(frame, &states, m, threads)).transpose()?;
@@ -498,8 +490,7 @@ fn build(
         GraphLayout::EdgeList => None,
         GraphLayout::Padded => Some(Neighbors::from_edges_on(n, &edge_index, &edge_features, shared)?),
     };
-    let later = spec.map.is_some() && map.is_none();
-    let pre = Preprocessed {
+    let mut pre = Preprocessed {
         inputs: NetworkInputs {
             trajectory,
             trajectory_mask,
@@ -508,8 +499,8 @@ fn build(
             edge_features,
             map,
             map_present,
-            map_grid,
-            map_slot,
+            map_grid: None,
+            map_slot: None,
             neighbors,
         },
         prior,
@@ -518,7 +509,23 @@ fn build(
         radii,
         edges,
     };
+    if let (true, Some(m)) = (crops, &spec.map) {
+        pre.inputs.draw_scene(frame, &pre.states, m)?;
+    }
+    let later = spec.map.is_some() && pre.inputs.map.is_none();
     Ok((pre, later))
+}
+
+impl NetworkInputs {
+    /// A scene model's rasters, grids and slots (contract 12, [`crate::scene::scene_inputs`]) drawn into these inputs;
+    /// nothing for a crop model (`crop.scene` None).
+    pub fn draw_scene(&mut self, frame: &Frame, states: &[TrafficState], crop: &MapSpec) -> Result<()> {
+        if let Some(scene) = crop.scene {
+            let (raster, grid, slot) = crate::scene::scene_inputs(frame, states, crop, scene)?;
+            (self.map, self.map_grid, self.map_slot) = (Some(raster), Some(grid), Some(slot));
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]

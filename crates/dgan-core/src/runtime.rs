@@ -532,11 +532,10 @@ impl Predictor {
         let (mut pre, mut later) = preprocess_without_crops(frame, spec, &self.limits, self.threads)?;
         times.preprocess = started.elapsed();
         if let (true, Some(m)) = (later, &spec.map) {
-            if let Some(scene) = m.scene {
+            if m.scene.is_some() {
                 // A scene model's rasters and grids (contract 12), timed as the crops they stand for: drawn before
                 // the parts are known, since a part takes whole groups of them.
-                let (raster, grid, slot) = crate::scene::scene_inputs(frame, &pre.states, m, scene)?;
-                (pre.inputs.map, pre.inputs.map_grid, pre.inputs.map_slot) = (Some(raster), Some(grid), Some(slot));
+                pre.inputs.draw_scene(frame, &pre.states, m)?;
                 times.crops = started.elapsed().saturating_sub(times.preprocess);
                 later = false;
             }

@@ -161,40 +161,18 @@ fn crop_box(crop: &MapSpec, pose: &AgentPose) -> [f64; 4] {
 /// The groups of boxes that intersect (touching counts), through any chain of them: each group's indices ascending,
 /// the groups in the order of their lowest index.
 pub fn groups_of(boxes: &[[f64; 4]]) -> Vec<Vec<usize>> {
-    let n = boxes.len();
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn root(parent: &mut [usize], mut x: usize) -> usize {
-        while parent[x] != x {
-            parent[x] = parent[parent[x]];
-            x = parent[x];
-        }
-        x
-    }
     // Sweep along x: each box meets the boxes that start before it ends.
-    let mut order: Vec<usize> = (0..n).collect();
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
     order.sort_by(|&a, &b| boxes[a][0].total_cmp(&boxes[b][0]));
-    for (k, &a) in order.iter().enumerate() {
-        for &b in &order[k + 1..] {
-            if boxes[b][0] > boxes[a][2] {
-                break;
-            }
-            if boxes[b][1] <= boxes[a][3] && boxes[a][1] <= boxes[b][3] {
-                let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-                parent[ra.max(rb)] = ra.min(rb);
-            }
-        }
-    }
-    let mut index = vec![usize::MAX; n];
-    let mut groups: Vec<Vec<usize>> = vec![];
-    for i in 0..n {
-        let r = root(&mut parent, i);
-        if index[r] == usize::MAX {
-            index[r] = groups.len();
-            groups.push(vec![]);
-        }
-        groups[index[r]].push(i);
-    }
-    groups
+    let order = &order;
+    let meet = order.iter().enumerate().flat_map(move |(k, &a)| {
+        order[k + 1..]
+            .iter()
+            .take_while(move |&&b| boxes[b][0] <= boxes[a][2])
+            .filter(move |&&b| boxes[b][1] <= boxes[a][3] && boxes[a][1] <= boxes[b][3])
+            .map(move |&b| (a, b))
+    });
+    crate::graph::components(boxes.len(), meet)
 }
 
 /// The scene raster's own geometry: `crop`'s resolution and drawing, `size_px` square, centred.
