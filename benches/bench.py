@@ -53,6 +53,7 @@ sys.path.insert(0, str(ROOT))
 import dgan  # noqa: E402
 from benches import research  # noqa: E402
 from benches.flops import graph_flops, sgemm_gflops  # noqa: E402
+from dgan.contract import KEPT_INPUTS, KEPT_OUTPUT  # noqa: E402
 from dgan.demo import scene_for  # noqa: E402
 
 SPACING_M = 60.0
@@ -132,7 +133,9 @@ def torch_pipeline(name: str, device: str = "cpu") -> Callable[[dict[str, np.nda
 
     def run(x: dict[str, np.ndarray]) -> Any:
         with torch.no_grad():
-            cl, al, off = model(*[torch.from_numpy(x[k]).to(device) for k in INPUTS if k in x])
+            named = {k: torch.from_numpy(x[k]).to(device) for k in (*INPUTS, *KEPT_INPUTS) if k in x}
+            out = model(**named) if "map_patches" in named else model(*named.values())
+            cl, al, off = out[0], out[1], out[2]
             prior = torch.from_numpy(x["prior"]).to(device)
             t = cal.anchor_temperatures(prior, spec.dt_s)
             modes, p = decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature)
@@ -154,6 +157,29 @@ def bare_session(path: Path, options: dict[str, Any] | None = None) -> Any:
     return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
 
 
+def warm_inputs(session: Any, x: dict[str, np.ndarray], spec: dgan.InputSpec) -> dict[str, np.ndarray]:
+    """A kept-features model's network inputs (contract 13) once its tiles are kept, from ``dgan.preprocess``'s
+    ``x`` (every tile to compute): no tile, each agent's reading of the tiles' features (``dgan.read_kept``), as
+    ``predict`` feeds its network on every call after the map's first."""
+    m = spec.map
+    assert m is not None
+    sc = m.scene
+    assert sc is not None
+    grid = (-(-m.height_px // sc.stride), -(-m.width_px // sc.stride))
+    names = [i.name for i in session.get_inputs()]
+    blank = np.zeros((len(x["trajectory"]), sc.channels, *grid), np.float32)
+    (rows,) = session.run([KEPT_OUTPUT], {k: blank if k == "map_patches" else x[k] for k in names})
+    patches = dgan.read_kept(np.concatenate([x["map_rows"], rows]), x["map_index"], x["map_weight"], grid)
+    return {k: x[k] for k in names if k != "map_patches"} | {"map": x["map"][:0], "map_patches": patches}
+
+
+def call_inputs(predictor: dgan.Predictor, frame: dgan.Frame) -> dict[str, np.ndarray]:
+    """``dgan.preprocess``'s tensors of ``frame`` as ``predict`` feeds them to the network: of a kept-features model
+    (contract 13) once the map's tiles are kept (:func:`warm_inputs`)."""
+    x = dgan.preprocess(frame, predictor.spec)
+    return x | warm_inputs(bare_session(predictor.path), x, predictor.spec) if "map_rows" in x else x
+
+
 def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any]]:
     predictor = dgan.Predictor(name)
     spec = predictor.spec
@@ -166,8 +192,10 @@ def bench_model(name: str, agents: list[int], repeat: int) -> list[dict[str, Any
     for n in agents:
         f = tiled(frame, n)
         x = dgan.preprocess(f, spec)
-        feed = {k: x[k] for k in names}
         row: dict[str, Any] = {"model": name, "N": n, "E": len(x["edge_index"])}
+        if "map_rows" in x:  # kept features (contract 13): every call after the first reads the map's tiles
+            x = x | warm_inputs(session, x, spec)
+        feed = {k: x[k] for k in names}
         fns: dict[str, Callable[[], Any]] = {
             "predict": partial(predictor.predict, f),
             "preprocess": partial(dgan.preprocess, f, spec, threads=1),
@@ -420,7 +448,7 @@ def flops_table(models: list[str], agents: list[int]) -> None:
     for name in models:
         p = dgan.Predictor(name, sessions=1)
         for n in agents:
-            f = graph_flops(p.path, dgan.preprocess(tiled(scene_for(p.spec).frame, n), p.spec))
+            f = graph_flops(p.path, call_inputs(p, tiled(scene_for(p.spec).frame, n)))
             print(f"| {name} | {n} | {f.total / n / 1e6:.2f} ({f.dense / n / 1e6:.2f} + {f.other / n / 1e6:.2f}) |")
 
 

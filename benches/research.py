@@ -403,12 +403,8 @@ def scene_inputs(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> tuple[Arr
     if m.draw_agents and frame.map is not None:
         draw_boxes(raster, states, scene, owners=(centre, north))
     # Each crop block's centre (rows from the top, columns centred on the agent's) in its group's raster.
-    k = m.scene.stride
-    gh, gw = -(-m.height_px // k), -(-m.width_px // k)
-    rows = np.arange(gh) * k + k / 2
-    cols = m.agent_col + 0.5 + (np.arange(gw) - (gw - 1) / 2) * k
-    local = np.stack(np.meshgrid((m.agent_row + 0.5 - rows) * res, (m.agent_col + 0.5 - cols) * res, indexing="ij"), -1)
-    w = to_world(np.broadcast_to(local.reshape(-1, 2), (n, gh * gw, 2)), pos, heading) - centre[group][:, None]
+    gh, gw = -(-m.height_px // m.scene.stride), -(-m.width_px // m.scene.stride)
+    w = block_centres(states, m) - centre[group][:, None]
     u, v = side // 2 + 0.5 + w[..., 0] / res, side // 2 + 0.5 - w[..., 1] / res
     cells = np.stack([2 * u / side - 1, 2 * v / side - 1], axis=-1).reshape(n, gh, gw, 2)
     place = np.array([np.sum(group[:i] == group[i]) for i in range(n)], dtype=np.int64)
@@ -417,6 +413,62 @@ def scene_inputs(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> tuple[Arr
     grid[group, place] = cells
     out: Arr = (raster.astype(np.float32) / 255.0).transpose(0, 3, 1, 2)
     return np.ascontiguousarray(out), grid, (group * most + place).astype(np.int64)
+
+
+def block_centres(states: dict[str, Arr], m: Any) -> Arr:
+    """``(N, B, 2)`` the world positions of the centres of each agent's crop's ``stride × stride`` blocks, row-major
+    (rows from the crop's top, columns laid out symmetrically about the agent's)."""
+    pos, heading, res, k = states["position"], states["heading"], m.resolution_m, m.scene.stride
+    gh, gw = -(-m.height_px // k), -(-m.width_px // k)
+    rows = np.arange(gh) * k + k / 2
+    cols = m.agent_col + 0.5 + (np.arange(gw) - (gw - 1) / 2) * k
+    local = np.stack(np.meshgrid((m.agent_row + 0.5 - rows) * res, (m.agent_col + 0.5 - cols) * res, indexing="ij"), -1)
+    return to_world(np.broadcast_to(local.reshape(-1, 2), (len(pos), gh * gw, 2)), pos, heading)
+
+
+def kept_inputs(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> dict[str, Arr]:
+    """A kept-features model's inputs (contract 13) with every tile computed: the rasters ``(T, 3, P, P)`` of the
+    tiles the agents read (north up on the world's grid of pixels, global pixel ``(k, l)`` at ``(k r, -l r)``, each
+    with its halo), no kept rows, and each agent's four rows and bilinear weights per block centre."""
+    sc, res = m.scene, m.resolution_m
+    t, side, n = sc.tile_px // sc.stride, sc.tile_px + 2 * sc.halo_px, len(states["position"])
+    w = block_centres(states, m)
+    u, v = (w[..., 0] / res + 0.5) / sc.stride - 0.5, (-w[..., 1] / res + 0.5) / sc.stride - 0.5
+    u0, v0 = np.floor(u), np.floor(v)
+    du, dv = u - u0, v - v0
+    cu = (u0[..., None] + [0, 1, 0, 1]).astype(np.int64).reshape(n, -1)
+    cv = (v0[..., None] + [0, 0, 1, 1]).astype(np.int64).reshape(n, -1)
+    weight = np.stack([(1 - du) * (1 - dv), du * (1 - dv), (1 - du) * dv, du * dv], -1).reshape(n, -1)
+    rows = np.zeros((0, sc.channels), np.float32)
+    if frame.map is None:  # one blank block, read with zero weights
+        out = {"map": np.zeros((0, 3, side, side), np.float32), "map_rows": np.zeros((t * t, sc.channels), np.float32)}
+        return out | {"map_index": np.zeros_like(cu), "map_weight": np.zeros_like(weight, dtype=np.float32)}
+    tiles = np.stack([cu // t, cv // t], -1).reshape(-1, 2)
+    unique, first, block = np.unique(tiles, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")  # tiles in order of first use
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    index = rank[block.reshape(-1)].reshape(n, -1) * t * t + (cv % t) * t + cu % t
+    centre = (unique[order] * sc.tile_px - sc.halo_px + side // 2) * res * np.array([1.0, -1.0])
+    north = np.full(len(centre), np.pi / 2)
+    tile = dataclasses.replace(m, height_px=side, width_px=side, agent_row=side // 2, agent_col=side // 2)
+    if isinstance(frame.map, dgan.RasterMap):
+        raster = raster_crops(frame.map, pixel_world({"position": centre, "heading": north}, tile))
+    else:
+        els = Elements(frame.map.elements())
+        raster = np.stack([vector_crop(els, c, np.pi / 2, tile) for c in centre])
+    maps = np.ascontiguousarray((raster.astype(np.float32) / 255.0).transpose(0, 3, 1, 2))
+    return {"map": maps, "map_rows": rows, "map_index": index, "map_weight": weight.astype(np.float32)}
+
+
+def read_rows(table: Arr, x: dict[str, Arr], m: Any) -> Arr:
+    """``(N, C, gh, gw)``: each agent's bilinear reading of a kept-features model's rows (contract 13), the weighted
+    sum of the four rows ``map_index`` names per block centre (weights ``map_weight``)."""
+    n, k = x["map_index"].shape
+    gh, gw = -(-m.height_px // m.scene.stride), -(-m.width_px // m.scene.stride)
+    picked = table[x["map_index"]] * x["map_weight"][..., None]  # (N, B · 4, C)
+    out: Arr = picked.reshape(n, k // 4, 4, -1).sum(axis=2).transpose(0, 2, 1).reshape(n, -1, gh, gw)
+    return np.ascontiguousarray(out, dtype=np.float32)
 
 
 def preprocess(frame: dgan.Frame, spec: dgan.InputSpec) -> dict[str, Arr]:
@@ -451,7 +503,11 @@ def preprocess(frame: dgan.Frame, spec: dgan.InputSpec) -> dict[str, Arr]:
         "heading": heading,
     }
     x["prior"] = prior_rollout(x["trajectory"].astype(np.float64), mask, x["state"], spec).astype(np.float32)
-    if spec.map is not None and spec.map.scene is not None:
+    if spec.map is not None and spec.map.scene is not None and spec.map.scene.tile_px:
+        x |= kept_inputs(frame, s, spec.map)
+        if spec.map.optional:
+            x["map_present"] = np.full(n, float(frame.map is not None), dtype=np.float32)
+    elif spec.map is not None and spec.map.scene is not None:
         x["map"], x["map_grid"], x["map_slot"] = scene_inputs(frame, s, spec.map)
         if spec.map.optional:
             x["map_present"] = np.full(n, float(frame.map is not None), dtype=np.float32)
@@ -500,6 +556,7 @@ def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
         import torch
 
         from training.export import load_checkpoint
+        from training.modules.dgan import DGAN
     except ImportError:
         return None
     torch.set_num_threads(1)
@@ -508,13 +565,20 @@ def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
     model = load_checkpoint(ROOT / "training" / "checkpoints" / f"{name}.pt")[0]
     inputs = [k for k in contract.EDGE_LIST_INPUTS if k != "map" or spec.map is not None]
     inputs = [k for k in inputs if k != "map_present" or (spec.map is not None and spec.map.optional)]
-    scene = spec.map is not None and spec.map.scene is not None
-    inputs = [k for k in inputs if k not in contract.SCENE_GRID_INPUTS or scene]
+    scene = spec.map.scene if spec.map is not None else None
+    inputs = [k for k in inputs if k not in contract.SCENE_GRID_INPUTS or (scene and not scene.tile_px)]
+    kept = scene is not None and scene.tile_px > 0
+    inputs += list(contract.KEPT_INPUTS) if kept else []
 
     def run(frame: dgan.Frame) -> tuple[Arr, Arr]:
         x = preprocess(frame, spec)
         with torch.no_grad():
-            out = model(*[torch.from_numpy(x[k]) for k in inputs])
-        return decode(tuple(o.numpy() for o in out), x, contract_)
+            if kept:  # the tiles' features, then each agent's reading of them (contract 13)
+                assert isinstance(model, DGAN)
+                rows = model.tile_rows(torch.from_numpy(x["map"])).numpy()
+                x["map_patches"] = read_rows(np.concatenate([x["map_rows"], rows]), x, spec.map)
+                x["map"] = x["map"][:0]
+            out = model(**{k: torch.from_numpy(x[k]) for k in inputs})
+        return decode((out[0].numpy(), out[1].numpy(), out[2].numpy()), x, contract_)
 
     return run

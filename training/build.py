@@ -7,7 +7,7 @@ import dgan
 from training.config import Config
 from training.data.datasets import DATASETS
 from training.modules.dgan import DGAN
-from training.modules.scene import SCENE_MIN_PX, SCENE_STRIDE
+from training.modules.scene import SCENE_MIN_PX, SCENE_STRIDE, scene_halo_px
 
 
 def input_spec(cfg: Config) -> dgan.InputSpec:
@@ -27,7 +27,7 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
             optional=cfg.train.map_dropout > 0,
             render=d.map_render,
             classes=tuple(x.strip() for x in cfg.model.map_classes.split(",") if x.strip()),
-            scene=dgan.SceneSpec(SCENE_MIN_PX, SCENE_STRIDE) if cfg.model.map_mode == "scene" else None,
+            scene=scene_spec(cfg) if cfg.model.map_mode == "scene" else None,
         )
     return dgan.InputSpec(
         dt_s=info.dt_s,
@@ -42,6 +42,16 @@ def input_spec(cfg: Config) -> dgan.InputSpec:
         heading=d.heading,
         denoise_gate_m=d.denoise_gate_m,
     )
+
+
+def scene_spec(cfg: Config) -> dgan.SceneSpec:
+    """A scene model's :class:`dgan.SceneSpec`: its features kept with the map in tiles of ``data.map_scene_tile_px``
+    (contract 13; a halo of the scene CNN's reach, its channels) or, with 0, rasters per call (contract 12)."""
+    tile = cfg.data.map_scene_tile_px
+    if not tile:
+        return dgan.SceneSpec(SCENE_MIN_PX, SCENE_STRIDE)
+    halo = scene_halo_px(cfg.model.map_res_blocks)
+    return dgan.SceneSpec(SCENE_MIN_PX, SCENE_STRIDE, tile, halo, 2 * cfg.model.map_channels)
 
 
 def class_priors(declared: str) -> dict[str, dgan.ClassPrior]:
@@ -82,7 +92,11 @@ def build_model(cfg: Config, spec: dgan.InputSpec, num_anchors: int) -> DGAN:
     hw = (spec.map.height_px, spec.map.width_px) if spec.map else None
     optional = spec.map is not None and spec.map.optional
     gate = map_gate(cfg.model.map_classes, spec)
-    return DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw, optional, gate)
+    model = DGAN(cfg.model, spec.t_obs, spec.t_f, spec.state_dim, len(spec.classes), num_anchors, hw, optional, gate)
+    scene = spec.map.scene if spec.map is not None else None
+    if scene is not None and scene.tile_px:
+        model.kept_tiles = (scene.tile_px, scene.halo_px)
+    return model
 
 
 def map_gate(declared: str, spec: dgan.InputSpec) -> list[float] | None:

@@ -34,6 +34,10 @@ class DataConfig:
     # for model.map_mode = "scene" (issue 26); the exported model's rasters just hold each group of crops (contract 12,
     # training.modules.scene.SCENE_MIN_PX at least). 0: none.
     map_scene_px: int = 0
+    # > 0 (with map_scene_px and map_draw_agents = false): the exported model keeps the scene CNN's features with the
+    # map, in tiles of this many pixels on a grid fixed in the world (contract 13, dgan_core::kept): each tile is
+    # computed once per map and predictor. Training is unchanged (its windows' rasters). 0: rasters per call.
+    map_scene_tile_px: int = 0
     # The kinematic prior the network refines (dgan.PriorSpec): "none" (absolute anchors, contract 1) or
     # "constant_velocity"; prior_window_s > 0 estimates its velocity over that many seconds of observed positions.
     prior: str = "none"

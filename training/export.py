@@ -14,8 +14,8 @@ import torch
 
 import dgan
 from dgan import _dgan
+from dgan.contract import KEPT_OUTPUT, PADDED_INPUTS, PREPROCESS_VERSION, RASTER_VERSION
 from dgan.contract import OUTPUTS as CONTRACT_OUTPUTS
-from dgan.contract import PADDED_INPUTS, PREPROCESS_VERSION, RASTER_VERSION
 from training.config import Config
 from training.losses import Calibration
 from training.modules.dgan import DGAN, ConsensusEnsemble
@@ -156,13 +156,19 @@ def example_inputs(spec: dgan.InputSpec, n: int = 3) -> dict[str, torch.Tensor]:
         "neighbor_features": torch.randn(n, 2, 6, generator=g),
     }
     m = spec.map
-    if m is not None and m.scene is not None:
+    if m is not None and m.scene is not None and m.scene.tile_px:
+        side = m.scene.tile_px + 2 * m.scene.halo_px
+        args["map"] = torch.rand(2, 3, side, side, generator=g)
+    elif m is not None and m.scene is not None:
         args["map"] = torch.rand(2, 3, 24, 24, generator=g)
     elif m is not None:
         args["map"] = torch.rand(n, 3, m.height_px, m.width_px, generator=g)
     if m is not None and m.optional:
         args["map_present"] = torch.ones(n)
-    if m is not None and m.scene is not None:
+    if m is not None and m.scene is not None and m.scene.tile_px:
+        gh, gw = (-(-side // m.scene.stride) for side in (m.height_px, m.width_px))
+        args["map_patches"] = torch.randn(n, m.scene.channels, gh, gw, generator=g)
+    elif m is not None and m.scene is not None:
         gh, gw = (-(-side // m.scene.stride) for side in (m.height_px, m.width_px))
         args["map_grid"] = torch.rand(2, 2, gh, gw, 2, generator=g) * 2 - 1
         args["map_slot"] = torch.arange(n) % 4
@@ -194,25 +200,17 @@ def export_model(
         raise ValueError("anchors must be grouped by class, in the order of spec.classes")
     inputs = example_inputs(spec)
     args, names = tuple(inputs.values()), list(inputs)
-    dyn = {
-        "trajectory": {0: "N"},
-        "trajectory_mask": {0: "N"},
-        "state": {0: "N"},
-        "neighbor_index": {0: "N", 1: "D"},
-        "neighbor_mask": {0: "N", 1: "D"},
-        "neighbor_features": {0: "N", 1: "D"},
-        "map": {0: "F", 2: "S", 3: "S"} if spec.map is not None and spec.map.scene is not None else {0: "N"},
-        "map_present": {0: "N"},
-        "map_grid": {0: "F", 1: "M"},
-        "map_slot": {0: "N"},
-    }
-    dynamic_axes = {k: dyn[k] for k in names} | {o: {0: "N"} for o in OUTPUTS}
+    kept = "map_patches" in names
+    outputs = [*OUTPUTS, KEPT_OUTPUT] if kept else OUTPUTS
+    dyn = input_axes(spec)
+    dynamic_axes = {k: dyn[k] for k in names} | {o: {0: "N"} for o in outputs} | {KEPT_OUTPUT: {0: "R"}}
+    dynamic_axes = {k: v for k, v in dynamic_axes.items() if k in names or k in outputs}
     torch.onnx.export(
         PaddedDGAN(model, names).eval(),
         args,
         str(path),
         input_names=names,
-        output_names=OUTPUTS,
+        output_names=outputs,
         dynamic_axes=dynamic_axes,
         opset_version=17,
         dynamo=False,
@@ -225,6 +223,32 @@ def export_model(
     seal(path)
     dgan.Predictor(path)  # the engine checks the contract and the seal
     return path
+
+
+def input_axes(spec: dgan.InputSpec) -> dict[str, dict[int, str]]:
+    """Every input's dynamic axes, by name."""
+    return {
+        "trajectory": {0: "N"},
+        "trajectory_mask": {0: "N"},
+        "state": {0: "N"},
+        "neighbor_index": {0: "N", 1: "D"},
+        "neighbor_mask": {0: "N", 1: "D"},
+        "neighbor_features": {0: "N", 1: "D"},
+        "map": map_axes(spec),
+        "map_present": {0: "N"},
+        "map_grid": {0: "F", 1: "M"},
+        "map_slot": {0: "N"},
+        "map_patches": {0: "N"},
+    }
+
+
+def map_axes(spec: dgan.InputSpec) -> dict[int, str]:
+    """The dynamic axes of the input ``map``: the agents' crops (N), a scene model's rasters (F of side S, contract
+    12) or the tiles a call computes (T, contract 13)."""
+    scene = spec.map.scene if spec.map is not None else None
+    if scene is not None and scene.tile_px:
+        return {0: "T"}
+    return {0: "F", 2: "S", 3: "S"} if scene is not None else {0: "N"}
 
 
 def store_half(m: onnx.ModelProto) -> int:

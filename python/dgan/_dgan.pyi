@@ -26,6 +26,7 @@ __all__ = [
     "init_onnxruntime",
     "kinematic_prior",
     "preprocess",
+    "read_kept",
     "scene_raster",
     "seal_model",
     "to_agent_frame",
@@ -41,7 +42,8 @@ CONTRACT_VERSION: int
 #: ``class_sizes_m`` (default length, width), ``map_kinds`` (in drawing order: ``name``, ``polygon``, ``colour``,
 #: ``width_m``), ``agent_colour``, ``state_features``, ``edge_features``, ``state_mirrored``, ``edge_mirrored`` (the
 #: columns that change sign when a scene is mirrored y → −y), ``inputs`` (by graph layout: ``edge_list``,
-#: ``padded``; in the contract's order), ``outputs``. Read it through :mod:`dgan.contract`.
+#: ``padded``; ``kept``, a padded model whose features are kept with the map; in the contract's order), ``outputs``,
+#: ``kept_output``. Read it through :mod:`dgan.contract`.
 CONTRACT: dict[str, Any]
 #: The choices of ``frame_from_rows``' ``duplicates`` (``dgan_core::Duplicates::ALL``).
 DUPLICATES: list[str]
@@ -99,6 +101,8 @@ class RasterMap:
     def image(self) -> npt.NDArray[np.uint8] | None: ...
     @property
     def world_to_pixel(self) -> npt.NDArray[np.float64] | None: ...
+    @property
+    def features_kept(self) -> int: ...
 
 @final
 class VectorMap:
@@ -107,6 +111,8 @@ class VectorMap:
     def elements(self) -> list[tuple[str, npt.NDArray[np.float64]]]: ...
     @property
     def tiles_kept(self) -> int: ...
+    @property
+    def features_kept(self) -> int: ...
 
 @final
 class Prediction:
@@ -198,6 +204,12 @@ def crop_grid(
     size_px: int,
     scene_origin: tuple[float, float],
     scene_heading: float,
+) -> npt.NDArray[np.float32]: ...
+def read_kept(
+    rows: npt.NDArray[np.float32],
+    index: npt.NDArray[np.int64],
+    weight: npt.NDArray[np.float32],
+    grid: tuple[int, int],
 ) -> npt.NDArray[np.float32]: ...
 def seal_model(path: str | os.PathLike[str]) -> str: ...
 def available_execution_providers(onnxruntime_library: str | os.PathLike[str] | None) -> list[str]: ...

@@ -55,7 +55,12 @@ EDGE_LIST_INPUTS: Final[tuple[str, ...]] = tuple(_C["inputs"]["edge_list"])
 PADDED_INPUTS: Final[tuple[str, ...]] = tuple(_C["inputs"]["padded"])
 #: A scene model's inputs after ``map_present`` (contract 12): where its agents read the frame's raster.
 SCENE_GRID_INPUTS: Final[tuple[str, ...]] = EDGE_LIST_INPUTS[EDGE_LIST_INPUTS.index("map_present") + 1 :]
+#: A scene model's inputs after ``map_present`` when its features are kept with the map (contract 13): the kept
+#: rows and where each agent reads them.
+KEPT_INPUTS: Final[tuple[str, ...]] = tuple(_C["inputs"]["kept"][_C["inputs"]["kept"].index("map_present") + 1 :])
 OUTPUTS: Final[tuple[str, ...]] = tuple(_C["outputs"])
+#: The output of a model with kept features (contract 13): the features of the tiles a call computed.
+KEPT_OUTPUT: Final[str] = _C["kept_output"]
 #: Keys what the engine's preprocessing produces, for caches of its output.
 CACHE_KEY: Final = f"contract{VERSION}-raster{RASTER_VERSION}-preprocess{PREPROCESS_VERSION}"
 

@@ -63,6 +63,12 @@ class RasterMap:
         assert h is not None
         return h
 
+    @property
+    def features_kept(self) -> int:
+        """How many tiles of scene models' features are kept with this map (contract 13: computed once per map and
+        predictor, reused by every later call with this map; at most 512, the least recently used replaced first)."""
+        return self._map.features_kept
+
     def __reduce__(self) -> tuple[Any, ...]:
         return (RasterMap, (self.image, self.world_to_pixel))
 
@@ -143,6 +149,12 @@ class VectorMap:
         """How many tiles of this map are kept for the crops of models with ``map.render = "tiles"`` (drawn once,
         reused by every later call with this map; at most 512, the least recently used replaced first)."""
         return self._map.tiles_kept
+
+    @property
+    def features_kept(self) -> int:
+        """How many tiles of scene models' features are kept with this map (contract 13: computed once per map and
+        predictor, reused by every later call with this map; at most 512, the least recently used replaced first)."""
+        return self._map.features_kept
 
     def __len__(self) -> int:
         return len(self._map)

@@ -11,6 +11,7 @@ map pixels to the Social-GAN world metres; for eth and hotel the pixel vector is
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Final
@@ -51,8 +52,11 @@ def world_to_pixel(scene: str, pixel_to_world: npt.ArrayLike) -> npt.NDArray[np.
     return np.asarray(inv, dtype=np.float64)
 
 
+@functools.lru_cache(maxsize=len(ETH_UCY_SCENES))
 def scene_map(scene: str) -> RasterMap:
-    """The raster map a bundled ETH/UCY model was trained with: ``dgan.scene_map("zara1")``."""
+    """The raster map a bundled ETH/UCY model was trained with: ``dgan.scene_map("zara1")``. The same map object on
+    every call (maps do not change), so a model that keeps its map features with the map (contract 13) computes them
+    once for all the frames that hold it."""
     if scene not in ETH_UCY_SCENES:
         raise InvalidMapError(f"no bundled scene {scene!r}; bundled scenes: {', '.join(ETH_UCY_SCENES)}")
     return scene_raster_map(scene, Path(__file__).parent / "data" / "scenes" / scene)

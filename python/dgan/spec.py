@@ -30,10 +30,18 @@ class SceneSpec:
     """How a scene model's map CNN reads the map (contract 12): once per group of agents whose crops meet, over a
     square north-up raster of the scene at the crops' resolution (:func:`scene_raster`), at least ``min_px`` pixels a
     side and larger where a group's crops reach farther; each agent reads the network's features at the centres of
-    its crop's ``stride × stride`` blocks (:func:`crop_grid`)."""
+    its crop's ``stride × stride`` blocks (:func:`crop_grid`).
+
+    Contract 13, ``tile_px`` > 0: the map CNN's features are kept with the map instead (``dgan_core::kept``): on a
+    grid fixed in the world, in tiles of ``tile_px`` pixels, each computed once per map and predictor from a raster of
+    the tile and ``halo_px`` more pixels each side (the map alone: ``draw_agents`` must be false), ``channels`` wide;
+    every later call on that map reads them."""
 
     min_px: int = 128
     stride: int = 4
+    tile_px: int = 0
+    halo_px: int = 0
+    channels: int = 0
 
 
 @dataclass(frozen=True)
@@ -171,6 +179,9 @@ class InputSpec:
             del d["map"]["classes"]
         if d["map"] is not None and d["map"]["scene"] is None:  # contracts 1-11 take a crop per agent
             del d["map"]["scene"]
+        elif d["map"] is not None and not d["map"]["scene"]["tile_px"]:  # contract 12 reads rasters per call
+            for key in ("tile_px", "halo_px", "channels"):
+                del d["map"]["scene"][key]
         return json.dumps(d)
 
     @classmethod
@@ -308,3 +319,20 @@ def _count(v: Any, name: str) -> int:
     if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
         raise InvalidSpecError(f"{name} must be a positive int, got {v!r}")
     return int(v)
+
+
+def read_kept(
+    rows: npt.ArrayLike, index: npt.ArrayLike, weight: npt.ArrayLike, grid: tuple[int, int]
+) -> npt.NDArray[np.float32]:
+    """Each agent's reading ``(N, C, gh, gw)`` of a kept-features model's map (contract 13, the input
+    ``map_patches``): for every crop block centre the weighted sum of its four rows (``index``, ``weight``
+    ``(N, gh · gw · 4)``, as :func:`preprocess` gives them as ``map_index`` and ``map_weight``) of ``rows`` ``(R, C)``:
+    ``map_rows`` followed by the network's ``map_features`` of the tiles in ``map`` (what the engine does between its
+    two runs of such a model; ``dgan_core::kept``)."""
+    r = np.ascontiguousarray(rows, dtype=np.float32)
+    i = np.ascontiguousarray(index, dtype=np.int64)
+    w = np.ascontiguousarray(weight, dtype=np.float32)
+    if r.ndim != 2 or i.ndim != 2 or w.ndim != 2:
+        raise InvalidSpecError(f"rows, index and weight must be 2-D, got {r.shape}, {i.shape}, {w.shape}")
+    out: npt.NDArray[np.float32] = _dgan.read_kept(r, i, w, (int(grid[0]), int(grid[1])))
+    return out

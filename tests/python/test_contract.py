@@ -46,9 +46,11 @@ def test_the_inputs_are_those_preprocessing_gives() -> None:
     layout = contract.PADDED_INPUTS if spec.graph == "padded" else contract.EDGE_LIST_INPUTS
     wanted = [n for n in layout if n in got]
     optional = spec.map is not None and spec.map.optional
-    scene = spec.map is not None and spec.map.scene is not None
+    scene = spec.map.scene if spec.map is not None else None
+    per_call = scene is not None and not scene.tile_px  # contract 12's grids; contract 13 reads kept tiles
     grids = ("map_grid", "map_slot")
-    assert wanted == [n for n in layout if (n != "map_present" or optional) and (n not in grids or scene)]
+    assert wanted == [n for n in layout if (n != "map_present" or optional) and (n not in grids or per_call)]
+    assert all(k in got for k in ("map_rows", "map_index", "map_weight")) == (scene is not None and not per_call)
     assert got["state"].shape[1] == spec.state_dim == contract.state_width(spec.classes)
     key = "neighbor_features" if spec.graph == "padded" else "edge_features"
     assert got[key].shape[-1] == len(contract.EDGE_FEATURES)

@@ -98,6 +98,10 @@ class DGAN(nn.Module):
             nn.ReLU(),
         )
         self.scene = cfg.map_mode == "scene"
+        # Contract 13 (features kept with the map): (tile_px, halo_px), set by training.build.build_model from
+        # data.map_scene_tile_px (None: rasters per call), and the tiles' rows the last forward computed.
+        self.kept_tiles: tuple[int, int] | None = None
+        self.new_rows = torch.zeros(0)
         self.map_enc = map_encoder(cfg, map_hw)
         # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
         # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
@@ -128,11 +132,13 @@ class DGAN(nn.Module):
         map: Tensor | None,
         map_present: Tensor | None,
         *,
-        scene: tuple[Tensor, Tensor] | None = None,
+        scene: tuple[Tensor, ...] | None = None,
     ) -> Tensor:
         """Node features: the trajectory LSTM, the traffic-state MLP and the map CNN, concatenated and projected.
         With ``model.map_mode = "scene"``, ``map`` is the frames' scene rasters and ``scene`` their agents' grids and
-        each agent's slot (``map_grid``, ``map_slot``: :class:`~training.modules.scene.SceneMapEncoder`)."""
+        each agent's slot (``map_grid``, ``map_slot``: :class:`~training.modules.scene.SceneMapEncoder`); with one
+        tensor, ``map`` is the tiles to compute and ``scene`` each agent's reading of the features (contract 13:
+        ``map_patches``), the tiles' rows left in :attr:`new_rows`."""
         x = torch.cat([trajectory, trajectory_mask.unsqueeze(-1)], dim=-1)
         _, (h_n, _) = self.lstm(self.embed(x))
         parts = [h_n[-1], self.state_mlp(state)]
@@ -143,6 +149,10 @@ class DGAN(nn.Module):
                 reads = state[:, -self.num_classes :] @ self.map_gate.to(state.dtype)
                 map_present = map_present * reads
                 features = self._readers_map(map, reads)
+            elif self.scene and scene is not None and len(scene) == 1:
+                assert self.kept_tiles is not None, "kept features need data.map_scene_tile_px"
+                assert isinstance(self.map_enc, SceneMapEncoder)
+                features, self.new_rows = self.map_enc.forward_kept(map, *scene, *self.kept_tiles)
             elif self.scene:
                 assert scene is not None, "a scene map encoder takes map_grid and map_slot"
                 features = self.map_enc(map, *scene)
@@ -205,8 +215,10 @@ class DGAN(nn.Module):
         map_present: Tensor | None = None,
         map_grid: Tensor | None = None,
         map_slot: Tensor | None = None,
-    ) -> tuple[Tensor, Tensor, Tensor]:
-        scene = None if map_grid is None or map_slot is None else (map_grid, map_slot)
+        map_patches: Tensor | None = None,
+    ) -> tuple[Tensor, ...]:
+        """Class logits, anchor logits and offsets (and with kept features, contract 13, the new tiles' rows)."""
+        scene = scene_inputs(map_grid, map_slot, map_patches)
         v = self.encode(trajectory, trajectory_mask, state, map, map_present, scene=scene)
         if not self.cfg.use_edge_features:
             edge_features = edge_features * 0.0
@@ -216,7 +228,18 @@ class DGAN(nn.Module):
         if not self.cfg.use_gat:
             # The contract's edge inputs stay in the exported graph (an exporter drops unused inputs).
             p = (edge_features.sum() + edge_index.sum().to(v.dtype)) * 0.0
-        return self.heads(p, v)
+        return self.heads(p, v) + self._kept_out(scene)
+
+    def tile_rows(self, tiles: Tensor) -> Tensor:
+        """The features of tiles of the map as the engine keeps them (contract 13:
+        :meth:`~training.modules.scene.SceneMapEncoder.tile_rows`)."""
+        assert self.kept_tiles is not None, "kept features need data.map_scene_tile_px"
+        assert isinstance(self.map_enc, SceneMapEncoder)
+        return self.map_enc.tile_rows(tiles, *self.kept_tiles)
+
+    def _kept_out(self, scene: tuple[Tensor, ...] | None) -> tuple[Tensor, ...]:
+        """The new tiles' rows as a fourth output where the map's features are kept (contract 13)."""
+        return (self.new_rows,) if scene is not None and len(scene) == 1 else ()
 
     def forward_padded(
         self,
@@ -230,9 +253,10 @@ class DGAN(nn.Module):
         map_present: Tensor | None = None,
         map_grid: Tensor | None = None,
         map_slot: Tensor | None = None,
-    ) -> tuple[Tensor, Tensor, Tensor]:
+        map_patches: Tensor | None = None,
+    ) -> tuple[Tensor, ...]:
         """:meth:`forward` on the padded neighbour layout (contract 3): the same outputs for the same graph."""
-        scene = None if map_grid is None or map_slot is None else (map_grid, map_slot)
+        scene = scene_inputs(map_grid, map_slot, map_patches)
         v = self.encode(trajectory, trajectory_mask, state, map, map_present, scene=scene)
         if not self.cfg.use_edge_features:
             neighbor_features = neighbor_features * 0.0
@@ -251,7 +275,15 @@ class DGAN(nn.Module):
         if not self.cfg.use_gat:
             unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
             p = unused * 0.0
-        return self.heads(p, v)
+        return self.heads(p, v) + self._kept_out(scene)
+
+
+def scene_inputs(grid: Tensor | None, slot: Tensor | None, patches: Tensor | None) -> tuple[Tensor, ...] | None:
+    """A scene model's reading inputs: the grids and slots of contract 12, the agents' readings of the kept features
+    of contract 13, or None (a crop model)."""
+    if patches is not None:
+        return (patches,)
+    return None if grid is None or slot is None else (grid, slot)
 
 
 def map_encoder(cfg: ModelConfig, map_hw: tuple[int, int] | None) -> nn.Module | None:
@@ -288,7 +320,7 @@ class PaddedDGAN(nn.Module):
         #: The inputs' names, in the order ``forward`` takes them (a scene model's map_present may be absent).
         self.names = names
 
-    def forward(self, *inputs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    def forward(self, *inputs: Tensor) -> tuple[Tensor, ...]:
         if self.names is None:
             return self.model.forward_padded(*inputs)
         return self.model.forward_padded(**dict(zip(self.names, inputs, strict=True)))

@@ -77,6 +77,14 @@ SCENE_MIN_PX = 32
 SCENE_TRAIN_PX = 128
 
 
+def scene_halo_px(res_blocks: int) -> int:
+    """The pixels a kept tile's raster needs around it (contract 13) so that its features are those of a map without
+    edges: the scene CNN's reach (3 × 3 convolutions: the stem 1 pixel, the first residual block 4, the second strided
+    convolution 2, the second block 8), rounded up to the stride."""
+    reach = 1 + (4 if res_blocks >= 2 else 0) + 2 + (8 if res_blocks >= 1 else 0)
+    return -(-reach // SCENE_STRIDE) * SCENE_STRIDE
+
+
 class SceneMapEncoder(nn.Module):
     """``(W, 3, S, S)`` scene rasters, ``(A, gh, gw, 2)`` crop grids and ``(A,)`` each agent's window → ``(A, out)``."""
 
@@ -95,6 +103,7 @@ class SceneMapEncoder(nn.Module):
             ResBlock(2 * c) if res_blocks >= 1 else nn.Identity(),
         )
         self.agent = nn.Sequential(nn.Conv2d(2 * c, 2 * c, 3, stride=2, padding=1), nn.ReLU())
+        self.grid_hw = grid_hw
         hh, ww = (math.ceil(x / 2) for x in grid_hw)
         self.proj = nn.Sequential(nn.Flatten(), nn.Linear(2 * c * hh * ww, out), nn.ReLU())
 
@@ -102,6 +111,21 @@ class SceneMapEncoder(nn.Module):
         patches = read_slots(self.scene(scene), grid, slot)
         out: Tensor = self.proj(self.agent(patches))
         return out
+
+    def tile_rows(self, tiles: Tensor, tile: int, halo: int) -> Tensor:
+        """Contract 13: the features of tiles of the map, ``(T, 3, P, P)`` rasters of ``tile`` pixels and ``halo``
+        more each side, as ``(T · t², C)`` rows (each tile's ``t × t`` without the halo's, row-major): what the engine
+        keeps with the map (``dgan_core::kept``) and reads each agent's blocks from (:func:`dgan.read_kept`)."""
+        f = self.scene(tiles)
+        h, t = halo // SCENE_STRIDE, tile // SCENE_STRIDE
+        rows: Tensor = f[:, :, h : h + t, h : h + t].permute(0, 2, 3, 1).reshape(-1, f.shape[1])
+        return rows
+
+    def forward_kept(self, tiles: Tensor, patches: Tensor, tile: int, halo: int) -> tuple[Tensor, Tensor]:
+        """Contract 13: ``(A, out)`` from each agent's reading of the features ``(A, C, gh, gw)`` (``map_patches``),
+        and the rows of the tiles ``tiles`` (:meth:`tile_rows`; the output ``map_features``)."""
+        out: Tensor = self.proj(self.agent(patches))
+        return out, self.tile_rows(tiles, tile, halo)
 
 
 def read_slots(features: Tensor, grid: Tensor, slot: Tensor) -> Tensor:

@@ -255,6 +255,13 @@ def map_words(cfg: dict[str, Any]) -> str:
     crop = f"{d['map_height_px']}×{d['map_width_px']} px crops at {d['map_resolution_m']} m/px,\n  heading-aligned"
     if cfg.get("model", {}).get("map_mode", "crop") != "scene":
         return crop
+    if d.get("map_scene_tile_px", 0):
+        return (
+            f"the scene at {d['map_resolution_m']} m/px without the agents' boxes, its features kept with the map in "
+            f"north-up tiles of {d['map_scene_tile_px']} px (contract 13; {d['map_scene_px']} px rasters in\n  "
+            f"training), each agent reading them over its {d['map_height_px']}×{d['map_width_px']} px heading-aligned "
+            "crop"
+        )
     return (
         f"one north-up raster of the scene at {d['map_resolution_m']} m/px for each group of agents whose crops meet "
         f"({d['map_scene_px']} px a side in\n  training), each agent reading it over its "
@@ -266,6 +273,11 @@ def scene_words(cfg: dict[str, Any]) -> str:
     """The map CNN's reading of a scene model (``model.map_mode = "scene"``, contract 12); "" for a crop model."""
     if cfg.get("model", {}).get("map_mode", "crop") != "scene":
         return ""
+    if cfg["data"].get("map_scene_tile_px", 0):
+        return (
+            ", its first stages run once per map over tiles of the scene, kept for every later call, each agent "
+            "reading their features at its crop's 4 × 4 blocks: a call pays only for the reading"
+        )
     return (
         ", its first stages run once per frame over the scene's raster, each agent reading their features at its "
         "crop's 4 × 4 blocks: the map's cost does not grow with the agents"

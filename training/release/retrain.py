@@ -139,11 +139,15 @@ def train_hdmap(root: Path) -> None:
 DISTILLED_SCENES = ("univ", "zara1", "hotel")
 #: What a fold's student changes of its configuration: hotel's has a head twice as wide (3.73 MFLOP an agent) and a
 #: temperature set by each agent's anchor entropy (``train.calibration = "entropy"``), which mends the S-shaped
-#: reliability a student's single temperature left (docs/results.md); zara1's reads one raster of the scene per frame
-#: (contract 12: ``model.map_mode = "scene"``, 128 px at least) with that temperature.
+#: reliability a student's single temperature left (docs/results.md); zara1's reads the scene's features (contract 12's
+#: ``model.map_mode = "scene"``, 128 px rasters in training) without the agents' boxes, kept with the map in tiles of
+#: 64 px (contract 13), with that temperature.
 SCENE_STUDENT_ARGS = {
     "hotel": ("--set", "model.head_dim=512", "--set", "train.calibration=entropy"),
-    "zara1": ("--set", "model.map_mode=scene", "--set", "data.map_scene_px=128", "--set", "train.calibration=entropy"),
+    "zara1": (
+        *("--set", "model.map_mode=scene", "--set", "data.map_scene_px=128", "--set", "train.calibration=entropy"),
+        *("--set", "data.map_draw_agents=false", "--set", "data.map_scene_tile_px=64"),
+    ),
 }
 
 

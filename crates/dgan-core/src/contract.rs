@@ -17,11 +17,12 @@ use std::collections::BTreeMap;
 /// (`map.render`); version 8 each class's own velocity estimate (`prior.by_class`); version 9 a temperature that grows
 /// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`);
 /// version 10 histories denoised before preprocessing (`denoise_gate_m`); version 11 the classes that read the map
-/// (`map.classes`); version 12 rasters of the scene for the map CNN (`map.scene`: `map_grid`, `map_slot`).
-pub const CONTRACT_VERSION: u32 = 12;
+/// (`map.classes`); version 12 rasters of the scene for the map CNN (`map.scene`: `map_grid`, `map_slot`); version 13
+/// the map CNN's features kept with the map (`map.scene.tile_px`: input `map_patches`, output `map_features`).
+pub const CONTRACT_VERSION: u32 = 13;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 12] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 13] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -51,6 +52,13 @@ pub const INPUT_MAP: &str = "map";
 pub const INPUT_MAP_GRID: &str = "map_grid";
 /// Input (scene models, contract 12): `(N,)` i64, each agent's row of `map_grid` flattened to `(F · M, ..)`.
 pub const INPUT_MAP_SLOT: &str = "map_slot";
+/// Input (kept features, contract 13): `(N, C, gh, gw)` f32, each agent's reading of the map's features at its crop
+/// blocks' centres (`map` then holds the rasters `(T, 3, P, P)` of the tiles to compute, none where the engine
+/// reads them: [`crate::kept`]).
+pub const INPUT_MAP_PATCHES: &str = "map_patches";
+/// Output (kept features, contract 13): `(T · t², C)` f32, the features of the tiles of `map` (each tile's `t × t`
+/// rows, row-major, in the order of its rasters), which the engine keeps with the map.
+pub const OUTPUT_MAP_FEATURES: &str = "map_features";
 /// Input (padded layout): `(N, D)` i64, each agent's senders, itself included, padded with its own row.
 pub const INPUT_NEIGHBOR_INDEX: &str = "neighbor_index";
 /// Input (padded layout): `(N, D)` f32, 1 for a real sender, 0 for padding.
@@ -274,6 +282,11 @@ impl ModelContract {
                 "map.scene is a contract-12 key; versions 1 to 11 take a crop per agent".into(),
             ));
         }
+        if self.contract_version < 13 && self.input.map.as_ref().and_then(|m| m.scene).is_some_and(|s| s.kept()) {
+            return Err(DganError::Contract(
+                "map.scene.tile_px is a contract-13 key; version 12 reads rasters of the scene per call".into(),
+            ));
+        }
         if self.input.map.as_ref().is_some_and(|m| m.scene.is_some()) && self.input.graph != GraphLayout::Padded {
             return Err(DganError::Contract("a scene model (map.scene) takes the padded graph layout".into()));
         }
@@ -397,7 +410,7 @@ impl ModelContract {
     pub fn expected_outputs(&self) -> Result<Vec<TensorSpec>> {
         let k = self.anchors()?.total();
         let c = self.input.classes.len();
-        Ok(vec![
+        let mut out = vec![
             TensorSpec { name: OUTPUT_CLASS_LOGITS, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(c)] },
             TensorSpec { name: OUTPUT_ANCHOR_LOGITS, dtype: DType::F32, dims: vec![Dim::Agents, Dim::Fixed(k)] },
             TensorSpec {
@@ -405,7 +418,12 @@ impl ModelContract {
                 dtype: DType::F32,
                 dims: vec![Dim::Agents, Dim::Fixed(k), Dim::Fixed(self.input.t_f), Dim::Fixed(2)],
             },
-        ])
+        ];
+        if let Some(scene) = self.input.map.as_ref().and_then(|m| m.scene).filter(|s| s.kept()) {
+            let dims = vec![Dim::Dynamic("the computed tiles' rows"), Dim::Fixed(scene.channels)];
+            out.push(TensorSpec { name: OUTPUT_MAP_FEATURES, dtype: DType::F32, dims });
+        }
+        Ok(out)
     }
 }
 
@@ -443,6 +461,10 @@ pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
     if let Some(m) = &spec.map {
         let dims = match m.scene {
             None => vec![Dim::Agents, Dim::Fixed(3), Dim::Fixed(m.height_px), Dim::Fixed(m.width_px)],
+            Some(s) if s.kept() => {
+                let side = Dim::Fixed(s.tile_raster_px());
+                vec![Dim::Dynamic("the computed tiles T"), Dim::Fixed(3), side, side]
+            }
             Some(_) => {
                 let side = Dim::Dynamic("the scene raster's side");
                 vec![Dim::Dynamic("the rasters F"), Dim::Fixed(3), side, side]
@@ -452,7 +474,10 @@ pub fn expected_inputs(spec: &InputSpec) -> Vec<TensorSpec> {
         if m.optional {
             v.push(TensorSpec { name: INPUT_MAP_PRESENT, dtype: DType::F32, dims: vec![Dim::Agents] });
         }
-        if let Some((gh, gw)) = m.scene_grid() {
+        if let (Some((gh, gw)), Some(s)) = (m.scene_grid(), m.scene.filter(|s| s.kept())) {
+            let dims = vec![Dim::Agents, Dim::Fixed(s.channels), Dim::Fixed(gh), Dim::Fixed(gw)];
+            v.push(TensorSpec { name: INPUT_MAP_PATCHES, dtype: DType::F32, dims });
+        } else if let Some((gh, gw)) = m.scene_grid() {
             let (frames, most) = (Dim::Dynamic("the rasters F"), Dim::Dynamic("a raster's most agents M"));
             let dims = vec![frames, most, Dim::Fixed(gh), Dim::Fixed(gw), Dim::Fixed(2)];
             v.push(TensorSpec { name: INPUT_MAP_GRID, dtype: DType::F32, dims });
@@ -649,7 +674,7 @@ mod tests {
             v10.replace("\"contract_version\": 10", "\"contract_version\": 12").replace("\"render\": \"tiles\"", scene);
         let c = ModelContract::from_json(&v12).unwrap();
         let m = c.input.map.as_ref().unwrap();
-        assert_eq!(m.scene, Some(crate::spec::SceneSpec { min_px: 64, stride: 4 }));
+        assert_eq!(m.scene, Some(crate::spec::SceneSpec { min_px: 64, stride: 4, ..Default::default() }));
         assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
         let inputs = c.expected_inputs();
         let names: Vec<_> = inputs.iter().map(|t| t.name).collect();
@@ -670,6 +695,26 @@ mod tests {
         }
         let tiled = v12.replace("\"render\": \"agent\"", "\"render\": \"tiles\"");
         assert!(ModelContract::from_json(&tiled).unwrap_err().to_string().contains("do not apply"));
+
+        // Version 13 keeps the features with the map: the tiles' rasters, the kept rows and the reads, and an output.
+        let kept = "\"stride\": 4, \"tile_px\": 64, \"halo_px\": 16, \"channels\": 16";
+        let v13 = v12.replace("\"contract_version\": 12", "\"contract_version\": 13").replace("\"stride\": 4", kept);
+        let err = ModelContract::from_json(&v13).unwrap_err().to_string();
+        assert!(err.contains("draw_agents must be false"), "{err}");
+        let v13 = v13.replace("\"render\": \"agent\"", "\"draw_agents\": false, \"render\": \"agent\"");
+        let c = ModelContract::from_json(&v13).unwrap();
+        let names: Vec<_> = c.expected_inputs().iter().map(|t| t.name).collect();
+        assert_eq!(&names[6..], [INPUT_MAP, INPUT_MAP_PRESENT, INPUT_MAP_PATCHES]);
+        assert_eq!(c.expected_inputs()[6].dims[2], Dim::Fixed(96));
+        assert_eq!(c.expected_outputs().unwrap()[3].name, OUTPUT_MAP_FEATURES);
+        let older = v13.replace("\"contract_version\": 13", "\"contract_version\": 12");
+        assert!(ModelContract::from_json(&older).unwrap_err().to_string().contains("contract-13 key"));
+        for (bad, says) in [("\"halo_px\": 16", "\"halo_px\": 6"), ("\"tile_px\": 64", "\"tile_px\": 600")] {
+            let err = ModelContract::from_json(&v13.replace(bad, says)).unwrap_err().to_string();
+            assert!(err.contains("tile_px"), "{err}");
+        }
+        let err = ModelContract::from_json(&v13.replace("\"channels\": 16", "\"channels\": 0")).unwrap_err();
+        assert!(err.to_string().contains("channels"), "{err}");
     }
 
     #[test]

@@ -352,6 +352,11 @@ impl Frame {
     pub fn map(&self) -> Option<&SceneMap> {
         self.map.as_deref()
     }
+
+    /// The scene's map as shared by the frames that hold it, if any.
+    pub fn shared_map(&self) -> Option<&Arc<SceneMap>> {
+        self.map.as_ref()
+    }
 }
 
 #[cfg(test)]

@@ -40,6 +40,7 @@ pub mod frame;
 pub mod graph;
 pub mod history;
 pub mod integrity;
+pub mod kept;
 pub mod limits;
 pub mod map;
 pub mod preprocess;

@@ -2,7 +2,7 @@
 //! or a vector map (typed polylines and polygons of a semantic HD map, in world metres).
 
 use crate::error::{DganError, Result};
-use crate::tile_store::TileStore;
+use crate::tile_store::{FeatureStore, TileStore};
 use nalgebra::{Matrix3, Vector3};
 use ndarray::Array3;
 use std::fmt;
@@ -17,6 +17,17 @@ pub enum SceneMap {
     Vector(VectorMap),
 }
 
+impl SceneMap {
+    /// Scene models' features of this map kept for every later call ([`crate::kept`]), shared by every frame that
+    /// holds it.
+    pub fn features(&self) -> &FeatureStore {
+        match self {
+            SceneMap::Raster(m) => &m.features,
+            SceneMap::Vector(m) => &m.features,
+        }
+    }
+}
+
 /// An RGB image of the scene and the homography from world metres to its pixels.
 ///
 /// Pixel coordinates are `(u, v)` = (column, row), with integer values at pixel centres.
@@ -27,6 +38,8 @@ pub struct RasterMap {
     /// The homography's last row is `(0, 0, 1)` (every ETH/UCY and Stanford Drone map): the projection's `z` is
     /// exactly 1 at every finite point, so [`RasterMap::project`] skips the division, which changes no bit.
     affine: bool,
+    /// Scene models' features of this map ([`crate::kept`]).
+    features: FeatureStore,
 }
 
 impl RasterMap {
@@ -47,7 +60,12 @@ impl RasterMap {
             return Err(DganError::InvalidMap(format!("world_to_pixel is singular (determinant {det:e})")));
         }
         let affine = world_to_pixel[2] == [0.0, 0.0, 1.0];
-        Ok(Self { image: image.as_standard_layout().to_owned(), world_to_pixel: m, affine })
+        Ok(Self {
+            image: image.as_standard_layout().to_owned(),
+            world_to_pixel: m,
+            affine,
+            features: FeatureStore::default(),
+        })
     }
 
     /// Reads a PNG or JPEG image (converted to RGB) and pairs it with its world→pixel homography.
@@ -368,13 +386,14 @@ impl MapElement {
 pub struct VectorMap {
     elements: Vec<MapElement>,
     tiles: TileStore,
+    features: FeatureStore,
 }
 
 impl VectorMap {
     /// A map of the given elements, kept in drawing order (regions under lines).
     pub fn new(mut elements: Vec<MapElement>) -> Self {
         elements.sort_by_key(|e| MapElementKind::ALL.iter().position(|k| *k == e.kind));
-        Self { elements, tiles: TileStore::default() }
+        Self { elements, tiles: TileStore::default(), features: FeatureStore::default() }
     }
 
     /// The elements, in drawing order.

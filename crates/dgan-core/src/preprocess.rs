@@ -39,6 +39,9 @@ pub struct NetworkInputs {
     pub map_grid: Option<Array5<f32>>,
     /// `(N,)` each agent's row of `map_grid` flattened to `(F · M, ..)`: for scene models.
     pub map_slot: Option<Array1<i64>>,
+    /// For scene models whose features are kept with the map (contract 13, [`crate::kept`]): the kept rows the call
+    /// reads and each agent's rows and weights; `map` then holds the rasters of the tiles the call computes.
+    pub kept: Option<crate::kept::KeptReads>,
     /// The same graph as each agent's padded list of senders, for models of the padded layout (contract 3).
     pub neighbors: Option<Neighbors>,
 }
@@ -216,7 +219,19 @@ pub fn preprocess_within(frame: &Frame, spec: &InputSpec, limits: &Limits) -> Re
 /// ([`crate::raster::rasterize_on`]) and a large frame's edge rows and kinematic prior. The tensors are the same
 /// whatever the threads.
 pub fn preprocess_on(frame: &Frame, spec: &InputSpec, limits: &Limits, threads: usize) -> Result<Preprocessed> {
-    build(frame, spec, limits, threads, true).map(|(pre, _)| pre)
+    build(frame, spec, limits, threads, true, None).map(|(pre, _)| pre)
+}
+
+/// [`preprocess_on`] for the predictor numbered `model`: a scene model whose features are kept with the map
+/// (contract 13) reads the tiles that predictor kept before instead of computing them again.
+pub fn preprocess_for(
+    frame: &Frame,
+    spec: &InputSpec,
+    limits: &Limits,
+    threads: usize,
+    model: u64,
+) -> Result<Preprocessed> {
+    build(frame, spec, limits, threads, true, Some(model)).map(|(pre, _)| pre)
 }
 
 /// [`preprocess_on`] with the map crops of a frame that has a map left for the caller to draw
@@ -229,7 +244,7 @@ pub fn preprocess_without_crops(
     limits: &Limits,
     threads: usize,
 ) -> Result<(Preprocessed, bool)> {
-    build(frame, spec, limits, threads, false)
+    build(frame, spec, limits, threads, false, None)
 }
 
 /// Receivers a thread takes at a time when the edge rows are shared out.
@@ -391,6 +406,7 @@ fn build(
     limits: &Limits,
     threads: usize,
     crops: bool,
+    model: Option<u64>,
 ) -> Result<(Preprocessed, bool)> {
     spec.validate()?;
     frame.check_dt(spec.dt_s)?;
@@ -501,6 +517,7 @@ fn build(
             map_present,
             map_grid: None,
             map_slot: None,
+            kept: None,
             neighbors,
         },
         prior,
@@ -510,19 +527,34 @@ fn build(
         edges,
     };
     if let (true, Some(m)) = (crops, &spec.map) {
-        pre.inputs.draw_scene(frame, &pre.states, m)?;
+        pre.inputs.draw_scene(frame, &pre.states, m, model)?;
     }
     let later = spec.map.is_some() && pre.inputs.map.is_none();
     Ok((pre, later))
 }
 
 impl NetworkInputs {
-    /// A scene model's rasters, grids and slots (contract 12, [`crate::scene::scene_inputs`]) drawn into these inputs;
-    /// nothing for a crop model (`crop.scene` None).
-    pub fn draw_scene(&mut self, frame: &Frame, states: &[TrafficState], crop: &MapSpec) -> Result<()> {
-        if let Some(scene) = crop.scene {
-            let (raster, grid, slot) = crate::scene::scene_inputs(frame, states, crop, scene)?;
-            (self.map, self.map_grid, self.map_slot) = (Some(raster), Some(grid), Some(slot));
+    /// A scene model's rasters, grids and slots (contract 12, [`crate::scene::scene_inputs`]), or, where its
+    /// features are kept with the map (contract 13), the rasters of the tiles this call computes and every agent's
+    /// reads ([`crate::kept::kept_inputs`]; `model` the predictor's number, whose kept tiles are read), drawn into
+    /// these inputs; nothing for a crop model (`crop.scene` None).
+    pub fn draw_scene(
+        &mut self,
+        frame: &Frame,
+        states: &[TrafficState],
+        crop: &MapSpec,
+        model: Option<u64>,
+    ) -> Result<()> {
+        match crop.scene {
+            Some(scene) if scene.kept() => {
+                let (reads, rasters) = crate::kept::kept_inputs(frame, states, crop, scene, model)?;
+                (self.map, self.kept) = (Some(rasters), Some(reads));
+            }
+            Some(scene) => {
+                let (raster, grid, slot) = crate::scene::scene_inputs(frame, states, crop, scene)?;
+                (self.map, self.map_grid, self.map_slot) = (Some(raster), Some(grid), Some(slot));
+            }
+            None => {}
         }
         Ok(())
     }

@@ -7,24 +7,27 @@
 use crate::batch::{balanced_parts, join, take};
 use crate::contract::{check_tensor, DType, ModelContract, METADATA_KEY};
 use crate::contract::{
-    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_GRID, INPUT_MAP_PRESENT, INPUT_MAP_SLOT,
-    INPUT_NEIGHBOR_FEATURES, INPUT_NEIGHBOR_INDEX, INPUT_NEIGHBOR_MASK, INPUT_STATE, INPUT_TRAJECTORY,
-    INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS, OUTPUT_CLASS_LOGITS, OUTPUT_OFFSETS,
+    INPUT_EDGE_FEATURES, INPUT_EDGE_INDEX, INPUT_MAP, INPUT_MAP_GRID, INPUT_MAP_PATCHES, INPUT_MAP_PRESENT,
+    INPUT_MAP_SLOT, INPUT_NEIGHBOR_FEATURES, INPUT_NEIGHBOR_INDEX, INPUT_NEIGHBOR_MASK, INPUT_STATE, INPUT_TRAJECTORY,
+    INPUT_TRAJECTORY_MASK, OUTPUT_ANCHOR_LOGITS, OUTPUT_CLASS_LOGITS, OUTPUT_MAP_FEATURES, OUTPUT_OFFSETS,
 };
 use crate::decode::{decode_on, Anchors, DecodeParams, Decoded, NetworkOutputs};
 use crate::error::{DganError, Result};
 use crate::frame::Frame;
 use crate::limits::on_threads;
-use crate::preprocess::{preprocess_on, preprocess_without_crops, Limits, NetworkInputs, Preprocessed};
+use crate::preprocess::{preprocess_for, preprocess_without_crops, Limits, NetworkInputs, Preprocessed};
 use crate::raster::{rasterize_into, rasterize_rows};
 use crate::transform::AgentPose;
-use ndarray::{s, Array2, Array4, ArrayView3, Axis, Ix2, Ix4};
+use ndarray::{s, Array2, Array3, Array4, ArrayView3, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
 use ort::value::{Tensor, TensorElementType, TensorRef, ValueType};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard, TryLockError};
 use std::time::{Duration, Instant};
+
+/// The most tiles of a kept-features model (contract 13) one network run computes.
+const TILES_PER_RUN: usize = 64;
 
 /// The environment variable naming the ONNX Runtime shared library.
 pub const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";
@@ -246,6 +249,9 @@ pub struct PhaseTimes {
 /// A loaded, contract-checked DGAN model.
 #[derive(Debug)]
 pub struct Predictor {
+    /// This predictor's number, unique in the process: the key of the map features it keeps with maps
+    /// ([`crate::kept`]).
+    id: u64,
     sessions: Vec<Mutex<Session>>,
     /// With `threads` ≥ 2 on the CPU, one single-threaded session per thread: the parts of a frame that splits
     /// ([`SPLIT_MAX_LOAD`]) and the network calls of [`Predictor::predict_batch`] run on them concurrently, where
@@ -447,7 +453,9 @@ impl Predictor {
                 lanes.push(Mutex::new(open_session(&path, &bytes, &single)?));
             }
         }
+        static NEXT_ID: AtomicU64 = AtomicU64::new(1);
         Ok(Self {
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             sessions,
             lanes,
             next: AtomicUsize::new(0),
@@ -459,6 +467,12 @@ impl Predictor {
             limits: options.limits,
             threads: options.intra_threads,
         })
+    }
+
+    /// This predictor's number, unique in the process: a scene model whose features are kept with the map
+    /// (contract 13) keeps them under it, so that its later calls on the map read them.
+    pub fn id(&self) -> u64 {
+        self.id
     }
 
     /// How many ONNX Runtime sessions serve this predictor.
@@ -535,7 +549,7 @@ impl Predictor {
             if m.scene.is_some() {
                 // A scene model's rasters and grids (contract 12), timed as the crops they stand for: drawn before
                 // the parts are known, since a part takes whole groups of them.
-                pre.inputs.draw_scene(frame, &pre.states, m)?;
+                pre.inputs.draw_scene(frame, &pre.states, m, Some(self.id))?;
                 times.crops = started.elapsed().saturating_sub(times.preprocess);
                 later = false;
             }
@@ -674,7 +688,7 @@ impl Predictor {
         let per_thread = frames.len().div_ceil(self.threads.max(1));
         let runs: Vec<&[Frame]> = frames.chunks(per_thread).collect();
         let preprocess = |part: &[Frame]| -> Vec<Result<Preprocessed>> {
-            part.iter().map(|f| preprocess_on(f, spec, &self.limits, 1)).collect()
+            part.iter().map(|f| preprocess_for(f, spec, &self.limits, 1, self.id)).collect()
         };
         // A panicked thread returns nothing: each of its frames gets the error below.
         let panicked = Vec::new;
@@ -841,9 +855,76 @@ impl Predictor {
         self.run_on(Pool::Sessions, inputs)
     }
 
+    /// A kept-features model's inputs (contract 13) made whole: the tiles of `map` that are not yet kept computed by
+    /// a first run of the network (with one blank agent) and kept with their maps, then every agent's reading of the
+    /// features ([`crate::kept::KeptReads::patches`]); `map` left with no tile for the second run. Other inputs as
+    /// they are.
+    fn read_kept(&self, pool: Pool, mut inputs: NetworkInputs) -> Result<(NetworkInputs, Option<Array4<f32>>)> {
+        let Some(reads) = inputs.kept.take() else { return Ok((inputs, None)) };
+        let tiles = inputs.map.take().ok_or_else(|| DganError::Inference("kept reads without tiles".into()))?;
+        let side = tiles.dim().2;
+        let new = if reads.new.is_empty() {
+            None
+        } else {
+            // In runs of at most TILES_PER_RUN tiles, so that a frame that reads many bounds the network's memory.
+            let mut rows = vec![];
+            for start in (0..tiles.dim().0).step_by(TILES_PER_RUN) {
+                let end = (start + TILES_PER_RUN).min(tiles.dim().0);
+                rows.push(self.compute_tiles(pool, tiles.slice(s![start..end, .., .., ..]).to_owned())?);
+            }
+            let views: Vec<_> = rows.iter().map(|r| r.view()).collect();
+            Some(ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?)
+        };
+        if let Some(rows) = &new {
+            reads.keep(rows.view())?;
+        }
+        let patches = reads.patches(new.as_ref().map(|r| r.view()))?;
+        inputs.map = Some(Array4::zeros((0, 3, side, side)));
+        Ok((inputs, Some(patches)))
+    }
+
+    /// The features `(T · t², C)` of the tiles `(T, 3, P, P)` (the output `map_features`): the network run on them
+    /// with one blank agent.
+    fn compute_tiles(&self, pool: Pool, tiles: Array4<f32>) -> Result<Array2<f32>> {
+        let infer = |e: ort::Error| DganError::Inference(e.to_string());
+        let spec = &self.contract.input;
+        let m = spec.map.as_ref().ok_or_else(|| DganError::Inference("kept reads without a map".into()))?;
+        let scene = m.scene.ok_or_else(|| DganError::Inference("kept reads without map.scene".into()))?;
+        let (gh, gw) = m.scene_grid().unwrap_or((1, 1));
+        let mut feed: Vec<(&str, SessionInputValue<'_>)> = vec![
+            (INPUT_TRAJECTORY, Tensor::from_array(Array3::<f32>::zeros((1, spec.t_obs, 2))).map_err(infer)?.into()),
+            (INPUT_TRAJECTORY_MASK, Tensor::from_array(Array2::<f32>::zeros((1, spec.t_obs))).map_err(infer)?.into()),
+            (INPUT_STATE, Tensor::from_array(Array2::<f32>::zeros((1, spec.state_dim()))).map_err(infer)?.into()),
+            (INPUT_NEIGHBOR_INDEX, Tensor::from_array(Array2::<i64>::zeros((1, 1))).map_err(infer)?.into()),
+            (INPUT_NEIGHBOR_MASK, Tensor::from_array(Array2::<f32>::ones((1, 1))).map_err(infer)?.into()),
+            (INPUT_NEIGHBOR_FEATURES, Tensor::from_array(Array3::<f32>::zeros((1, 1, 6))).map_err(infer)?.into()),
+            (INPUT_MAP, Tensor::from_array(tiles).map_err(infer)?.into()),
+            (
+                INPUT_MAP_PATCHES,
+                Tensor::from_array(Array4::<f32>::zeros((1, scene.channels, gh, gw))).map_err(infer)?.into(),
+            ),
+        ];
+        if m.optional {
+            feed.push((INPUT_MAP_PRESENT, Tensor::from_array(ndarray::Array1::<f32>::zeros(1)).map_err(infer)?.into()));
+        }
+        let mut session = self.session(pool)?;
+        let outputs = session.run(feed).map_err(infer)?;
+        let rows = outputs
+            .get(OUTPUT_MAP_FEATURES)
+            .ok_or_else(|| DganError::Inference(format!("the model did not return {OUTPUT_MAP_FEATURES:?}")))?
+            .try_extract_array::<f32>()
+            .map_err(infer)?
+            .into_dimensionality::<Ix2>()
+            .map_err(|e| DganError::Inference(format!("{OUTPUT_MAP_FEATURES}: {e}")))?
+            .to_owned();
+        Ok(rows)
+    }
+
     /// [`Predictor::run`] on the first free session of `pool`.
     fn run_on(&self, pool: Pool, inputs: NetworkInputs) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
         let infer = |e: ort::Error| DganError::Inference(e.to_string());
+        let kept = inputs.kept.is_some();
+        let (inputs, patches) = self.read_kept(pool, inputs)?;
         let mut feed: Vec<(&str, SessionInputValue<'_>)> = vec![
             (INPUT_TRAJECTORY, Tensor::from_array(inputs.trajectory).map_err(infer)?.into()),
             (INPUT_TRAJECTORY_MASK, Tensor::from_array(inputs.trajectory_mask).map_err(infer)?.into()),
@@ -872,9 +953,12 @@ impl Predictor {
             feed.push((INPUT_MAP_GRID, Tensor::from_array(grid).map_err(infer)?.into()));
             feed.push((INPUT_MAP_SLOT, Tensor::from_array(slot).map_err(infer)?.into()));
         }
+        if let Some(p) = patches {
+            feed.push((INPUT_MAP_PATCHES, Tensor::from_array(p).map_err(infer)?.into()));
+        }
         let mut session = self.session(pool)?;
         let outputs = session.run(feed).map_err(infer)?;
-        if let Some(map) = map {
+        if let (Some(map), false) = (map, kept) {
             // The last call's, not the largest: a Predictor holds at most one call's crops beyond the call.
             *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()) = map.into_raw_vec_and_offset().0;
         }

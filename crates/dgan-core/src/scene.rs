@@ -20,7 +20,7 @@ use std::f64::consts::FRAC_PI_2;
 pub use crate::spec::MAX_SCENE_PX;
 
 /// [`scene_raster`] with the boxes of `drawn` alone (the agents within reach of it).
-fn scene_raster_of(
+pub(crate) fn scene_raster_of(
     frame: &Frame,
     drawn: &[TrafficState],
     crop: &MapSpec,
@@ -196,6 +196,30 @@ fn scene_spec(crop: &MapSpec, size_px: usize) -> Result<MapSpec> {
     })
 }
 
+/// The world positions of the centres of an agent's crop's `stride × stride` blocks (the agent at `pose`), row-major
+/// over `(⌈H / stride⌉, ⌈W / stride⌉)`: the rows from the crop's top, the columns laid out symmetrically about the
+/// agent's, so that a mirrored crop's blocks are its blocks with their columns reversed (training mirrors the scene
+/// with its agents).
+pub(crate) fn block_centres<'a>(
+    pose: &'a AgentPose,
+    crop: &'a MapSpec,
+    stride: usize,
+) -> impl Iterator<Item = [f64; 2]> + 'a {
+    let (gh, gw) = (crop.height_px.div_ceil(stride), crop.width_px.div_ceil(stride));
+    let half = stride as f64 / 2.0;
+    (0..gh * gw).map(move |k| {
+        let (bi, bj) = (k / gw, k % gw);
+        // The block's centre in the crop's continuous pixels (edges at integers), then the agent's frame.
+        let row = (bi * stride) as f64 + half;
+        let col = crop.agent_col as f64 + 0.5 + (bj as f64 - (gw as f64 - 1.0) / 2.0) * stride as f64;
+        let local = [
+            (crop.agent_row as f64 + 0.5 - row) * crop.resolution_m,
+            (crop.agent_col as f64 + 0.5 - col) * crop.resolution_m,
+        ];
+        pose.to_world(local)
+    })
+}
+
 /// Where each agent's crop (`crop`, the agent at `poses[i]`) lies in the scene raster of [`scene_raster`]
 /// (`size_px`, placed by `scene_pose`): `(N, ⌈H / stride⌉, ⌈W / stride⌉, 2)`, for each `stride × stride` block of the
 /// crop (row-major, the crop's own rows and columns; the rows from the crop's top, the columns centred on the
@@ -217,31 +241,19 @@ pub fn crop_grid(
     }
     let (gh, gw) = (crop.height_px.div_ceil(stride), crop.width_px.div_ceil(stride));
     let mut out = Array4::<f32>::zeros((poses.len(), gh, gw, 2));
-    let half = stride as f64 / 2.0;
     let side = size_px as f64;
     for (i, pose) in poses.iter().enumerate() {
-        for bi in 0..gh {
-            for bj in 0..gw {
-                // The block's centre in the crop's continuous pixels (edges at integers), then the agent's frame.
-                // Columns are laid out symmetrically about the agent's, so that a mirrored crop's grid is the grid
-                // with its columns reversed (training mirrors the scene with its agents).
-                let row = (bi * stride) as f64 + half;
-                let col = crop.agent_col as f64 + 0.5 + (bj as f64 - (gw as f64 - 1.0) / 2.0) * stride as f64;
-                let local = [
-                    (crop.agent_row as f64 + 0.5 - row) * crop.resolution_m,
-                    (crop.agent_col as f64 + 0.5 - col) * crop.resolution_m,
-                ];
-                let [u, v] = scene.local_to_pixel(scene_pose.to_local(pose.to_world(local)));
-                out[[i, bi, bj, 0]] = (2.0 * u / side - 1.0) as f32;
-                out[[i, bi, bj, 1]] = (2.0 * v / side - 1.0) as f32;
-            }
+        for (k, world) in block_centres(pose, crop, stride).enumerate() {
+            let [u, v] = scene.local_to_pixel(scene_pose.to_local(world));
+            out[[i, k / gw, k % gw, 0]] = (2.0 * u / side - 1.0) as f32;
+            out[[i, k / gw, k % gw, 1]] = (2.0 * v / side - 1.0) as f32;
         }
     }
     Ok(out)
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::class::AgentClass;
     use crate::map::RasterMap;
@@ -250,7 +262,8 @@ mod tests {
     use std::f64::consts::FRAC_PI_2;
     use std::sync::Arc;
 
-    fn crop(draw_agents: bool) -> MapSpec {
+    /// A crop of 32 × 31 pixels at 0.5 m, the agent at row 24, column 15.
+    pub(crate) fn crop(draw_agents: bool) -> MapSpec {
         MapSpec {
             height_px: 32,
             width_px: 31,
@@ -365,7 +378,7 @@ mod tests {
     #[test]
     fn a_frame_s_raster_grows_to_hold_every_crop() {
         let spec = crop(false);
-        let scene = SceneSpec { min_px: 64, stride: 4 };
+        let scene = SceneSpec { min_px: 64, stride: 4, ..Default::default() };
         let (f, s) = gradient_frame(&[0.0, 1.0]);
         let (raster, grid, slot) = scene_inputs(&f, &s, &spec, scene).unwrap();
         assert_eq!(raster.dim(), (1, 3, 64, 64));

@@ -54,12 +54,47 @@ pub const MAX_SCENE_PX: usize = 2048;
 /// group of agents whose crops meet ([`crate::scene::scene_inputs`]), at least `min_px` pixels a side and larger
 /// where a group's crops reach farther (up to [`MAX_SCENE_PX`]; beyond, an agent reads no map); each agent reads the
 /// network's features at the centres of its crop's `stride × stride` blocks ([`crate::scene::crop_grid`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct SceneSpec {
     /// The raster's least side, pixels.
     pub min_px: usize,
     /// The side of a crop's blocks, pixels: the network's downsampling before the agents read it.
     pub stride: usize,
+    /// Contract 13: the map's features are kept with the map, in tiles of this many pixels a side on a grid fixed
+    /// in the world, each computed once per map and model ([`crate::kept`]); 0 (the default): rasters per call.
+    #[serde(default, skip_serializing_if = "is_zero_px")]
+    pub tile_px: usize,
+    /// Contract 13: pixels of the map drawn around each tile (at least the CNN's reach), so that a tile's features
+    /// are those of the map without edges.
+    #[serde(default, skip_serializing_if = "is_zero_px")]
+    pub halo_px: usize,
+    /// Contract 13: the features' channels (the rows the engine keeps).
+    #[serde(default, skip_serializing_if = "is_zero_px")]
+    pub channels: usize,
+}
+
+fn is_zero_px(v: &usize) -> bool {
+    *v == 0
+}
+
+/// The most pixels a kept tile's raster may have a side (its tile and both halos, [`SceneSpec::tile_px`]).
+pub const MAX_TILE_RASTER_PX: usize = 512;
+
+impl SceneSpec {
+    /// Whether the features are kept with the map in tiles (contract 13).
+    pub fn kept(&self) -> bool {
+        self.tile_px > 0
+    }
+
+    /// The side of a kept tile's raster: its tile and a halo each side.
+    pub fn tile_raster_px(&self) -> usize {
+        self.tile_px + 2 * self.halo_px
+    }
+
+    /// The side of a kept tile in features (`tile_px / stride`).
+    pub fn tile_features(&self) -> usize {
+        self.tile_px / self.stride.max(1)
+    }
 }
 
 /// How a vector map becomes the agents' crops (`map.render` of a contract-7 model).
@@ -127,6 +162,31 @@ impl MapSpec {
                 return bad("map.scene reads one raster for every agent: map.render \"tiles\" and map.classes do not \
                             apply to it"
                     .into());
+            }
+            let declared = [scene.tile_px, scene.halo_px, scene.channels];
+            if scene.kept() || declared.iter().any(|v| *v > 0) {
+                let s = scene.stride;
+                if scene.tile_px == 0 || scene.tile_px % s != 0 || scene.halo_px % s != 0 {
+                    return bad(format!(
+                        "map.scene.tile_px and halo_px must be multiples of the stride {s} (tile_px at least one), \
+                         got {} and {}",
+                        scene.tile_px, scene.halo_px
+                    ));
+                }
+                if scene.tile_raster_px() > MAX_TILE_RASTER_PX {
+                    return bad(format!(
+                        "a kept tile's raster (tile_px + 2 halo_px) must be at most {MAX_TILE_RASTER_PX} pixels, got {}",
+                        scene.tile_raster_px()
+                    ));
+                }
+                if !(1..=4096).contains(&scene.channels) {
+                    return bad(format!("map.scene.channels must be 1..=4096, got {}", scene.channels));
+                }
+                if self.draw_agents {
+                    return bad("kept map features (map.scene.tile_px) hold the map alone: draw_agents must be false \
+                                (the agents' boxes change every call)"
+                        .into());
+                }
             }
         }
         Ok(())

@@ -38,20 +38,24 @@ pub(crate) fn contract(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("edge_mirrored", dgan_core::spec::EDGE_MIRRORED.to_vec())?;
     let inputs = PyDict::new(py);
     for layout in ["edge_list", "padded"] {
-        inputs.set_item(layout, all_inputs(layout).map_err(crate::error::to_py)?)?;
+        inputs.set_item(layout, all_inputs(layout, "").map_err(crate::error::to_py)?)?;
     }
+    // A scene model whose features are kept with the map (contract 13).
+    let kept = r#", "tile_px": 4, "halo_px": 0, "channels": 1"#;
+    inputs.set_item("kept", all_inputs("padded", kept).map_err(crate::error::to_py)?)?;
     d.set_item("inputs", inputs)?;
     d.set_item("outputs", [c::OUTPUT_CLASS_LOGITS, c::OUTPUT_ANCHOR_LOGITS, c::OUTPUT_OFFSETS].to_vec())?;
+    d.set_item("kept_output", c::OUTPUT_MAP_FEATURES)?;
     Ok(d)
 }
 
-/// Every input a model of a graph layout can take (with a map that may be absent, read as a scene), in the
-/// contract's order.
-fn all_inputs(layout: &str) -> dgan_core::Result<Vec<&'static str>> {
+/// Every input a model of a graph layout can take (with a map that may be absent, read as a scene; `kept` more keys
+/// of its scene), in the contract's order.
+fn all_inputs(layout: &str, kept: &str) -> dgan_core::Result<Vec<&'static str>> {
     let json = format!(
         r#"{{"dt_s": 1, "t_obs": 2, "t_f": 2, "classes": ["pedestrian"], "attention_lambda": 0, "graph": "{layout}",
             "map": {{"height_px": 2, "width_px": 2, "resolution_m": 1, "agent_row": 1, "agent_col": 1, "optional": true,
-                     "scene": {{"min_px": 4, "stride": 1}}}}}}"#
+                     "draw_agents": false, "scene": {{"min_px": 4, "stride": 1{kept}}}}}}}"#
     );
     let spec = crate::preprocess::parse_spec(&json)?;
     Ok(c::expected_inputs(&spec).into_iter().map(|t| t.name).collect())

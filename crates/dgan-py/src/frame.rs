@@ -243,6 +243,12 @@ impl PyRasterMap {
             SceneMap::Vector(_) => None,
         }
     }
+
+    /// How many tiles of scene models' features are kept with the map (contract 13).
+    #[getter]
+    fn features_kept(&self) -> usize {
+        self.inner.features().len()
+    }
 }
 
 /// Typed polylines and polygons in world metres (see `dgan.VectorMap`).
@@ -288,6 +294,12 @@ impl PyVectorMap {
             SceneMap::Vector(v) => v.elements().len(),
             SceneMap::Raster(_) => 0,
         }
+    }
+
+    /// How many tiles of scene models' features are kept with the map (contract 13).
+    #[getter]
+    fn features_kept(&self) -> usize {
+        self.inner.features().len()
     }
 
     /// How many tiles of the map are kept for `map.render = "tiles"` crops.

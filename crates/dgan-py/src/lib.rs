@@ -42,6 +42,7 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(geometry::attention_graph, m)?)?;
     m.add_function(wrap_pyfunction!(scene::scene_raster, m)?)?;
     m.add_function(wrap_pyfunction!(scene::crop_grid, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::read_kept, m)?)?;
     m.add_function(wrap_pyfunction!(init_onnxruntime, m)?)?;
     m.add_function(wrap_pyfunction!(predictor::available_execution_providers, m)?)?;
     m.add_function(wrap_pyfunction!(predictor::seal_model, m)?)?;

@@ -64,6 +64,11 @@ pub fn preprocess<'py>(
         d.set_item("map_grid", g.into_pyarray(py))?;
         d.set_item("map_slot", s.into_pyarray(py))?;
     }
+    if let Some(k) = x.kept {
+        d.set_item("map_rows", k.table().into_pyarray(py))?;
+        d.set_item("map_index", k.index.into_pyarray(py))?;
+        d.set_item("map_weight", k.weight.into_pyarray(py))?;
+    }
     if let Some(nb) = x.neighbors {
         d.set_item("neighbor_index", nb.index.into_pyarray(py))?;
         d.set_item("neighbor_mask", nb.mask.into_pyarray(py))?;

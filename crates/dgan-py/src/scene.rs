@@ -8,7 +8,7 @@ use dgan_core::scene;
 use dgan_core::state::traffic_states_with;
 use dgan_core::transform::AgentPose;
 use dgan_core::{DganError, InputSpec, MapSpec};
-use numpy::{IntoPyArray, PyArray3, PyArray4, PyReadonlyArrayDyn};
+use numpy::{IntoPyArray, PyArray3, PyArray4, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
 fn map_of(spec: &InputSpec) -> PyResult<&MapSpec> {
@@ -67,4 +67,23 @@ pub fn crop_grid<'py>(
     let scene_pose = AgentPose::new(scene_origin, scene_heading);
     let grid = scene::crop_grid(&poses, crop, stride, size_px, &scene_pose).py()?;
     Ok(grid.into_pyarray(py))
+}
+
+/// Each agent's reading `(N, C, gh, gw)` of a kept-features model's tiles (contract 13, `dgan_core::kept`): for every
+/// block centre the weighted sum of its four rows (`index`, `weight` `(N, gh · gw · 4)`, as `dgan.preprocess` gives
+/// them) of `rows` `(R, C)`, the kept rows followed by those of the tiles computed (the network's `map_features`).
+#[pyfunction]
+pub fn read_kept<'py>(
+    py: Python<'py>,
+    rows: PyReadonlyArray2<'py, f32>,
+    index: PyReadonlyArray2<'py, i64>,
+    weight: PyReadonlyArray2<'py, f32>,
+    grid: (usize, usize),
+) -> PyResult<Bound<'py, PyArray4<f32>>> {
+    let (rows, index, weight) = (rows.as_array(), index.as_array().to_owned(), weight.as_array().to_owned());
+    if rows.iter().any(|v| !v.is_finite()) || weight.iter().any(|v| !v.is_finite()) {
+        return Err(to_py(DganError::InvalidSpec("rows and weights must be finite".into())));
+    }
+    let out = dgan_core::kept::read_rows(rows, &index, &weight, grid).py()?;
+    Ok(out.into_pyarray(py))
 }

@@ -20,6 +20,15 @@ def frame_and_spec(name: str) -> tuple[dgan.Frame, dgan.InputSpec]:
     return scene_for(spec).frame, spec
 
 
+def per_call(spec: dgan.InputSpec) -> dgan.InputSpec:
+    """A scene model's spec read as contract 12 (rasters of the agents' groups each call, the agents' boxes drawn):
+    the bundled ``zara1`` keeps its features with the map (contract 13)."""
+    assert spec.map is not None
+    assert spec.map.scene is not None
+    scene = dataclasses.replace(spec.map.scene, tile_px=0, halo_px=0, channels=0)
+    return dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=True, scene=scene))
+
+
 @pytest.mark.parametrize("name", ["apolloscape", "zara1", "sdd", "hdmap"])
 def test_the_network_inputs_are_the_engines(name: str) -> None:
     frame, spec = frame_and_spec(name)
@@ -33,8 +42,9 @@ def test_the_network_inputs_are_the_engines(name: str) -> None:
 
 @pytest.mark.parametrize("name", ["zara1", "sdd"])
 def test_raster_crops_are_the_engines(name: str) -> None:
-    """The crops (or a scene model's raster and grids, contract 12: ``zara1``) of a raster map."""
+    """The crops (or a scene model's raster and grids, contract 12: ``zara1`` read so) of a raster map."""
     frame, spec = frame_and_spec(name)
+    spec = per_call(spec) if name == "zara1" else spec
     assert spec.map is not None
     bare = dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=False))
     np.testing.assert_array_equal(research.preprocess(frame, bare)["map"], dgan.preprocess(frame, bare)["map"])
@@ -83,17 +93,24 @@ def test_the_prior_fits_are_the_engines(fit: str) -> None:
     np.testing.assert_allclose(ours, engine, atol=2e-5)
 
 
-@pytest.mark.parametrize(("name", "atol"), [("apolloscape", 1e-3), ("zara1", 0.05)])
-def test_the_pipeline_predicts_what_the_engine_does(name: str, atol: float) -> None:
+@pytest.mark.parametrize(("name", "atol", "n"), [("apolloscape", 1e-3, 0), ("zara1", 1e-3, 0), ("zara1", 1e-3, 400)])
+def test_the_pipeline_predicts_what_the_engine_does(name: str, atol: float, n: int) -> None:
+    """Also ``zara1`` (its map features kept, contract 13) on its scene tiled to 400 agents, whose agents read more
+    tiles than one network run of the engine computes."""
+    from benches.bench import tiled
+
     pytest.importorskip("torch")
     predictor = dgan.Predictor(name, sessions=1)
     frame = scene_for(predictor.spec).frame
+    frame = tiled(frame, n) if n else frame
+    if n:
+        assert len(dgan.preprocess(frame, predictor.spec)["map"]) > 64
     run = research.pipeline(name)
     assert run is not None
     trajectories, probabilities = run(frame)
     engine = predictor.predict(frame)
     modes = engine.trajectories.shape[1]
-    # The same network in PyTorch and ONNX Runtime (zara1: on crops whose agents' box edges differ).
+    # The same network in PyTorch and ONNX Runtime.
     np.testing.assert_allclose(trajectories[:, 0], engine.trajectories[:, 0], atol=atol)
     np.testing.assert_allclose(probabilities[:, :modes], engine.probabilities, atol=atol)
 
@@ -104,8 +121,8 @@ def test_a_scene_models_groups_are_the_engines() -> None:
     from benches.bench import tiled
 
     frame, spec = frame_and_spec("zara1")
+    spec = per_call(spec)
     assert spec.map is not None
-    assert spec.map.scene is not None
     big = tiled(frame, 32)
     bare = dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=False))
     engine, ours = dgan.preprocess(big, bare), research.preprocess(big, bare)
@@ -113,3 +130,24 @@ def test_a_scene_models_groups_are_the_engines() -> None:
     np.testing.assert_array_equal(ours["map"], engine["map"])
     np.testing.assert_array_equal(ours["map_slot"], engine["map_slot"])
     np.testing.assert_allclose(ours["map_grid"], engine["map_grid"], atol=1e-5)
+
+
+@pytest.mark.parametrize("with_map", [True, False])
+def test_a_kept_features_models_tiles_and_reads_are_the_engines(with_map: bool) -> None:
+    """Contract 13 (features kept with the map): the tiles the agents read, in order of first use, each drawn with
+    its halo on the world's grid, and each agent's four rows and weights per block centre; a frame without a map
+    reads one blank block."""
+    from benches.bench import tiled
+
+    frame, spec = frame_and_spec("zara1")
+    assert spec.map is not None
+    assert spec.map.scene is not None
+    scene = dataclasses.replace(spec.map.scene, tile_px=32, halo_px=16, channels=16)
+    kept = dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=False, scene=scene))
+    big = tiled(frame, 32) if with_map else tiled(frame, 32).without_map()
+    engine, ours = dgan.preprocess(big, kept), research.preprocess(big, kept)
+    assert engine["map"].shape[0] > 1 if with_map else engine["map"].shape[0] == 0
+    for key in ("map", "map_rows", "map_index"):
+        assert ours[key].shape == engine[key].shape, key
+        np.testing.assert_array_equal(ours[key], engine[key], err_msg=key)
+    np.testing.assert_allclose(ours["map_weight"], engine["map_weight"], atol=1e-5)

@@ -409,6 +409,15 @@ def spec_and_misc_cases() -> list[Case]:
     for label, kwargs, msg in specs:
         base = {"dt_s": 0.4, "t_obs": 8, "t_f": 12} | kwargs
         cases.append((f"InputSpec {label}", lambda k=base: dgan.InputSpec(**k), exc.InvalidSpecError, msg))
+    # dgan.read_kept (contract 13): rows outside the table, reads of another grid, NaN weights, wrong ranks.
+    rows, index, weight = np.ones((8, 3), np.float32), np.zeros((2, 16), np.int64), np.ones((2, 16), np.float32)
+    kept: list[tuple[str, Callable[[], Any], str]] = [
+        ("a row outside", lambda: dgan.read_kept(rows, index + 8, weight, (2, 2)), "outside the table"),
+        ("another grid", lambda: dgan.read_kept(rows, index, weight, (3, 3)), "blocks of four rows"),
+        ("NaN weights", lambda: dgan.read_kept(rows, index, weight * np.nan, (2, 2)), "finite"),
+        ("1-D rows", lambda: dgan.read_kept(rows[0], index, weight, (2, 2)), "2-D"),
+    ]
+    cases += [(f"read_kept {label}", fn, exc.InvalidSpecError, msg) for label, fn, msg in kept]
     pred = np.zeros((2, 3, 12, 2))
     gt = np.zeros((2, 12, 2))
     metric_cases: list[tuple[str, Callable[[], Any], str]] = [
@@ -527,7 +536,7 @@ def contract_cases(tmp: Path) -> list[Case]:
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 13, 99, "4", None, -1],
+        "contract_version": [0, 14, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",
@@ -553,6 +562,10 @@ def contract_cases(tmp: Path) -> list[Case]:
     return cases
 
 
+#: A scene that keeps its features with the map (contract 13).
+KEPT_SCENE = {"min_px": 32, "stride": 4, "tile_px": 64, "halo_px": 16, "channels": 16}
+
+
 def readers_cases(tmp: Path) -> list[Case]:
     """Contract 11's ``map.classes`` (the classes whose crops the engine draws) made invalid in the bundled zara1
     model's contract (a contract-10 file, or declared version 11), sealed again: a ``ContractError`` that says why."""
@@ -570,13 +583,20 @@ def readers_cases(tmp: Path) -> list[Case]:
         path = sealed_with(src, bad, tmp / f"readers_{len(cases)}.onnx")
         cases.append((f"contract map.classes {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
     # Contract 12's map.scene: not in an older contract, nor with a stride or side out of range, nor with readers.
-    for label, version, scene, extra, msg in [
+    scenes: list[tuple[str, int, dict[str, Any], dict[str, Any], str]] = [
         ("in a contract-11 model", 11, {"min_px": 32, "stride": 4}, {}, "map.scene is a contract-12 key"),
         ("with stride 0", 12, {"min_px": 32, "stride": 0}, {}, "map.scene.stride must be"),
         ("of 10^6 px", 12, {"min_px": 10**6, "stride": 4}, {}, "map.scene.min_px must be"),
         ("with readers", 12, {"min_px": 32, "stride": 4}, {"classes": ["pedestrian"]}, "do not apply"),
         ("without its stride", 12, {"min_px": 32}, {}, "missing field `stride`"),
-    ]:
+        # Contract 13's kept features: not in contract 12, with the agents' boxes, off the stride; and the bundled
+        # zara1's graph (which keeps them) declared as reading rasters per call.
+        ("kept in a contract-12 model", 12, {**KEPT_SCENE}, {"draw_agents": False}, "contract-13 key"),
+        ("kept with the agents' boxes", 13, {**KEPT_SCENE}, {"draw_agents": True}, "draw_agents must be false"),
+        ("kept off the stride", 13, {**KEPT_SCENE, "halo_px": 6}, {"draw_agents": False}, "multiples of the stride"),
+        ("per call on a kept graph", 12, {"min_px": 32, "stride": 4}, {"draw_agents": False}, "must be dynamic"),
+    ]
+    for label, version, scene, extra, msg in scenes:
         bad = dict(
             meta, weights_sha256="0" * 64, contract_version=version, map={**meta["map"], "scene": scene, **extra}
         )

@@ -189,3 +189,25 @@ def test_preprocess_threads_bound_the_crops_not_the_tensors(zara1_frame: dgan.Fr
     for bad in (0, -1, 1.5, True, 10**6):
         with pytest.raises(exc.InvalidSpecError, match="threads"):
             dgan.preprocess(zara1_frame, spec, threads=bad)  # type: ignore[arg-type]
+
+
+def test_a_scene_models_features_are_kept_with_the_map_for_later_calls() -> None:
+    """Contract 13 (the bundled zara1): the first call on a map computes the tiles its agents read and keeps them
+    with the map; later frames holding the same map (``dgan.scene_map`` gives the same object every time) read them,
+    while another predictor keeps its own; a map's copy starts with none."""
+    predictor = dgan.Predictor("zara1")
+    scene = dgan.demo.scene_for(predictor.spec)
+    frame = scene.frame
+    assert dgan.scene_map("zara1") is dgan.scene_map("zara1")
+    local = dgan.RasterMap(frame.map.image, frame.map.world_to_pixel)  # type: ignore[union-attr]
+    first = predictor.predict(frame.with_map(local))
+    kept = local.features_kept
+    assert kept > 0
+    moved = dgan.Frame(frame.positions + 0.5, classes=frame.classes, map=local)
+    predictor.predict(moved)
+    assert local.features_kept == kept  # the same tiles, read
+    again = predictor.predict(frame.with_map(local))
+    np.testing.assert_array_equal(again.trajectories, first.trajectories)
+    dgan.Predictor("zara1").predict(frame.with_map(local))
+    assert local.features_kept == 2 * kept
+    assert dgan.RasterMap(local.image, local.world_to_pixel).features_kept == 0

@@ -21,7 +21,7 @@ from training.data.recording import WindowSet
 from training.data.splits import located
 from training.data.windows import build_windows
 from training.export import export_model
-from training.modules.scene import SCENE_MIN_PX, SCENE_STRIDE, read_slots
+from training.modules.scene import SCENE_MIN_PX, SCENE_STRIDE, SceneMapEncoder, read_slots
 
 ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / "training" / "configs" / "ethucy_zara1.toml"
@@ -167,3 +167,78 @@ def test_a_scene_frame_split_across_lanes_equals_one_call() -> None:
     assert timings["parts"] > 0.0  # it did split
     np.testing.assert_allclose(b.trajectories, a.trajectories, atol=1e-5)
     np.testing.assert_allclose(b.probabilities, a.probabilities, atol=1e-6)
+
+
+KEPT = {**SCENE, "data.map_draw_agents": False, "data.map_scene_tile_px": 32}
+
+
+def test_kept_tiles_read_what_one_raster_of_the_world_grid_gives() -> None:
+    """Contract 13: the features of the map's tiles (each computed from its raster and a halo of the CNN's reach)
+    read at each agent's blocks are what the scene CNN over one large north-up raster on the same world grid gives
+    there, far from its edges: the tiles are seamless and placed where the engine's grid says."""
+    torch.manual_seed(0)
+    cfg = Config.load(CONFIG, KEPT)
+    spec = input_spec(cfg)
+    assert spec.map is not None
+    assert spec.map.scene is not None
+    assert spec.map.scene.tile_px == 32
+    model = build_model(cfg, spec, 8).eval()
+    frame = dgan.demo.scene_for(spec).frame
+    x = dgan.preprocess(frame, spec)
+    assert x["map_rows"].shape == (0, spec.map.scene.channels)
+    assert len(x["map"]) >= 2
+    enc = model.map_enc
+    assert isinstance(enc, SceneMapEncoder)
+    with torch.no_grad():
+        new = enc.tile_rows(torch.from_numpy(x["map"]), 32, 16)
+        assert new.shape == (len(x["map"]) * 64, spec.map.scene.channels)
+        patches = dgan.read_kept(new.numpy(), x["map_index"], x["map_weight"], (8, 8))
+        got = enc.proj(enc.agent(torch.from_numpy(patches)))
+        # One raster of 384 px whose middle pixel is global pixel (40, -40): world (20, 20) at 0.5 m.
+        raster = dgan.scene_raster(frame, spec, 384, origin=(20.0, 20.0), heading=np.pi / 2)
+        grid = dgan.crop_grid(x["origin"], x["heading"], spec, SCENE_STRIDE, 384, (20.0, 20.0), np.pi / 2)
+        assert np.abs(grid).max() < 0.8  # far from the raster's edges
+        n = len(grid)
+        features = enc.scene(torch.from_numpy(raster)[None])
+        reads = read_slots(features, torch.from_numpy(grid)[None], torch.arange(n))
+        want = enc.proj(enc.agent(reads))
+    torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-4)
+
+
+def test_a_kept_features_model_exports_and_predicts_as_its_network(tmp_path: Path) -> None:
+    """Contract 13 end to end: the exported graph gives the PyTorch network's outputs on the engine's inputs (every
+    tile computed, each agent's reading of them by ``dgan.read_kept``), and a predictor's later calls, which read the
+    tiles it kept, its batches and its lanes give each agent what its first call gave."""
+    from benches.bench import tiled
+
+    torch.manual_seed(0)
+    cfg = Config.load(CONFIG, KEPT)
+    spec = input_spec(cfg)
+    model = build_model(cfg, spec, 8).eval()
+    anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (8, spec.t_f, 2)), axis=1).astype(np.float32)
+    path = export_model(model, spec, anchors, np.zeros(8, np.int64), tmp_path / "m.onnx", "kept")
+    frame = dgan.demo.scene_for(spec).frame
+    x = dgan.preprocess(frame, dgan.Predictor(path).spec)
+    with torch.no_grad():
+        rows = model.tile_rows(torch.from_numpy(x["map"])).numpy()
+    x["map_patches"] = dgan.read_kept(np.concatenate([x["map_rows"], rows]), x["map_index"], x["map_weight"], (8, 8))
+    names = [n for n in (*dgan.contract.PADDED_INPUTS, *dgan.contract.KEPT_INPUTS) if n in x]
+    import onnxruntime as ort  # type: ignore[import-untyped]
+
+    got = ort.InferenceSession(str(path)).run(None, {n: x[n] for n in names})
+    with torch.no_grad():
+        want = model.forward_padded(**{n: torch.from_numpy(x[n]) for n in names})
+    assert len(got) == len(want) == 4
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_allclose(g, w.numpy(), atol=1e-4)
+    predictor = dgan.Predictor(path, threads=2)
+    first = predictor.predict(frame)
+    for again in (predictor.predict(frame), predictor.predict_batch([frame, frame.without_map(), frame])[2]):
+        np.testing.assert_allclose(again.trajectories, first.trajectories, atol=1e-5)
+        np.testing.assert_allclose(again.probabilities, first.probabilities, atol=1e-6)
+    big = tiled(frame, 128)
+    a, b = dgan.Predictor(path).predict(big), predictor.predict(big)
+    assert predictor.last_timings is not None
+    assert predictor.last_timings["parts"] > 0.0
+    np.testing.assert_allclose(b.trajectories, a.trajectories, atol=1e-5)
+    assert np.isfinite(predictor.predict(frame.without_map()).trajectories).all()
