@@ -234,7 +234,8 @@ pub struct PhaseTimes {
     /// The frame's tensors other than the map crops (states, transforms, graph, edge features, prior), on the calling
     /// thread.
     pub preprocess: Duration,
-    /// The map crops, on up to `threads` threads (zero for a model without a map).
+    /// The map crops, on up to `threads` threads (zero for a model without a map); of a model that keeps its map
+    /// features (contract 13), the tiles it computes and every agent's reading of them.
     pub crops: Duration,
     /// The network call: tensors handed to ONNX Runtime, the run (copies to and from a GPU included), outputs read.
     pub network: Duration,
@@ -801,8 +802,12 @@ impl Predictor {
         let decoded = if n == 0 {
             None
         } else {
+            // A kept-features model's reading of the map (and the tiles it had not kept) timed with the crops.
+            let reading = Instant::now();
+            let (inputs, patches) = self.read_kept(pool, inputs)?;
+            let read = if patches.is_some() { reading.elapsed() } else { Duration::ZERO };
             let started = Instant::now();
-            let outputs = self.run_on(pool, inputs)?;
+            let outputs = self.run_read(pool, inputs, patches)?;
             let ran = started.elapsed();
             let prior = if priors.len() == 1 {
                 priors.pop().ok_or_else(|| DganError::Inference("no prior".into()))?
@@ -813,6 +818,7 @@ impl Predictor {
             let decoded = self.decode_outputs(&outputs, prior.view(), &poses, modes, threads)?;
             if let Some(times) = times {
                 (times.network, times.decode) = (ran, started.elapsed().saturating_sub(ran));
+                times.crops += read;
             }
             Some(decoded)
         };
@@ -922,9 +928,19 @@ impl Predictor {
 
     /// [`Predictor::run`] on the first free session of `pool`.
     fn run_on(&self, pool: Pool, inputs: NetworkInputs) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
-        let infer = |e: ort::Error| DganError::Inference(e.to_string());
-        let kept = inputs.kept.is_some();
         let (inputs, patches) = self.read_kept(pool, inputs)?;
+        self.run_read(pool, inputs, patches)
+    }
+
+    /// [`Predictor::run_on`] once a kept-features model's reading is done ([`Predictor::read_kept`]: `patches`).
+    fn run_read(
+        &self,
+        pool: Pool,
+        inputs: NetworkInputs,
+        patches: Option<Array4<f32>>,
+    ) -> Result<(Array2<f32>, Array2<f32>, Array4<f32>)> {
+        let infer = |e: ort::Error| DganError::Inference(e.to_string());
+        let kept = patches.is_some();
         let mut feed: Vec<(&str, SessionInputValue<'_>)> = vec![
             (INPUT_TRAJECTORY, Tensor::from_array(inputs.trajectory).map_err(infer)?.into()),
             (INPUT_TRAJECTORY_MASK, Tensor::from_array(inputs.trajectory_mask).map_err(infer)?.into()),
