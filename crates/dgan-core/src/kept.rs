@@ -223,22 +223,36 @@ fn read_blocks(
     }
     let mut out = Array4::<f32>::zeros((n, c, gh, gw));
     let total = blocks.iter().map(|b| b.len() / c.max(1)).sum::<usize>();
-    for ((idx, w), mut patch) in index.outer_iter().zip(weight.outer_iter()).zip(out.outer_iter_mut()) {
+    let (index, weight) = (index.as_standard_layout(), weight.as_standard_layout());
+    let (idx_all, w_all) = match (index.as_slice(), weight.as_slice()) {
+        (Some(i), Some(w)) => (i, w),
+        _ => return Err(DganError::InvalidSpec("map reads are not contiguous".into())),
+    };
+    let points = gh * gw;
+    // Each block centre's four rows summed into `acc` (one vector operation a row), then laid out by channel.
+    let mut acc = vec![0.0f32; c];
+    for (a, mut patch) in out.outer_iter_mut().enumerate() {
         let patch = patch.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("patch not contiguous".into()))?;
-        for p in 0..gh * gw {
-            for k in 0..4 {
-                let (i, wt) = (idx[p * 4 + k], w[p * 4 + k]);
-                let i = usize::try_from(i).ok().filter(|i| *i < total).ok_or_else(|| {
-                    DganError::InvalidSpec(format!("a map read's row {i} is outside the table's {total} rows"))
+        let reads = &idx_all[a * p4..(a + 1) * p4];
+        let weights = &w_all[a * p4..(a + 1) * p4];
+        for p in 0..points {
+            acc.fill(0.0);
+            for k in p * 4..p * 4 + 4 {
+                let i = usize::try_from(reads[k]).ok().filter(|i| *i < total).ok_or_else(|| {
+                    DganError::InvalidSpec(format!("a map read's row {} is outside the table's {total} rows", reads[k]))
                 })?;
                 let (b, r) = (i / rows, i % rows);
                 let row = blocks
                     .get(b)
                     .and_then(|blk| blk.get(r * c..(r + 1) * c))
                     .ok_or_else(|| DganError::InvalidSpec(format!("a map read's row {i} is outside its block")))?;
-                for (ch, v) in row.iter().enumerate() {
-                    patch[ch * gh * gw + p] += wt * v;
+                let wt = weights[k];
+                for (s, v) in acc.iter_mut().zip(row) {
+                    *s += wt * v;
                 }
+            }
+            for (ch, v) in acc.iter().enumerate() {
+                patch[ch * points + p] = *v;
             }
         }
     }
@@ -316,17 +330,27 @@ pub fn kept_inputs(
     let mut tiles: HashMap<(i64, i64), usize> = HashMap::new();
     let mut order: Vec<(i64, i64)> = vec![];
     let mut local: Vec<(usize, i64)> = Vec::with_capacity(n * points * 4);
+    let mut last: Option<((i64, i64), usize)> = None;
+    let weights = weight.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("weights are not contiguous".into()))?;
     for (a, s) in states.iter().enumerate() {
         let pose = s.pose();
         for (p, world) in block_centres(&pose, crop, scene.stride).enumerate() {
             for (c, ((u, v), w)) in corners(world, crop.resolution_m, scene.stride).into_iter().enumerate() {
                 let at = (u.div_euclid(t), v.div_euclid(t));
-                let tile = *tiles.entry(at).or_insert_with(|| {
-                    order.push(at);
-                    order.len() - 1
-                });
+                // Neighbouring corners mostly share a tile: the last one found is tried first.
+                let tile = match last {
+                    Some((a, k)) if a == at => k,
+                    _ => {
+                        let k = *tiles.entry(at).or_insert_with(|| {
+                            order.push(at);
+                            order.len() - 1
+                        });
+                        last = Some((at, k));
+                        k
+                    }
+                };
                 local.push((tile, v.rem_euclid(t) * t + u.rem_euclid(t)));
-                weight[[a, p * 4 + c]] = w;
+                weights[(a * points + p) * 4 + c] = w;
             }
         }
     }
