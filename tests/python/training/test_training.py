@@ -16,6 +16,7 @@ import torch
 from conftest import shared_data
 
 import dgan
+from dgan.contract import KEPT_INPUTS
 from training.build import build_model, input_spec
 from training.config import Config
 from training.data.batches import INPUTS, forward_inputs
@@ -180,9 +181,15 @@ def assert_parity(
     if spec.map is not None and spec.map.optional:
         frames += [frame.without_map() for frame in frames]
     for frame in frames:
-        x = dgan.preprocess(frame, spec)
+        x = kept_inputs(model, spec, dgan.preprocess(frame, spec))
         with torch.no_grad():
-            cl, al, off = model(*forward_inputs({k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in x.items()}))
+            if "map_patches" in x:  # named: the kept readings follow contract 12's grids in forward's order
+                named = {k: torch.from_numpy(x[k]) for k in (*INPUTS, *KEPT_INPUTS) if k in x}
+                cl, al, off = model(**named)[:3]
+            else:
+                cl, al, off = model(
+                    *forward_inputs({k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in x.items()})
+                )
             prior = torch.from_numpy(x["prior"])
             a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
             t = cal.anchor_temperatures(prior, spec.dt_s)
@@ -193,6 +200,21 @@ def assert_parity(
         got = predictor.predict(frame)
         np.testing.assert_allclose(got.probabilities, prob.numpy(), atol=1e-4)
         np.testing.assert_allclose(got.trajectories, tied_order(world, prob.numpy(), got.trajectories), atol=1e-4)
+
+
+def kept_inputs(model: torch.nn.Module, spec: dgan.InputSpec, x: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``x`` (``dgan.preprocess``'s) as the network gets it: of a model that keeps its map features (contract 13), its
+    tiles' features computed by ``model`` and each agent's reading of them (``dgan.read_kept``), no tile left."""
+    if "map_rows" not in x:
+        return x
+    assert spec.map is not None
+    assert spec.map.scene is not None
+    assert isinstance(model, DGAN)
+    with torch.no_grad():
+        rows = model.tile_rows(torch.from_numpy(x["map"])).numpy()
+    grid = (-(-spec.map.height_px // spec.map.scene.stride), -(-spec.map.width_px // spec.map.scene.stride))
+    patches = dgan.read_kept(np.concatenate([x["map_rows"], rows]), x["map_index"], x["map_weight"], grid)
+    return x | {"map": x["map"][:0], "map_patches": patches}
 
 
 def tied_order(expected: np.ndarray, prob: np.ndarray, got: np.ndarray, tie: float = 1e-6) -> np.ndarray:
@@ -217,6 +239,10 @@ def test_bundled_models_match_pytorch(name: str) -> None:
 
 def test_every_bundled_model_has_a_checkpoint() -> None:
     assert set(dgan.models.list()) <= {p.stem for p in CHECKPOINTS.glob("*.pt")}
+
+
+#: Contract 13: the map features kept with the map, in tiles of 64 px.
+KEPT = {"data.map_draw_agents": False, "data.map_scene_tile_px": 64}
 
 
 def randomised_batch_norm(model: DGAN) -> DGAN:
@@ -247,6 +273,7 @@ def randomised_batch_norm(model: DGAN) -> DGAN:
         ("ethucy_zara1", {"data.prior": "none", "train.map_dropout": 0.0}),
         ("ethucy_zara1", {"model.map_mode": "scene", "data.map_scene_px": 64}),
         ("ethucy_zara1", {"model.map_mode": "scene", "data.map_scene_px": 64, "train.map_dropout": 0.0}),
+        ("ethucy_zara1", {"model.map_mode": "scene", "data.map_scene_px": 64, **KEPT}),
     ],
 )
 @pytest.mark.slow
