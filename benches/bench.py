@@ -165,9 +165,9 @@ def warm_inputs(session: Any, x: dict[str, np.ndarray], spec: dgan.InputSpec) ->
     ``predict`` feeds its network on every call after the map's first."""
     m = spec.map
     assert m is not None
-    sc = m.scene
+    sc, grid = m.scene, m.scene_grid
     assert sc is not None
-    grid = (-(-m.height_px // sc.stride), -(-m.width_px // sc.stride))
+    assert grid is not None
     names = [i.name for i in session.get_inputs()]
     blank = np.zeros((len(x["trajectory"]), sc.channels, *grid), np.float32)
     (rows,) = session.run([KEPT_OUTPUT], {k: blank if k == "map_patches" else x[k] for k in names})

@@ -403,7 +403,7 @@ def scene_inputs(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> tuple[Arr
     if m.draw_agents and frame.map is not None:
         draw_boxes(raster, states, scene, owners=(centre, north))
     # Each crop block's centre (rows from the top, columns centred on the agent's) in its group's raster.
-    gh, gw = -(-m.height_px // m.scene.stride), -(-m.width_px // m.scene.stride)
+    gh, gw = block_grid(m)
     w = block_centres(states, m) - centre[group][:, None]
     u, v = side // 2 + 0.5 + w[..., 0] / res, side // 2 + 0.5 - w[..., 1] / res
     cells = np.stack([2 * u / side - 1, 2 * v / side - 1], axis=-1).reshape(n, gh, gw, 2)
@@ -415,11 +415,16 @@ def scene_inputs(frame: dgan.Frame, states: dict[str, Arr], m: Any) -> tuple[Arr
     return np.ascontiguousarray(out), grid, (group * most + place).astype(np.int64)
 
 
+def block_grid(m: Any) -> tuple[int, int]:
+    """The ``stride × stride`` blocks of a scene model's crop, ``(rows, columns)``, the last ones partial."""
+    return -(-m.height_px // m.scene.stride), -(-m.width_px // m.scene.stride)
+
+
 def block_centres(states: dict[str, Arr], m: Any) -> Arr:
     """``(N, B, 2)`` the world positions of the centres of each agent's crop's ``stride × stride`` blocks, row-major
     (rows from the crop's top, columns laid out symmetrically about the agent's)."""
     pos, heading, res, k = states["position"], states["heading"], m.resolution_m, m.scene.stride
-    gh, gw = -(-m.height_px // k), -(-m.width_px // k)
+    gh, gw = block_grid(m)
     rows = np.arange(gh) * k + k / 2
     cols = m.agent_col + 0.5 + (np.arange(gw) - (gw - 1) / 2) * k
     local = np.stack(np.meshgrid((m.agent_row + 0.5 - rows) * res, (m.agent_col + 0.5 - cols) * res, indexing="ij"), -1)
@@ -465,7 +470,7 @@ def read_rows(table: Arr, x: dict[str, Arr], m: Any) -> Arr:
     """``(N, C, gh, gw)``: each agent's bilinear reading of a kept-features model's rows (contract 13), the weighted
     sum of the four rows ``map_index`` names per block centre (weights ``map_weight``)."""
     n, k = x["map_index"].shape
-    gh, gw = -(-m.height_px // m.scene.stride), -(-m.width_px // m.scene.stride)
+    gh, gw = block_grid(m)
     picked = table[x["map_index"]] * x["map_weight"][..., None]  # (N, B · 4, C)
     out: Arr = picked.reshape(n, k // 4, 4, -1).sum(axis=2).transpose(0, 2, 1).reshape(n, -1, gh, gw)
     return np.ascontiguousarray(out, dtype=np.float32)

@@ -165,11 +165,11 @@ def example_inputs(spec: dgan.InputSpec, n: int = 3) -> dict[str, torch.Tensor]:
         args["map"] = torch.rand(n, 3, m.height_px, m.width_px, generator=g)
     if m is not None and m.optional:
         args["map_present"] = torch.ones(n)
-    if m is not None and m.scene is not None and m.scene.tile_px:
-        gh, gw = (-(-side // m.scene.stride) for side in (m.height_px, m.width_px))
-        args["map_patches"] = torch.randn(n, m.scene.channels, gh, gw, generator=g)
-    elif m is not None and m.scene is not None:
-        gh, gw = (-(-side // m.scene.stride) for side in (m.height_px, m.width_px))
+    grid = m.scene_grid if m is not None else None
+    if m is not None and m.scene is not None and grid is not None and m.scene.tile_px:
+        args["map_patches"] = torch.randn(n, m.scene.channels, *grid, generator=g)
+    elif grid is not None:
+        gh, gw = grid
         args["map_grid"] = torch.rand(2, 2, gh, gw, 2, generator=g) * 2 - 1
         args["map_slot"] = torch.arange(n) % 4
     return args

@@ -78,6 +78,14 @@ class MapSpec:
         if self.scene is not None and not isinstance(self.scene, SceneSpec):
             raise InvalidSpecError(f"map.scene must be a dgan.SceneSpec, got {self.scene!r}")
 
+    @property
+    def scene_grid(self) -> tuple[int, int] | None:
+        """The blocks of each agent's crop a scene model reads, ``(rows, columns)``: ``ceil(height_px / stride)``,
+        ``ceil(width_px / stride)`` (``dgan_core::spec::MapSpec::scene_grid``); None for a crop model."""
+        if self.scene is None:
+            return None
+        return -(-self.height_px // self.scene.stride), -(-self.width_px // self.scene.stride)
+
 
 @dataclass(frozen=True)
 class ClassPrior:

@@ -99,9 +99,8 @@ class DGAN(nn.Module):
         )
         self.scene = cfg.map_mode == "scene"
         # Contract 13 (features kept with the map): (tile_px, halo_px), set by training.build.build_model from
-        # data.map_scene_tile_px (None: rasters per call), and the tiles' rows the last forward computed.
+        # data.map_scene_tile_px (None: rasters per call).
         self.kept_tiles: tuple[int, int] | None = None
-        self.new_rows = torch.zeros(0)
         self.map_enc = map_encoder(cfg, map_hw)
         # An optional map (contract 2) also gives the node its map_present flag, and zeroes the map's features where
         # the flag is 0, so that "no map" is one well-defined input the network learns in map dropout.
@@ -137,8 +136,8 @@ class DGAN(nn.Module):
         """Node features: the trajectory LSTM, the traffic-state MLP and the map CNN, concatenated and projected.
         With ``model.map_mode = "scene"``, ``map`` is the frames' scene rasters and ``scene`` their agents' grids and
         each agent's slot (``map_grid``, ``map_slot``: :class:`~training.modules.scene.SceneMapEncoder`); with one
-        tensor, ``map`` is the tiles to compute and ``scene`` each agent's reading of the features (contract 13:
-        ``map_patches``), the tiles' rows left in :attr:`new_rows`."""
+        tensor, ``scene`` each agent's reading of the kept features (contract 13: ``map_patches``; ``map``, the tiles
+        to compute, gives the fourth output, :meth:`tile_rows`)."""
         x = torch.cat([trajectory, trajectory_mask.unsqueeze(-1)], dim=-1)
         _, (h_n, _) = self.lstm(self.embed(x))
         parts = [h_n[-1], self.state_mlp(state)]
@@ -150,9 +149,8 @@ class DGAN(nn.Module):
                 map_present = map_present * reads
                 features = self._readers_map(map, reads)
             elif self.scene and scene is not None and len(scene) == 1:
-                assert self.kept_tiles is not None, "kept features need data.map_scene_tile_px"
                 assert isinstance(self.map_enc, SceneMapEncoder)
-                features, self.new_rows = self.map_enc.forward_kept(map, *scene, *self.kept_tiles)
+                features = self.map_enc.forward_kept(scene[0])
             elif self.scene:
                 assert scene is not None, "a scene map encoder takes map_grid and map_slot"
                 features = self.map_enc(map, *scene)
@@ -228,7 +226,7 @@ class DGAN(nn.Module):
         if not self.cfg.use_gat:
             # The contract's edge inputs stay in the exported graph (an exporter drops unused inputs).
             p = (edge_features.sum() + edge_index.sum().to(v.dtype)) * 0.0
-        return self.heads(p, v) + self._kept_out(scene)
+        return self.heads(p, v) + self._kept_out(map, scene)
 
     def tile_rows(self, tiles: Tensor) -> Tensor:
         """The features of tiles of the map as the engine keeps them (contract 13:
@@ -237,9 +235,11 @@ class DGAN(nn.Module):
         assert isinstance(self.map_enc, SceneMapEncoder)
         return self.map_enc.tile_rows(tiles, *self.kept_tiles)
 
-    def _kept_out(self, scene: tuple[Tensor, ...] | None) -> tuple[Tensor, ...]:
-        """The new tiles' rows as a fourth output where the map's features are kept (contract 13)."""
-        return (self.new_rows,) if scene is not None and len(scene) == 1 else ()
+    def _kept_out(self, map: Tensor | None, scene: tuple[Tensor, ...] | None) -> tuple[Tensor, ...]:
+        """The rows of the tiles ``map`` as a fourth output where the map's features are kept (contract 13)."""
+        if map is None or scene is None or len(scene) != 1:
+            return ()
+        return (self.tile_rows(map),)
 
     def forward_padded(
         self,
@@ -275,7 +275,7 @@ class DGAN(nn.Module):
         if not self.cfg.use_gat:
             unused = neighbor_features.sum() + neighbor_index.sum().to(v.dtype) + neighbor_mask.sum()
             p = unused * 0.0
-        return self.heads(p, v) + self._kept_out(scene)
+        return self.heads(p, v) + self._kept_out(map, scene)
 
 
 def scene_inputs(grid: Tensor | None, slot: Tensor | None, patches: Tensor | None) -> tuple[Tensor, ...] | None:

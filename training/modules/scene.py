@@ -121,11 +121,11 @@ class SceneMapEncoder(nn.Module):
         rows: Tensor = f[:, :, h : h + t, h : h + t].permute(0, 2, 3, 1).reshape(-1, f.shape[1])
         return rows
 
-    def forward_kept(self, tiles: Tensor, patches: Tensor, tile: int, halo: int) -> tuple[Tensor, Tensor]:
-        """Contract 13: ``(A, out)`` from each agent's reading of the features ``(A, C, gh, gw)`` (``map_patches``),
-        and the rows of the tiles ``tiles`` (:meth:`tile_rows`; the output ``map_features``)."""
+    def forward_kept(self, patches: Tensor) -> Tensor:
+        """Contract 13: ``(A, out)`` from each agent's reading of the kept features ``(A, C, gh, gw)``
+        (``map_patches``; the engine reads them from the rows of :meth:`tile_rows`)."""
         out: Tensor = self.proj(self.agent(patches))
-        return out, self.tile_rows(tiles, tile, halo)
+        return out
 
 
 def read_slots(features: Tensor, grid: Tensor, slot: Tensor) -> Tensor:

@@ -39,17 +39,18 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
     let shifted: Vec<Array2<i64>> =
         parts.iter().zip(&agent_ptr).map(|(p, &offset)| p.edge_index.mapv(|v| v + offset as i64)).collect();
     // A kept-features model's reads (contract 13) join with their tiles' rasters (a tile computed once).
-    let mut kept = None;
+    let (mut kept, mut tiles) = (None, None);
     if same_presence(parts, |p| p.kept.as_ref(), "kept map features")? {
         let pairs: Vec<(&crate::kept::KeptReads, &ndarray::Array4<f32>)> = parts
             .iter()
             .map(|p| p.kept.as_ref().zip(p.map.as_ref()))
             .collect::<Option<_>>()
             .ok_or_else(|| DganError::InvalidSpec("kept map features without their tiles' rasters".into()))?;
-        kept = Some(crate::kept::KeptReads::join(&pairs)?);
+        let (reads, rasters) = crate::kept::KeptReads::join(&pairs)?;
+        (kept, tiles) = (Some(reads), Some(rasters));
     }
-    let map = if let Some((_, rasters)) = &kept {
-        Some(rasters.clone())
+    let map = if tiles.is_some() {
+        tiles
     } else if same_presence(parts, |p| p.map.as_ref(), "map")? {
         Some(stack("map", parts.iter().filter_map(|p| p.map.as_ref().map(|m| m.view())).collect())?)
     } else {
@@ -123,7 +124,7 @@ pub fn join(parts: &[NetworkInputs]) -> Result<Joined> {
         map_present,
         map_grid,
         map_slot,
-        kept: kept.map(|(reads, _)| reads),
+        kept,
         neighbors,
     };
     Ok(Joined { inputs, agent_ptr })
@@ -182,9 +183,12 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
         None => None,
     };
     // A kept-features model's part reads the blocks its agents read, and computes the tiles among them.
-    let reads = match (&inputs.kept, &inputs.map) {
-        (Some(k), Some(m)) => Some(k.take(m, rows)),
-        _ => None,
+    let (reads, tiles) = match (&inputs.kept, &inputs.map) {
+        (Some(k), Some(m)) => {
+            let (reads, tiles) = k.take(m, rows);
+            (Some(reads), Some(tiles))
+        }
+        _ => (None, None),
     };
     Ok(NetworkInputs {
         trajectory: inputs.trajectory.select(Axis(0), rows),
@@ -193,7 +197,7 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
         edge_features: inputs.edge_features.select(Axis(0), &kept),
         edge_index,
         map: match (&scene, &inputs.map) {
-            _ if reads.is_some() => reads.as_ref().map(|(_, rasters)| rasters.clone()),
+            _ if tiles.is_some() => tiles,
             (Some((groups, _)), Some(m)) => Some(m.select(Axis(0), groups)),
             (None, Some(m)) => Some(m.select(Axis(0), rows)),
             (_, None) => None,
@@ -204,7 +208,7 @@ pub fn take(inputs: &NetworkInputs, rows: &[usize]) -> Result<NetworkInputs> {
             _ => None,
         },
         map_slot: scene.map(|(_, slots)| slots),
-        kept: reads.map(|(r, _)| r),
+        kept: reads,
         neighbors,
     })
 }

@@ -104,7 +104,7 @@ impl KeptReads {
         }
         let raster_views: Vec<_> =
             keep_new.iter().map(|&(part, t)| parts[part].1.index_axis(Axis(0), t).insert_axis(Axis(0))).collect();
-        let side = first_side(parts.iter().map(|(_, r)| *r));
+        let side = parts[0].1.dim().2;
         let rasters = if raster_views.is_empty() {
             Array4::zeros((0, 3, side, side))
         } else {
@@ -159,7 +159,7 @@ impl KeptReads {
                 self.rows
             )));
         }
-        let new_flat = new.as_ref().map(|n| n.as_standard_layout().to_owned());
+        let new_flat = new.as_ref().map(|n| n.as_standard_layout());
         let mut blocks: Vec<&[f32]> = self.kept.iter().map(|b| &b[..]).collect();
         if let Some(flat) = new_flat.as_ref().and_then(|f| f.as_slice()) {
             blocks.extend(flat.chunks(self.rows * c));
@@ -259,10 +259,6 @@ fn read_blocks(
     Ok(out)
 }
 
-fn first_side<'a>(mut rasters: impl Iterator<Item = &'a Array4<f32>>) -> usize {
-    rasters.next().map_or(0, |r| r.dim().2)
-}
-
 /// Row `v` of a table of blocks of `rows` rows, its block renumbered by `map`.
 fn remap(v: i64, rows: usize, map: &[usize]) -> i64 {
     let (b, r) = (v as usize / rows.max(1), v as usize % rows.max(1));
@@ -356,16 +352,19 @@ pub fn kept_inputs(
     }
     // Kept tiles first, then the ones to compute.
     let key = |at: (i64, i64)| model.map(|m| FeatureKey { model: m, i: at.0, j: at.1 });
-    let found: Vec<Option<Arc<[f32]>>> = order.iter().map(|&at| key(at).and_then(|k| map.features().get(&k))).collect();
+    let found: Vec<Option<Arc<[f32]>>> = order
+        .iter()
+        .map(|&at| key(at).and_then(|k| map.features().get(&k)).filter(|f| f.len() == rows * scene.channels))
+        .collect();
     let (mut kept, mut new, mut block) = (vec![], vec![], vec![0usize; order.len()]);
     for (b, f) in found.iter().enumerate() {
-        if let Some(f) = f.as_ref().filter(|f| f.len() == rows * scene.channels) {
+        if let Some(f) = f {
             block[b] = kept.len();
             kept.push(f.clone());
         }
     }
     for (b, &at) in order.iter().enumerate() {
-        if found[b].as_ref().is_none_or(|f| f.len() != rows * scene.channels) {
+        if found[b].is_none() {
             block[b] = kept.len() + new.len();
             new.push(NewTile { at, keep: key(at).map(|k| (map.clone(), k)) });
         }

@@ -17,6 +17,7 @@ use crate::frame::Frame;
 use crate::limits::on_threads;
 use crate::preprocess::{preprocess_for, preprocess_without_crops, Limits, NetworkInputs, Preprocessed};
 use crate::raster::{rasterize_into, rasterize_rows};
+use crate::spec::EDGE_FEATURES;
 use crate::transform::AgentPose;
 use ndarray::{s, Array2, Array3, Array4, ArrayView3, Axis, Ix2, Ix4};
 use ort::session::{Session, SessionInputValue};
@@ -871,6 +872,8 @@ impl Predictor {
         let side = tiles.dim().2;
         let new = if reads.new.is_empty() {
             None
+        } else if tiles.dim().0 <= TILES_PER_RUN {
+            Some(self.compute_tiles(pool, tiles)?)
         } else {
             // In runs of at most TILES_PER_RUN tiles, so that a frame that reads many bounds the network's memory.
             let mut rows = vec![];
@@ -903,7 +906,10 @@ impl Predictor {
             (INPUT_STATE, Tensor::from_array(Array2::<f32>::zeros((1, spec.state_dim()))).map_err(infer)?.into()),
             (INPUT_NEIGHBOR_INDEX, Tensor::from_array(Array2::<i64>::zeros((1, 1))).map_err(infer)?.into()),
             (INPUT_NEIGHBOR_MASK, Tensor::from_array(Array2::<f32>::ones((1, 1))).map_err(infer)?.into()),
-            (INPUT_NEIGHBOR_FEATURES, Tensor::from_array(Array3::<f32>::zeros((1, 1, 6))).map_err(infer)?.into()),
+            (
+                INPUT_NEIGHBOR_FEATURES,
+                Tensor::from_array(Array3::<f32>::zeros((1, 1, EDGE_FEATURES.len()))).map_err(infer)?.into(),
+            ),
             (INPUT_MAP, Tensor::from_array(tiles).map_err(infer)?.into()),
             (
                 INPUT_MAP_PATCHES,

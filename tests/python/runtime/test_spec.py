@@ -190,3 +190,13 @@ def test_scene_raster_and_crop_grid_refuse_bad_input(zara1_frame: dgan.Frame) ->
         dgan.crop_grid(*one, spec, 40, 64, (0, 0), 0.0)
     with pytest.raises(exc.InvalidSpecError, match="stride must be a positive int"):
         dgan.crop_grid(*one, spec, True, 64, (0, 0), 0.0)
+
+
+def test_a_scene_models_grid_is_the_engines(zara1_frame: dgan.Frame) -> None:
+    """``MapSpec.scene_grid``: the blocks whose reads the engine gives each agent (zara1: 32 × 31 px in 4 px blocks);
+    None for a crop model."""
+    spec = dgan.Predictor("zara1").spec
+    assert spec.map is not None
+    assert spec.map.scene_grid == (8, 8)
+    assert dgan.preprocess(zara1_frame, spec)["map_index"].shape[1] == 8 * 8 * 4
+    assert dgan.MapSpec().scene_grid is None

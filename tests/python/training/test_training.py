@@ -212,7 +212,8 @@ def kept_inputs(model: torch.nn.Module, spec: dgan.InputSpec, x: dict[str, np.nd
     assert isinstance(model, DGAN)
     with torch.no_grad():
         rows = model.tile_rows(torch.from_numpy(x["map"])).numpy()
-    grid = (-(-spec.map.height_px // spec.map.scene.stride), -(-spec.map.width_px // spec.map.scene.stride))
+    grid = spec.map.scene_grid
+    assert grid is not None
     patches = dgan.read_kept(np.concatenate([x["map_rows"], rows]), x["map_index"], x["map_weight"], grid)
     return x | {"map": x["map"][:0], "map_patches": patches}
 
