@@ -548,9 +548,10 @@ impl Predictor {
         let (mut pre, mut later) = preprocess_without_crops(frame, spec, &self.limits, self.threads)?;
         times.preprocess = started.elapsed();
         if let (true, Some(m)) = (later, &spec.map) {
-            if m.scene.is_some() {
-                // A scene model's rasters and grids (contract 12), timed as the crops they stand for: drawn before
-                // the parts are known, since a part takes whole groups of them.
+            // A scene model's rasters and grids (contract 12), timed as the crops they stand for: drawn before the
+            // parts are known, since a part takes whole groups of them. A kept-features model's reads (contract 13)
+            // are its own agents' alone, so a split frame's parts each find theirs on their lanes.
+            if m.scene.is_some_and(|s| !(s.kept() && self.lanes.len() >= 2)) {
                 pre.inputs.draw_scene(frame, &pre.states, m, Some(self.id))?;
                 times.crops = started.elapsed().saturating_sub(times.preprocess);
                 later = false;
@@ -566,8 +567,12 @@ impl Predictor {
             }
         }
         if let (true, Some(m)) = (later, &spec.map) {
-            let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
-            pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
+            if m.scene.is_some() {
+                pre.inputs.draw_scene(frame, &pre.states, m, Some(self.id))?;
+            } else {
+                let spare = std::mem::take(&mut *self.spare_crops.lock().unwrap_or_else(|e| e.into_inner()));
+                pre.inputs.map = Some(rasterize_into(frame, &pre.states, m, self.threads, spare)?);
+            }
             times.crops = started.elapsed().saturating_sub(times.preprocess);
         }
         // A small frame on a lane: waking intra-op workers costs more than they give there.
@@ -622,8 +627,9 @@ impl Predictor {
     }
 
     /// One frame as concurrent network calls, one per part (each closed under the graph's edges, so every agent
-    /// sees the neighbours it would see in one call), each part's map crops (`crops_later`) drawn, its network run
-    /// and its outputs decoded on its thread; the rows put back in frame order.
+    /// sees the neighbours it would see in one call), each part's map crops (`crops_later`; a kept-features model's
+    /// reads of its agents' tiles, [`crate::kept::kept_inputs`]) drawn, its network run and its outputs decoded on
+    /// its thread; the rows put back in frame order.
     fn run_split(
         &self,
         frame: &Frame,
@@ -637,7 +643,13 @@ impl Predictor {
         let one = |rows: &Vec<usize>| -> Result<Decoded> {
             let mut inputs = take(&pre.inputs, rows)?;
             if let (true, Some(m)) = (crops_later, &self.contract.input.map) {
-                inputs.map = Some(rasterize_rows(frame, &pre.states, m, rows, 1)?);
+                if m.scene.is_some() {
+                    // A kept-features model's part reads the tiles its own agents read.
+                    let states: Vec<_> = rows.iter().map(|&i| pre.states[i]).collect();
+                    inputs.draw_scene(frame, &states, m, Some(self.id))?;
+                } else {
+                    inputs.map = Some(rasterize_rows(frame, &pre.states, m, rows, 1)?);
+                }
             }
             let outputs = self.run_on(Pool::Lanes, inputs)?;
             let prior = pre.prior.select(Axis(0), rows);

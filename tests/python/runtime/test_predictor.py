@@ -381,6 +381,8 @@ def test_two_threads_split_frames_and_batches_with_the_one_thread_results() -> N
         crowd = dgan.Frame(base.positions[:, -1].mean(axis=0) + grid + steps, map=base.map)
         for frame in [*frames, doubled, doubled.without_map(), crowd]:
             want, got = one.predict(frame), two.predict(frame)
+            if frame is doubled:  # two parts, each drawing (or, zara1, reading the kept tiles of) its own agents
+                assert (two.last_timings or {}).get("parts", 0.0) > 0.0
             np.testing.assert_allclose(got.trajectories, want.trajectories, atol=1e-5)
             np.testing.assert_allclose(got.probabilities, want.probabilities, atol=1e-6)
             np.testing.assert_array_equal(got.edges, want.edges)
