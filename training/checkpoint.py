@@ -1,4 +1,5 @@
-"""Checkpoints written so that a run stopped at any moment keeps its last one whole."""
+"""Checkpoints written so that a run stopped at any moment keeps its last one whole, and the weights a run starts
+from (``train.init``)."""
 
 from __future__ import annotations
 
@@ -25,3 +26,30 @@ def update_checkpoint(path: Path, **values: Any) -> None:
     ckpt = torch.load(path, weights_only=False)
     ckpt.update(values)
     save_atomic(ckpt, path)
+
+
+#: A crop model's map CNN layers (``MapEncoder.net``) as a scene model's (``SceneMapEncoder``): the stem and both
+#: residual stages run over the scene, the last strided convolution per agent (training.modules.scene).
+CROP_TO_SCENE = {**{f"map_enc.net.{i}.": f"map_enc.scene.{i}." for i in range(8)}, "map_enc.net.8.": "map_enc.agent.0."}
+
+
+def init_weights(model: torch.nn.Module, path: Path | str) -> tuple[list[str], list[str]]:
+    """Loads into ``model`` the parameters and buffers of the checkpoint at ``path`` (a run's ``{"model": ...}``, or
+    a consensus's ``{"members": [...]}``, whose first member is taken) that match one of its own by name (a crop
+    model's map CNN renamed as a scene model's, :data:`CROP_TO_SCENE`) and shape; the names loaded and the model's
+    names left as initialised. Raises a ValueError when nothing matches (another architecture)."""
+    ckpt = torch.load(path, weights_only=False)
+    source = ckpt["members"][0]["model"] if "members" in ckpt else ckpt["model"]
+    own = model.state_dict()
+    found: dict[str, torch.Tensor] = {}
+    for name, value in source.items():
+        for old, new in CROP_TO_SCENE.items():
+            if name.startswith(old) and name not in own:
+                name = new + name[len(old) :]
+                break
+        if name in own and own[name].shape == value.shape:
+            found[name] = value
+    if not found:
+        raise ValueError(f"train.init: no parameter of {path} matches the model's names and shapes")
+    model.load_state_dict(found, strict=False)
+    return sorted(found), sorted(set(own) - set(found))

@@ -154,6 +154,10 @@ class TrainConfig:
     # teacher's whole mode distribution (its temperature applied; each teacher mode counted at the student anchor
     # closest to it), so that the student learns how sure the teacher is, not only its top mode. 0 = off.
     distill_soft: float = 0.0
+    # The weights a new run starts from: a checkpoint (a run's, or a consensus's first member) whose parameters of
+    # the same name and shape are loaded (training.checkpoint.init_weights; a crop model's map CNN into a scene
+    # model's, layer by layer); the others keep their initialisation. "" = none. Not read when resuming.
+    init: str = ""
 
 
 #: ``train.calibration_split`` and ``train.select_split``: every window of the validation split ("all",

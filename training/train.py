@@ -35,7 +35,7 @@ from training.calibrate import (
     check_calibration,
     fit_temperature,
 )
-from training.checkpoint import save_atomic
+from training.checkpoint import init_weights, save_atomic
 from training.config import Config
 from training.data.arrays import Windows
 from training.data.batches import prepared_batch, windows_with_targets
@@ -210,6 +210,10 @@ def main(argv: list[str] | None = None) -> Path:
     teacher = Teacher.load(cfg.train.distill, spec) if cfg.train.distill else None
     if teacher is not None:
         train = teacher_crops(cfg, spec, teacher, train, bars)
+    if cfg.train.init and ckpt is None:
+        loaded, left = init_weights(model, cfg.train.init)
+        if show:
+            print(f"train.init: {len(loaded)} tensors from {cfg.train.init}, {len(left)} initialised: {left}")
     opt, sched = optimiser(cfg, model)
     start_epoch, best = resume(ckpt, model, opt, sched)
     net: torch.nn.Module = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
