@@ -328,24 +328,36 @@ pub fn kept_inputs(
     let mut local: Vec<(usize, i64)> = Vec::with_capacity(n * points * 4);
     let mut last: Option<((i64, i64), usize)> = None;
     let weights = weight.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("weights are not contiguous".into()))?;
+    let mut tile_of = |at: (i64, i64)| -> usize {
+        // Neighbouring block centres mostly share a tile: the last one found is tried first.
+        match last {
+            Some((a, k)) if a == at => k,
+            _ => {
+                let k = *tiles.entry(at).or_insert_with(|| {
+                    order.push(at);
+                    order.len() - 1
+                });
+                last = Some((at, k));
+                k
+            }
+        }
+    };
     for (a, s) in states.iter().enumerate() {
         let pose = s.pose();
         for (p, world) in block_centres(&pose, crop, scene.stride).enumerate() {
-            for (c, ((u, v), w)) in corners(world, crop.resolution_m, scene.stride).into_iter().enumerate() {
-                let at = (u.div_euclid(t), v.div_euclid(t));
-                // Neighbouring corners mostly share a tile: the last one found is tried first.
-                let tile = match last {
-                    Some((a, k)) if a == at => k,
-                    _ => {
-                        let k = *tiles.entry(at).or_insert_with(|| {
-                            order.push(at);
-                            order.len() - 1
-                        });
-                        last = Some((at, k));
-                        k
-                    }
-                };
-                local.push((tile, v.rem_euclid(t) * t + u.rem_euclid(t)));
+            let four = corners(world, crop.resolution_m, scene.stride);
+            let ((u, v), _) = four[0];
+            let (lu, lv) = (u.rem_euclid(t), v.rem_euclid(t));
+            if lu + 1 < t && lv + 1 < t {
+                // All four corners in the first one's tile: its row and the three beside and below it.
+                let (tile, row) = (tile_of((u.div_euclid(t), v.div_euclid(t))), lv * t + lu);
+                local.extend([(tile, row), (tile, row + 1), (tile, row + t), (tile, row + t + 1)]);
+            } else {
+                for ((u, v), _) in four {
+                    local.push((tile_of((u.div_euclid(t), v.div_euclid(t))), v.rem_euclid(t) * t + u.rem_euclid(t)));
+                }
+            }
+            for (c, (_, w)) in four.into_iter().enumerate() {
                 weights[(a * points + p) * 4 + c] = w;
             }
         }
