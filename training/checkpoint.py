@@ -37,8 +37,11 @@ def init_weights(model: torch.nn.Module, path: Path | str) -> tuple[list[str], l
     """Loads into ``model`` the parameters and buffers of the checkpoint at ``path`` (a run's ``{"model": ...}``, or
     a consensus's ``{"members": [...]}``, whose first member is taken) that match one of its own by name (a crop
     model's map CNN renamed as a scene model's, :data:`CROP_TO_SCENE`) and shape; the names loaded and the model's
-    names left as initialised. Raises a ValueError when nothing matches (another architecture)."""
+    names left as initialised. Raises a ValueError when nothing matches (another architecture) or a consensus has no
+    members."""
     ckpt = torch.load(path, weights_only=False)
+    if "members" in ckpt and not ckpt["members"]:
+        raise ValueError(f"train.init: {path} is a consensus without members")
     source = ckpt["members"][0]["model"] if "members" in ckpt else ckpt["model"]
     own = model.state_dict()
     found: dict[str, torch.Tensor] = {}

@@ -96,6 +96,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[argparse.Namespace, Confi
     if cfg.train.distill_soft < 0 or (cfg.train.distill_soft > 0 and not cfg.train.distill):
         raise ValueError(f"train.distill_soft must be >= 0 and needs train.distill, got {cfg.train.distill_soft}")
     check_anchor_pool(cfg.train.anchor_pool)
+    if cfg.train.init and not Path(cfg.train.init).is_file():
+        raise ValueError(f"train.init must name a checkpoint file, got {cfg.train.init!r} (no such file)")
     calibration_config(cfg)  # refuses an unknown train.calibration_split before any training
     check_calibration(cfg.train.calibration)
     return args, cfg

@@ -54,3 +54,14 @@ def test_weights_of_other_shapes_stay_initialised_and_another_architecture_is_re
     torch.save({"model": {"something.else": torch.zeros(3)}}, tmp_path / "other.pt")
     with pytest.raises(ValueError, match=r"train\.init: no parameter"):
         init_weights(crop, tmp_path / "other.pt")
+    torch.save({"members": [], "runs": []}, tmp_path / "empty.pt")
+    with pytest.raises(ValueError, match="a consensus without members"):
+        init_weights(crop, tmp_path / "empty.pt")
+
+
+def test_a_run_refuses_an_init_that_is_not_a_file_before_loading_data(tmp_path: Path) -> None:
+    from training.train import parse_args
+
+    args = ["--config", str(CONFIG), "--out", str(tmp_path / "run"), "--set", f"train.init={tmp_path / 'no.pt'}"]
+    with pytest.raises(ValueError, match=r"train\.init must name a checkpoint file.*no such file"):
+        parse_args(args)
