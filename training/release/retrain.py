@@ -70,7 +70,9 @@ def _distilled(
     for i, (recordings, runs) in enumerate(folds):
         fold_teacher = model_checkpoint(runs, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")
         args = ("--set", f"data.val_recordings={recordings}", "--set", f"train.distill={fold_teacher}")
-        fold_students.append(_seed_runs(toml, root, (0,), f"{runs[0].name}_student", *args, *DISTILL))
+        # The folds stand in for the student: the same changes of its configuration.
+        student_args = STUDENT_ARGS.get(ds, ())
+        fold_students.append(_seed_runs(toml, root, (0,), f"{runs[0].name}_student", *args, *student_args, *DISTILL))
     return student, fold_students
 
 
