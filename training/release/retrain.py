@@ -65,13 +65,13 @@ def _distilled(
     """The student of the members' consensus, and for each calibration fold (its held-out recordings and runs) the
     student of that fold's consensus (no top-mode scale or temperature: the fold stands in for the model before
     calibration)."""
-    student = _student(members, TEACHERS / f"{ds}.pt", toml, root, f"{ds}_student", *STUDENT_ARGS.get(ds, ()))
+    student_args = STUDENT_ARGS.get(ds, ())
+    student = _student(members, TEACHERS / f"{ds}.pt", toml, root, f"{ds}_student", *student_args)
     fold_students = []
     for i, (recordings, runs) in enumerate(folds):
         fold_teacher = model_checkpoint(runs, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")
         args = ("--set", f"data.val_recordings={recordings}", "--set", f"train.distill={fold_teacher}")
         # The folds stand in for the student: the same changes of its configuration.
-        student_args = STUDENT_ARGS.get(ds, ())
         fold_students.append(_seed_runs(toml, root, (0,), f"{runs[0].name}_student", *args, *student_args, *DISTILL))
     return student, fold_students
 

@@ -308,19 +308,21 @@ fn decode_rows(
     let DecodeParams { anchors, prior, calibration, dt_s } = *params;
     let (rows, m, t_f, _) = part.trajectories.dim();
     let agents = first..first + rows;
+    // Each output's rows of this share, contiguous (copied once into that layout if they are not).
     let class_logits = out.class_logits.slice(s![agents.clone(), ..]);
+    let class_logits = class_logits.as_standard_layout();
     let anchor_logits = out.anchor_logits.slice(s![agents.clone(), ..]);
+    let anchor_logits = anchor_logits.as_standard_layout();
     let offsets = out.offsets.slice(s![agents.clone(), .., .., ..]);
     let offsets = offsets.as_standard_layout();
-    let offsets = offsets.as_slice().ok_or_else(|| DganError::Inference("offsets are not contiguous".into()))?;
-    // Over contiguous rows, without an early exit, so that the check vectorises (as ndarray's chained iterators over
-    // the views did not: a fifth of decoding's time).
-    let not_finite = |v: &[f32]| v.iter().fold(false, |bad, x| bad | !x.is_finite());
-    let logits_bad = class_logits.rows().into_iter().chain(anchor_logits.rows()).any(|row| match row.as_slice() {
-        Some(row) => not_finite(row),
-        None => row.iter().any(|x| !x.is_finite()),
-    });
-    if logits_bad || not_finite(offsets) {
+    fn contiguous(v: Option<&[f32]>) -> Result<&[f32]> {
+        v.ok_or_else(|| DganError::Inference("outputs are not contiguous".into()))
+    }
+    let offsets = contiguous(offsets.as_slice())?;
+    // Over the slices, without an early exit, so that the check vectorises (as ndarray's chained iterators over the
+    // views did not: a fifth of decoding's time).
+    let finite = |v: &[f32]| !v.iter().fold(false, |bad, x| bad | !x.is_finite());
+    if ![contiguous(class_logits.as_slice())?, contiguous(anchor_logits.as_slice())?, offsets].into_iter().all(finite) {
         return Err(DganError::Inference("the model produced NaN or infinite values".into()));
     }
     let k_total = anchors.total();
