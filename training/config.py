@@ -82,6 +82,9 @@ class DataConfig:
     # stay within this many metres of its current one given that position at every observed step, as a tracker
     # holding a static object's box gives it; 0 = none.
     augment_hold_m: float = 0.0
+    # Whether that copy holds the futures too: every agent whose whole window (history and future) stays within
+    # augment_hold_m of one point is held there throughout, as a tracker holding a static object's box holds it on.
+    augment_hold_future: bool = False
 
 
 @dataclass(frozen=True)

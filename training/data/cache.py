@@ -35,7 +35,7 @@ def cache_path(found: Located, spec: dgan.InputSpec, cache_dir: Path, scene_px: 
         if part.noise != (0.0, 0.0):
             version += f"-noise{part.noise[0]:g}-drop{part.noise[1]:g}"
         if part.hold > 0:
-            version += f"-hold{part.hold:g}"
+            version += f"-hold{part.hold:g}" + ("-future" if part.hold_future else "")
     if scene_px > 0 and spec.map is not None and spec.map.scene is not None:
         version += f"-scene{scene_px}"
     files_key = [(f.name, f.stat().st_size) for f in found.files]
@@ -68,7 +68,9 @@ def cached(
         if path.is_file():
             out.append(read_windows(path))
             continue
-        w = build_windows(f.read(), f.info, spec, f.part.stride, progress, f.part.noise, f.part.hold, scene_px)
+        w = build_windows(
+            f.read(), f.info, spec, f.part.stride, progress, f.part.noise, f.part.hold, scene_px, f.part.hold_future
+        )
         cache_dir.mkdir(parents=True, exist_ok=True)
         arrays = {k: v for k, v in vars(w).items() if isinstance(v, np.ndarray)}
         np.savez(path, files=np.array(w.files), **arrays)  # type: ignore[arg-type]

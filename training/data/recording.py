@@ -82,6 +82,8 @@ class WindowSet:
     noise: tuple[float, float] = (0.0, 0.0)
     pedestrians: bool = False
     hold: float = 0.0
+    #: With ``hold``: the whole window (history and future) of each agent that stays within ``hold`` metres held.
+    hold_future: bool = False
 
 
 @dataclass(frozen=True)

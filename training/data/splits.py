@@ -87,7 +87,10 @@ def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
     noisy = [replace(own, noise=(sigma, d.augment_drop)) for sigma in augment_sigmas(d.augment_noise)]
     if d.augment_hold_m < 0:
         raise ValueError(f"data.augment_hold_m must be >= 0 metres, got {d.augment_hold_m}")
-    noisy += [replace(own, hold=d.augment_hold_m)] if d.augment_hold_m > 0 else []
+    if d.augment_hold_future and d.augment_hold_m <= 0:
+        raise ValueError("data.augment_hold_future needs a held copy (data.augment_hold_m > 0)")
+    held = replace(own, hold=d.augment_hold_m, hold_future=d.augment_hold_future)
+    noisy += [held] if d.augment_hold_m > 0 else []
     extra = [WindowSet(s, "train", stride=d.extra_stride, pedestrians=True) for s in sources]
     return [own, *noisy, *extra, *joint]
 

@@ -121,13 +121,14 @@ def build_windows(
     noise: tuple[float, float] = (0.0, 0.0),
     hold: float = 0.0,
     scene_px: int = SCENE_TRAIN_PX,
+    hold_future: bool = False,
 ) -> Windows:
     """Preprocesses every window of ``recs`` through the engine; ``noise = (sigma_m, drop)`` first corrupts the
     observed histories as a tracker would (:func:`training.data.augment.tracker_noise`, seeded by the recording's
     order), ``hold`` (metres) holds their still agents where they are (:func:`training.data.augment.held_still`), the
-    futures staying as recorded. A scene model's windows (``spec.map.scene``, contract 12) also hold their scene
-    rasters of ``scene_px`` a side and their agents' grids (:func:`scene_inputs`), beside the agents' crops that a
-    teacher reads."""
+    futures staying as recorded (``hold_future``: the agents still over the whole window held throughout). A scene
+    model's windows (``spec.map.scene``, contract 12) also hold their scene rasters of ``scene_px`` a side and their
+    agents' grids (:func:`scene_inputs`), beside the agents' crops that a teacher reads."""
     from tqdm import tqdm
 
     parts: dict[str, list[Arr]] = {k: [] for k in Windows.__dataclass_fields__ if k not in ("files",)}
@@ -144,7 +145,9 @@ def build_windows(
         for w in tqdm(windows, desc=rec.name, disable=not progress, leave=False):
             if noise != (0.0, 0.0):
                 w = noisy_window(w, spec.t_obs, noise, rng)
-            if hold > 0:
+            if hold > 0 and hold_future:
+                w = replace(w, positions=held_still(w.positions, w.mask, hold))
+            elif hold > 0:
                 obs = held_still(w.positions[:, : spec.t_obs], w.mask[:, : spec.t_obs], hold)
                 w = replace(w, positions=np.concatenate([obs, w.positions[:, spec.t_obs :]], axis=1))
             frame = w.frame(info, spec.t_obs, with_map=spec.map is not None)

@@ -178,3 +178,39 @@ def test_a_held_copy_joins_the_training_sets_flagged_and_cached_apart() -> None:
     assert [s.hold for s in window_sets(d, "val")] == [0.0]
     with pytest.raises(ValueError, match="augment_hold_m"):
         window_sets(replace(d, augment_hold_m=-1.0), "train")
+
+
+def test_a_held_copy_with_futures_holds_the_still_agents_whole_window() -> None:
+    """``data.augment_hold_future``: an agent still over its whole window (a parked car's jittering box) is held at
+    one point throughout, so its future in its own frame is zero; a walker keeps its recorded window; without a held
+    copy the option is refused, and the cache keys the two held copies apart."""
+    from dataclasses import replace
+
+    from training.config import DataConfig
+    from training.data.cache import cache_path
+    from training.data.datasets import DATASETS
+    from training.data.recording import Located, Recording
+    from training.data.splits import window_sets
+    from training.data.windows import build_windows
+
+    spec = dgan.Predictor("apolloscape").spec
+    steps = spec.t_obs + spec.t_f
+    rng = np.random.default_rng(1)
+    step = np.repeat(np.arange(steps), 2)
+    agent = np.tile([0, 1], steps)
+    xy = np.c_[step * 1.5 * (agent == 1), 3.0 * agent] + (agent == 0)[:, None] * rng.normal(0.0, 0.05, (2 * steps, 2))
+    rec = Recording.sorted(name="toy", step=step, agent=agent, xy=xy, label=np.full(2 * steps, 2))
+    info = DATASETS["apolloscape"]
+    held = build_windows([rec], info, spec, stride=1, progress=False, hold=0.5, hold_future=True)
+    plain = build_windows([rec], info, spec, stride=1, progress=False, hold=0.5)
+    assert held.num_windows == plain.num_windows == 1
+    np.testing.assert_array_equal(held.future[0], 0.0)
+    assert np.abs(plain.future[0]).max() > 0.01
+    np.testing.assert_allclose(held.future[1], plain.future[1])
+    d = replace(DataConfig(), dataset="apolloscape", augment_hold_m=0.5, augment_hold_future=True)
+    assert [(s.hold, s.hold_future) for s in window_sets(d, "train")] == [(0.0, False), (0.5, True)]
+    with pytest.raises(ValueError, match="augment_hold_future"):
+        window_sets(replace(d, augment_hold_m=0.0), "train")
+    parts = window_sets(d, "train")[1], window_sets(replace(d, augment_hold_future=False), "train")[1]
+    keys = {cache_path(Located(p, [], info, list), spec, Path("/tmp")).name for p in parts}
+    assert len(keys) == 2
