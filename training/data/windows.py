@@ -112,6 +112,15 @@ def iter_windows(
         )
 
 
+def held_window(w: Window, t_obs: int, hold: float, whole: bool) -> Window:
+    """``w`` with its still agents held where they are (:func:`training.data.augment.held_still`): over the observed
+    steps, the futures staying as recorded, or (``whole``) over the whole window, history and future."""
+    if whole:
+        return replace(w, positions=held_still(w.positions, w.mask, hold))
+    obs = held_still(w.positions[:, :t_obs], w.mask[:, :t_obs], hold)
+    return replace(w, positions=np.concatenate([obs, w.positions[:, t_obs:]], axis=1))
+
+
 def build_windows(
     recs: Sequence[Recording],
     info: DatasetInfo,
@@ -145,11 +154,8 @@ def build_windows(
         for w in tqdm(windows, desc=rec.name, disable=not progress, leave=False):
             if noise != (0.0, 0.0):
                 w = noisy_window(w, spec.t_obs, noise, rng)
-            if hold > 0 and hold_future:
-                w = replace(w, positions=held_still(w.positions, w.mask, hold))
-            elif hold > 0:
-                obs = held_still(w.positions[:, : spec.t_obs], w.mask[:, : spec.t_obs], hold)
-                w = replace(w, positions=np.concatenate([obs, w.positions[:, spec.t_obs :]], axis=1))
+            if hold > 0:
+                w = held_window(w, spec.t_obs, hold, hold_future)
             frame = w.frame(info, spec.t_obs, with_map=spec.map is not None)
             x = dgan.preprocess(frame, crops)
             if scene is not None:

@@ -42,9 +42,10 @@ def slim_checkpoint(run: Path, out: Path) -> Path:
     return out
 
 
-def model_checkpoint(runs: list[Path], out: Path) -> Path:
-    """The checkpoint of one run (slimmed) or of several runs' consensus (``training.ensemble``, float16) at ``out``."""
-    if len(runs) > 1:
+def model_checkpoint(runs: list[Path], out: Path, consensus: bool = False) -> Path:
+    """The checkpoint of one run (slimmed) or of several runs' consensus (``training.ensemble``, float16) at ``out``;
+    ``consensus``: one run kept as a consensus of one too (one network, which can then take a top-mode scale)."""
+    if len(runs) > 1 or consensus:
         from training.ensemble import ensemble_checkpoint
 
         return ensemble_checkpoint(runs, out, half=True)
@@ -87,27 +88,32 @@ def test_metrics(predictor: dgan.Predictor, dataset: str, data_root: Path, fold:
     return metrics
 
 
-def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]] | None = None) -> dict[str, Any]:
+def bundle(
+    runs: list[Path], name: str, data_root: Path, folds: list[list[Path]] | None = None, top_scale: bool = False
+) -> dict[str, Any]:
     """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
     weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card.
 
     ``folds``: for a configuration with ``train.calibration_folds``, the runs of each of its folds (seeds, built into
-    a model as ``runs`` are); their predictions on their validation splits join the temperature's fit."""
+    a model as ``runs`` are); their predictions on their validation splits join the temperature's fit.
+    ``top_scale``: one run is kept as a consensus of one (one network's cost) with a top-mode scale fitted on
+    validation, as a consensus of several always is."""
     run = runs[0]
     cfg = json.loads((run / "config.json").read_text())["config"]
     dataset = cfg["data"].get("dataset", "ethucy")
     check_folds(cfg, folds or [])
     MODELS.mkdir(parents=True, exist_ok=True)
-    model_checkpoint(runs, CHECKPOINTS / f"{name}.pt")
+    consensus = len(runs) > 1 or top_scale
+    model_checkpoint(runs, CHECKPOINTS / f"{name}.pt", consensus)
     scale = None
-    if len(runs) > 1:
+    if consensus:
         from training.ensemble import fit_top_scale
 
         fit = fit_top_scale(CHECKPOINTS / f"{name}.pt", data_root)
         print(f"{name}: {fit}", flush=True)
         scale = list(fit.scale)
     with tempfile.TemporaryDirectory() as tmp:
-        fold_ckpts = [model_checkpoint(f, Path(tmp) / f"fold{i}.pt") for i, f in enumerate(folds or [])]
+        fold_ckpts = [model_checkpoint(f, Path(tmp) / f"fold{i}.pt", consensus) for i, f in enumerate(folds or [])]
         for fold_ckpt in fold_ckpts:  # the folds stand in for the model: the same top-mode scales
             with_scale(fold_ckpt, scale)
         print(f"{name}: {calibrate_checkpoint(CHECKPOINTS / f'{name}.pt', data_root, folds=fold_ckpts)}", flush=True)
@@ -127,7 +133,7 @@ def bundle(runs: list[Path], name: str, data_root: Path, folds: list[list[Path]]
     fold = cfg["data"]["scene"] if dataset == "ethucy" else ""
     metrics = test_metrics(predictor, dataset, data_root, fold)
     text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
-    if len(runs) > 1:
+    if consensus:
         text = text.replace("- **Test metrics**", ensemble_line(runs, predictor, cfg, scale) + "- **Test metrics**", 1)
     (MODELS / f"{name}.md").write_text(text)
     (run / "metrics.json").write_text(json.dumps(metrics, indent=2))

@@ -87,6 +87,12 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             f"{' and '.join(x.strip() for x in d['augment_noise'].split(','))} m, "
             f"{100 * d.get('augment_drop', 0.1):g}% of the observed steps dropped)."
         )
+    if (hold := d.get("augment_hold_m", 0.0)) > 0:
+        whole = "history and future" if d.get("augment_hold_future") else "its history"
+        parts.append(
+            f"Trained also on a held copy of its windows: each agent that stays within {hold:g} m of one point held "
+            f"there over {whole}, as a tracker holding a static object's box."
+        )
     if t.get("map_dropout", 0.0) > 0 and d.get("use_map", True) and cfg["model"].get("use_map", True):
         parts.append(
             f"Trained with map dropout ({t['map_dropout']:g} of the crops blanked), so it also runs without a map "
@@ -310,7 +316,8 @@ def distill_words(name: str, cfg: dict[str, Any]) -> str:
 def ensemble_line(
     runs: list[Path], predictor: dgan.Predictor, cfg: dict[str, Any], scale: list[float] | None = None
 ) -> str:
-    """The card's line for a model that is the consensus of several runs (``scale``: its top-mode scales)."""
+    """The card's line for a model that is the consensus of several runs, or one run kept as one with a top-mode
+    scale (``scale``: its top-mode scales)."""
     seeds = [json.loads((r / "config.json").read_text())["config"]["train"]["seed"] for r in runs]
     scaled = [f"{c} {s:g}" for c, s in zip(predictor.classes, scale or [], strict=False) if s != 1.0]
     scale_words = (
@@ -319,6 +326,11 @@ def ensemble_line(
         if scaled
         else ""
     )
+    if len(runs) == 1:
+        return (
+            f"- **Top-mode scale**: one network (seed {seeds[0]}), its weights stored as float16 and kept as a "
+            f"consensus of one (`training.ensemble`), so that its most probable mode can take a scale.{scale_words}\n"
+        )
     return (
         f"- **Ensemble**: the consensus of {len(runs)} runs of this configuration, seeds "
         f"{', '.join(map(str, seeds))} (`training.ensemble`): its most probable mode (of the agent's most probable "

@@ -34,7 +34,7 @@ def train_multiclass(root: Path) -> None:
         ]
         if ds in DISTILLED:
             members, folds = _distilled(ds, toml, root, members, list(zip(held, folds, strict=True)))
-        bundle(members, ds, root, folds)
+        bundle(members, ds, root, folds, top_scale=ds in TOP_SCALED)
         for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines
             runs = _seed_runs(toml, root, seeds, f"{ds}-{cls}", "--set", f"data.target_class={cls}")
             path = model_checkpoint(runs, multiclass.BASELINES / f"{ds}-{cls}.pt")
@@ -50,7 +50,20 @@ def train_multiclass(root: Path) -> None:
 DISTILLED = ("apolloscape", "sdd")
 #: What a student changes of its configuration: Stanford Drone's leaves out the map CNN's first residual block (the
 #: 8-channel stage, a quarter of the network's time; docs/speed.md), chosen on validation (docs/results.md).
-STUDENT_ARGS = {"sdd": ("--set", "model.map_res_blocks=1")}
+STUDENT_ARGS = {
+    "sdd": ("--set", "model.map_res_blocks=1"),
+    # ApolloScape's: a held copy of its still agents' whole windows and the pedestrian sources, its teacher on
+    # neither; kept as a consensus of one with a top-mode scale (:data:`TOP_SCALED`; runs/RULES-2026-12-06c).
+    "apolloscape": (
+        *("--set", "data.extra_sources=ethucy_2hz:2,sdd_2hz:12", "--set", "train.calibration_split=own"),
+        *("--set", "data.augment_hold_m=0.5", "--set", "data.augment_hold_future=true"),
+        *("--set", "train.distill_noisy=false"),
+    ),
+}
+#: The seed of each distilled model's student and its fold students (0 where not named), chosen on validation.
+STUDENT_SEED = {"apolloscape": 1}
+#: Distilled models whose student is kept as a consensus of one with a top-mode scale fitted on validation.
+TOP_SCALED = ("apolloscape",)
 #: How every student is trained: the consensus's most probable mode weighs 1 in the loss, and the epoch kept is the
 #: one of lowest validation top-1 ADE.
 DISTILL = ("--set", "train.distill_weight=1.0", "--set", "train.select=val_ade")
@@ -65,25 +78,27 @@ def _distilled(
     """The student of the members' consensus, and for each calibration fold (its held-out recordings and runs) the
     student of that fold's consensus (no top-mode scale or temperature: the fold stands in for the model before
     calibration)."""
-    student_args = STUDENT_ARGS.get(ds, ())
-    student = _student(members, TEACHERS / f"{ds}.pt", toml, root, f"{ds}_student", *student_args)
+    student_args, seed = STUDENT_ARGS.get(ds, ()), STUDENT_SEED.get(ds, 0)
+    student = _student(members, TEACHERS / f"{ds}.pt", toml, root, f"{ds}_student", *student_args, seed=seed)
     fold_students = []
     for i, (recordings, runs) in enumerate(folds):
         fold_teacher = model_checkpoint(runs, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")
         args = ("--set", f"data.val_recordings={recordings}", "--set", f"train.distill={fold_teacher}")
         # The folds stand in for the student: the same changes of its configuration.
-        fold_students.append(_seed_runs(toml, root, (0,), f"{runs[0].name}_student", *args, *student_args, *DISTILL))
+        fold_students.append(_seed_runs(toml, root, (seed,), f"{runs[0].name}_student", *args, *student_args, *DISTILL))
     return student, fold_students
 
 
-def _student(members: list[Path], teacher: Path, toml: Path, root: Path, tag: str, *args: str) -> list[Path]:
+def _student(
+    members: list[Path], teacher: Path, toml: Path, root: Path, tag: str, *args: str, seed: int = 0
+) -> list[Path]:
     """The members' consensus (or one member) kept at ``teacher`` (top-mode scale, for a consensus, and temperature
     fitted as bundling fits them), and one run of ``toml`` (with ``args``) distilled from it."""
     model_checkpoint(members, teacher)
     if len(members) > 1:
         fit_top_scale(teacher, root)
     calibrate_checkpoint(teacher, root)
-    return _seed_runs(toml, root, (0,), tag, *args, "--set", f"train.distill={teacher}", *DISTILL)
+    return _seed_runs(toml, root, (seed,), tag, *args, "--set", f"train.distill={teacher}", *DISTILL)
 
 
 def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: str) -> list[Path]:
