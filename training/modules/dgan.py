@@ -372,16 +372,17 @@ class ConsensusEnsemble(nn.Module):
         # gathered alone and the first member's is overwritten by one scatter (the same numbers as masking the
         # whole (N, K, T, 2) tensor, at a fraction of its memory traffic).
         top_class = cl0.argmax(-1)  # (N,)
-        tops, first, first_anchor = [], top_class, off0.new_zeros(0)
+        picks = []  # per member: the mode's index among all K (N,), its anchor and itself (N, T, 2)
         for m, (_, al, off) in enumerate(outs):
             best = al.reshape(n, c, kc).argmax(-1).gather(1, top_class.unsqueeze(1)).squeeze(1)  # (N,)
-            k = top_class * kc + best  # (N,) the mode's index among all K
-            anchor = self.anchors[m].reshape(c * kc, *tail)[k]  # (N, T, 2)
-            tops.append(anchor + off.gather(1, k.reshape(n, 1, 1, 1).expand(n, 1, *tail)).squeeze(1))
-            if m == 0:
-                first, first_anchor = k, anchor
+            k = top_class * kc + best
+            anchor = self.anchors[m].reshape(c * kc, *tail)[k]
+            picks.append((k, anchor, anchor + off.gather(1, k.reshape(n, 1, 1, 1).expand(n, 1, *tail)).squeeze(1)))
         # (N, T, 2), relative to the prior; scaled per class towards it.
-        consensus = torch.stack(tops).mean(0) * self.top_scale.to(off0.dtype)[top_class][:, None, None]
+        consensus = (
+            torch.stack([top for _, _, top in picks]).mean(0) * self.top_scale.to(off0.dtype)[top_class][:, None, None]
+        )
+        first, first_anchor, _ = picks[0]
         at = first.reshape(n, 1, 1, 1).expand(n, 1, *tail)
         return cl0, al0, off0.scatter(1, at, (consensus - first_anchor).unsqueeze(1))
 
