@@ -6,7 +6,7 @@ import argparse
 import json
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 import onnx
@@ -97,10 +97,14 @@ def contract(
     name: str,
     description: str,
     temperature: float | Calibration = 1.0,
+    top_scale: list[float] | None = None,
 ) -> dict[str, Any]:
     """The contract of an export: ``temperature`` a single temperature of the anchor logits or a contract-9
-    :class:`~training.losses.Calibration` (its keys written only where they differ from a single temperature)."""
+    :class:`~training.losses.Calibration` (its keys written only where they differ from a single temperature);
+    ``top_scale`` each class's top-mode scale (contract 14; written for the classes whose scale is not 1)."""
     cal = temperature if isinstance(temperature, Calibration) else Calibration(float(temperature))
+    pairs = zip(spec.classes, top_scale, strict=True) if top_scale else ()
+    scaled = {c: float(s) for c, s in pairs if float(s) != 1.0}
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
@@ -110,6 +114,7 @@ def contract(
         units="m",
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
         **cal.keys(),
+        **({"top_scale": scaled} if scaled else {}),
         name=name,
         description=description,
         weights_sha256=UNSEALED,
@@ -186,8 +191,15 @@ def export_model(
     temperature: float | Calibration = 1.0,
 ) -> Path:
     """Exports under the contract (version 3: the padded neighbour layout, whatever layout the model trained on);
-    anchors must be grouped by class in the spec's class order. ``temperature``: as :func:`contract`."""
+    anchors must be grouped by class in the spec's class order. ``temperature``: as :func:`contract`. A consensus of
+    one network is exported as that network, its top-mode scale in the contract (contract 14: the engine's decoding
+    applies it), so that the file runs one network and nothing around it."""
     from training.modules.dgan import PaddedDGAN
+
+    top_scale = None
+    if isinstance(model, ConsensusEnsemble) and len(model.members) == 1:
+        top_scale = [float(s) for s in model.top_scale]
+        model = cast(DGAN, model.members[0])
 
     scene = any(getattr(m, "scene", False) for m in getattr(model, "members", [model]))
     if scene != (spec.map is not None and spec.map.scene is not None):
@@ -217,7 +229,7 @@ def export_model(
     )
     m = onnx.load(str(path))
     store_half(m)
-    meta = contract(spec, anchors, class_of, name, description, temperature)
+    meta = contract(spec, anchors, class_of, name, description, temperature, top_scale)
     onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(meta)})
     onnx.save(m, str(path))
     seal(path)

@@ -65,6 +65,9 @@ def _info(args: argparse.Namespace) -> int:
     if c.get("class_temperature", 1.0) != 1.0:
         temp += f"; class logits {c['class_temperature']:g}"
     print(f"{temp}; contract {c['contract_version']})")
+    if c.get("top_scale"):
+        kept = ", ".join(f"{k} {v:g}" for k, v in c["top_scale"].items())
+        print(f"top mode   keeps this share of its residual over the prior: {kept} (contract 14)")
     print(f"providers  {', '.join(dgan.available_execution_providers())} (in this ONNX Runtime library)")
     if c.get("description"):
         print(f"about      {c['description']}")

@@ -328,8 +328,9 @@ def ensemble_line(
     )
     if len(runs) == 1:
         return (
-            f"- **Top-mode scale**: one network (seed {seeds[0]}), its weights stored as float16 and kept as a "
-            f"consensus of one (`training.ensemble`), so that its most probable mode can take a scale.{scale_words}\n"
+            f"- **Top-mode scale**: one network (seed {seeds[0]}), its weights stored as float16; its checkpoint is a "
+            f"consensus of one (`training.ensemble`), exported as the network alone with the scale in its contract "
+            f"(contract 14: the engine's decoding applies it).{scale_words}\n"
         )
     return (
         f"- **Ensemble**: the consensus of {len(runs)} runs of this configuration, seeds "

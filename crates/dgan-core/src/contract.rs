@@ -2,7 +2,7 @@
 //! `docs/model-contract.md`; this module is the one the runtime checks against.
 
 use crate::class::AgentClass;
-use crate::decode::{Anchors, Calibration};
+use crate::decode::{check_top_scale, Anchors, Calibration};
 use crate::error::{DganError, Result};
 use crate::prior::{PriorKind, PriorSpec, VelocityFit};
 use crate::spec::{is_zero, GraphLayout, HeadingSource, InputSpec, MapRender, EDGE_FEATURES};
@@ -18,11 +18,12 @@ use std::collections::BTreeMap;
 /// with the agent's speed (`temperature_speed_exponent`) and a temperature of the class logits (`class_temperature`);
 /// version 10 histories denoised before preprocessing (`denoise_gate_m`); version 11 the classes that read the map
 /// (`map.classes`); version 12 rasters of the scene for the map CNN (`map.scene`: `map_grid`, `map_slot`); version 13
-/// the map CNN's features kept with the map (`map.scene.tile_px`: input `map_patches`, output `map_features`).
-pub const CONTRACT_VERSION: u32 = 13;
+/// the map CNN's features kept with the map (`map.scene.tile_px`: input `map_patches`, output `map_features`); version
+/// 14 the share of its residual over the prior that each class's most probable mode keeps (`top_scale`).
+pub const CONTRACT_VERSION: u32 = 14;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 13] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 14] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -131,6 +132,11 @@ pub struct ModelContract {
     /// Contract 9: the class logits are divided by this before their softmax (1, the default: as trained).
     #[serde(default = "unit_temperature", skip_serializing_if = "is_one")]
     pub class_temperature: f64,
+    /// Contract 14: per class name, the share s of its residual over the kinematic prior that the agent's most
+    /// probable mode keeps when that class is the agent's most probable one (`prior + s · (anchor + offset)`; see
+    /// [`crate::decode::DecodeParams::top_scale`]); a class not named keeps all of it (1). Each in [0, 1].
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub top_scale: BTreeMap<String, f64>,
     /// A short model name.
     #[serde(default)]
     pub name: String,
@@ -314,6 +320,7 @@ impl ModelContract {
             _ => {}
         }
         self.check_calibration()?;
+        self.top_scales()?;
         if self.units != "m" {
             return Err(DganError::Contract(format!("units must be \"m\", got {:?}", self.units)));
         }
@@ -328,6 +335,33 @@ impl ModelContract {
             speed_exponent: self.temperature_speed_exponent,
             class_temperature: self.class_temperature,
         }
+    }
+
+    /// Each class's top-mode scale, in the model's class order (1 where the contract names none); empty without any.
+    pub fn top_scales(&self) -> Result<Vec<f64>> {
+        if self.top_scale.is_empty() {
+            return Ok(Vec::new());
+        }
+        if self.contract_version < 14 {
+            return Err(DganError::Contract(
+                "top_scale is a contract-14 key; versions 1 to 13 keep every mode as the network gives it".into(),
+            ));
+        }
+        if self.input.prior.kind == PriorKind::None {
+            return Err(DganError::Contract(
+                "top_scale scales a mode's residual over the kinematic prior; this model declares none".into(),
+            ));
+        }
+        if let Some(extra) = self.top_scale.keys().find(|k| !self.input.classes.iter().any(|c| c.name() == *k)) {
+            return Err(DganError::Contract(format!(
+                "top_scale given for {extra:?}, which is not among the classes ({})",
+                class_names(&self.input.classes)
+            )));
+        }
+        let scales: Vec<f64> =
+            self.input.classes.iter().map(|c| self.top_scale.get(c.name()).copied().unwrap_or(1.0)).collect();
+        check_top_scale(&scales, scales.len())?;
+        Ok(scales)
     }
 
     fn check_calibration(&self) -> Result<()> {
@@ -715,6 +749,24 @@ mod tests {
         }
         let err = ModelContract::from_json(&v13.replace("\"channels\": 16", "\"channels\": 0")).unwrap_err();
         assert!(err.to_string().contains("channels"), "{err}");
+
+        // Version 14 keeps a share of the most probable mode's residual per class; unnamed classes keep all of it.
+        let v14 = v13.replace("\"contract_version\": 13", "\"contract_version\": 14");
+        assert!(ModelContract::from_json(&v14).unwrap().top_scales().unwrap().is_empty());
+        let scaled = |s: &str| v14.replace("\"units\"", &format!("\"top_scale\": {s}, \"units\""));
+        let c = ModelContract::from_json(&scaled("{\"pedestrian\": 0.25}")).unwrap();
+        assert_eq!(c.top_scales().unwrap(), [1.0, 0.25]);
+        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+        let older = scaled("{\"pedestrian\": 0.25}").replace("\"contract_version\": 14", "\"contract_version\": 13");
+        for (case, says) in [
+            (older, "contract-14 key"),
+            (scaled("{\"truck\": 0.5}"), "not among the classes"),
+            (scaled("{\"pedestrian\": 1.5}"), "[0, 1]"),
+            (scaled("{\"pedestrian\": -0.1}"), "[0, 1]"),
+        ] {
+            let err = ModelContract::from_json(&case).unwrap_err().to_string();
+            assert!(err.contains(says), "{err}");
+        }
     }
 
     #[test]

@@ -210,6 +210,36 @@ pub struct DecodeParams<'a> {
     pub calibration: Calibration,
     /// The model's time step, seconds.
     pub dt_s: f64,
+    /// Contract 14: per class (the model's order), the share s of its residual over the prior that an agent's most
+    /// probable mode keeps, `prior + s · (anchor + offset)`, when that class is the agent's most probable one (the
+    /// largest class logit; the mode: that class's largest anchor logit, the first of equals). Every other mode, and
+    /// every probability, stays as the network gives it. Empty: every class keeps all of it (contracts 1 to 13).
+    pub top_scale: &'a [f64],
+}
+
+/// Checks a top-mode scale ([`DecodeParams::top_scale`]) for `classes` classes: empty, or one value in [0, 1] each.
+pub fn check_top_scale(top_scale: &[f64], classes: usize) -> Result<()> {
+    if top_scale.is_empty() {
+        return Ok(());
+    }
+    if top_scale.len() != classes {
+        return Err(DganError::Contract(format!("top_scale has {} values for {classes} classes", top_scale.len())));
+    }
+    if let Some(bad) = top_scale.iter().find(|s| !(0.0..=1.0).contains(*s)) {
+        return Err(DganError::Contract(format!("top_scale values must lie in [0, 1], got {bad}")));
+    }
+    Ok(())
+}
+
+/// The first index of the largest value (NaN never larger); 0 for an empty row.
+fn first_argmax(v: impl Iterator<Item = f32>) -> usize {
+    let mut best = (0, f32::NEG_INFINITY);
+    for (i, x) in v.enumerate() {
+        if x > best.1 {
+            best = (i, x);
+        }
+    }
+    best.0
 }
 
 /// Decodes the network's outputs for agents whose agent-centric frames are `poses`, keeping the top `modes`
@@ -262,8 +292,9 @@ pub fn decode_on(
 /// The shapes of the outputs and the prior against N agents and the anchors; the calibration and time step.
 fn check_outputs(out: &NetworkOutputs<'_>, params: &DecodeParams<'_>, n: usize) -> Result<()> {
     let NetworkOutputs { class_logits, anchor_logits, offsets } = out;
-    let DecodeParams { anchors, prior, calibration, dt_s } = params;
+    let DecodeParams { anchors, prior, calibration, dt_s, top_scale } = params;
     let (c, k_total, t_f) = (anchors.classes().len(), anchors.total(), anchors.steps());
+    check_top_scale(top_scale, c)?;
     let bad = |m: String| Err(DganError::Inference(m));
     if class_logits.dim() != (n, c) {
         return bad(format!("class_logits has shape {:?}, expected ({n}, {c})", class_logits.dim()));
@@ -305,7 +336,7 @@ fn decode_rows(
     first: usize,
     part: &mut DecodedMut<'_>,
 ) -> Result<()> {
-    let DecodeParams { anchors, prior, calibration, dt_s } = *params;
+    let DecodeParams { anchors, prior, calibration, dt_s, top_scale } = *params;
     let (rows, m, t_f, _) = part.trajectories.dim();
     let agents = first..first + rows;
     // Each output's rows of this share, contiguous (copied once into that layout if they are not).
@@ -362,6 +393,15 @@ fn decode_rows(
         }
         order[..m].sort_unstable();
         part.class_probabilities.row_mut(r).iter_mut().zip(&pc).for_each(|(o, v)| *o = *v);
+        // Contract 14: the anchor whose residual is scaled (none without a scale), and by how much.
+        let (scaled, scale) = if top_scale.is_empty() {
+            (usize::MAX, 1.0)
+        } else {
+            let top_class = first_argmax(class_logits.row(r).iter().copied());
+            let start: usize = per_class[..top_class].iter().sum();
+            let block = (start..start + per_class[top_class]).map(|k| anchor_logits[[r, k]]);
+            (start + first_argmax(block), top_scale[top_class])
+        };
         let off_agent = &offsets[r * k_total * step..(r + 1) * k_total * step];
         let mut traj = part.trajectories.slice_mut(s![r, .., .., ..]);
         let traj = traj.as_slice_mut().ok_or_else(|| DganError::Inference("trajectories are not contiguous".into()))?;
@@ -370,10 +410,11 @@ fn decode_rows(
             part.mode_classes[[r, mi]] = class_of[k] as i64;
             part.mode_anchors[[r, mi]] = k as i64;
             let (anchor, off) = (&anchor_flat[k * step..(k + 1) * step], &off_agent[k * step..(k + 1) * step]);
+            let s = if k == scaled { scale } else { 1.0 };
             for (t, w_out) in traj[mi * step..(mi + 1) * step].chunks_exact_mut(2).enumerate() {
                 let local = [
-                    f64::from(base[2 * t]) + anchor[2 * t] + f64::from(off[2 * t]),
-                    f64::from(base[2 * t + 1]) + anchor[2 * t + 1] + f64::from(off[2 * t + 1]),
+                    f64::from(base[2 * t]) + s * (anchor[2 * t] + f64::from(off[2 * t])),
+                    f64::from(base[2 * t + 1]) + s * (anchor[2 * t + 1] + f64::from(off[2 * t + 1])),
                 ];
                 let w = pose.to_world(local);
                 w_out[0] = w[0];
@@ -410,6 +451,7 @@ mod tests {
             prior: prior.map(|p| p.view()),
             calibration: Calibration::single(temperature),
             dt_s: 0.5,
+            top_scale: &[],
         };
         decode(out, params, &[pose], modes)
     }
@@ -454,7 +496,8 @@ mod tests {
         };
         let poses = [AgentPose::new([0.0, 0.0], 0.0); 2];
         let calibration = Calibration { temperature: 0.5, speed_exponent: 0.5, class_temperature: 2.0 };
-        let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5 };
+        let params =
+            DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5, top_scale: &[] };
         let d = decode(out, params, &poses, 3).unwrap();
         // p(c) = softmax(ln 2 / 2, 0) = (√2, 1) / (1 + √2) for both agents.
         let pv = 2f64.sqrt() / (1.0 + 2f64.sqrt());
@@ -479,6 +522,53 @@ mod tests {
     }
 
     #[test]
+    fn top_scale_shrinks_the_most_probable_class_top_mode_alone() {
+        let anchors = Anchors::new(
+            vec![AgentClass::Vehicle, AgentClass::Pedestrian],
+            vec![array![[[1.0, 0.0]], [[2.0, 0.0]]], array![[[0.0, 1.0]], [[0.0, 3.0]]]],
+        )
+        .unwrap();
+        let mut offsets = Array4::<f32>::zeros((2, 4, 1, 2));
+        offsets[[0, 1, 0, 0]] = 1.0; // agent 0's vehicle anchor 1 (its top mode): residual (3, 0)
+                                     // Agent 0: vehicle first, its anchor 1 the larger; agent 1: pedestrian first, its two anchors equal (the
+                                     // first, anchor 2, is the one scaled), and a vehicle anchor whose probability is the highest of all.
+        let class_logits = array![[1.0f32, 0.0], [0.0, 0.5]];
+        let anchor_logits = array![[0.0f32, 1.0, 0.0, 0.0], [0.0, 9.0, 0.0, 0.0]];
+        let prior = array![[[10.0f32, 0.0]], [[0.0, 10.0]]];
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let poses = [AgentPose::new([0.0, 0.0], 0.0); 2];
+        let scale = [0.5, 0.25];
+        let base = DecodeParams {
+            anchors: &anchors,
+            prior: Some(prior.view()),
+            calibration: Calibration::single(1.0),
+            dt_s: 0.5,
+            top_scale: &[],
+        };
+        let plain = decode(out, base, &poses, 4).unwrap();
+        let scaled = decode(out, DecodeParams { top_scale: &scale, ..base }, &poses, 4).unwrap();
+        assert_eq!(scaled.probabilities, plain.probabilities);
+        assert_eq!(scaled.mode_anchors, plain.mode_anchors);
+        let at = |d: &Decoded, i: usize, anchor: i64| {
+            let m = d.mode_anchors.row(i).iter().position(|&a| a == anchor).unwrap();
+            [d.trajectories[[i, m, 0, 0]], d.trajectories[[i, m, 0, 1]]]
+        };
+        assert_eq!(at(&plain, 0, 1), [13.0, 0.0]);
+        assert_eq!(at(&scaled, 0, 1), [11.5, 0.0], "prior + 0.5 · (2 + 1, 0)");
+        assert_eq!(at(&scaled, 1, 2), [0.0, 10.25], "prior + 0.25 · (0, 1): the first of equal logits");
+        for (i, k) in [(0, 0), (0, 2), (0, 3), (1, 0), (1, 1), (1, 3)] {
+            assert_eq!(at(&scaled, i, k), at(&plain, i, k), "agent {i} anchor {k} is not scaled");
+        }
+        for bad in [&[0.5][..], &[0.5, 1.5], &[f64::NAN, 1.0]] {
+            assert!(decode(out, DecodeParams { top_scale: bad, ..base }, &poses, 4).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
     fn threads_give_the_single_threaded_result_and_refuse_nan_in_any_share() {
         let anchors = Anchors::new(
             vec![AgentClass::Vehicle, AgentClass::Pedestrian],
@@ -493,7 +583,8 @@ mod tests {
         let prior = Array3::from_shape_fn((n, 2, 2), |(i, t, d)| (t + 1) as f32 * wave(i, d + 9));
         let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, -(i as f64)], i as f64 * 0.1)).collect();
         let calibration = Calibration { temperature: 0.8, speed_exponent: 0.3, class_temperature: 1.5 };
-        let params = DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5 };
+        let params =
+            DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5, top_scale: &[] };
         let out = NetworkOutputs {
             class_logits: class_logits.view(),
             anchor_logits: anchor_logits.view(),
@@ -585,7 +676,13 @@ mod tests {
             anchor_logits: anchor_logits.view(),
             offsets: offsets.view(),
         };
-        let params = DecodeParams { anchors: &anchors, prior: None, calibration: Calibration::single(1.0), dt_s: 0.4 };
+        let params = DecodeParams {
+            anchors: &anchors,
+            prior: None,
+            calibration: Calibration::single(1.0),
+            dt_s: 0.4,
+            top_scale: &[],
+        };
         let all = decode(out, params, &poses, k).unwrap();
         for i in 0..n {
             let (p, a) = (all.probabilities.row(i), all.mode_anchors.row(i));

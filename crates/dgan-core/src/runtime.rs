@@ -263,6 +263,8 @@ pub struct Predictor {
     next: AtomicUsize,
     contract: ModelContract,
     anchors: Anchors,
+    /// The contract's top-mode scale per class (contract 14; empty without one).
+    top_scale: Vec<f64>,
     path: PathBuf,
     limits: Limits,
     threads: usize,
@@ -417,6 +419,7 @@ impl Predictor {
             });
         }
         let anchors = contract.anchors()?;
+        let top_scale = contract.top_scales()?;
 
         let expected = contract.expected_inputs();
         for input in session.inputs() {
@@ -465,6 +468,7 @@ impl Predictor {
             last_times: Mutex::new(None),
             contract,
             anchors,
+            top_scale,
             path,
             limits: options.limits,
             threads: options.intra_threads,
@@ -682,6 +686,7 @@ impl Predictor {
             prior: Some(prior),
             calibration: self.contract.calibration(),
             dt_s: self.contract.input.dt_s,
+            top_scale: &self.top_scale,
         };
         decode_on(out, params, poses, modes, threads)
     }

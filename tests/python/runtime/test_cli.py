@@ -39,6 +39,14 @@ def test_info_names_contract_9s_temperatures(capsys: pytest.CaptureFixture[str])
     assert "denoising" not in capsys.readouterr().out
 
 
+def test_info_names_contract_14s_top_mode_scale(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", "apolloscape"]) == 0  # its cyclists and pedestrians keep part of their top mode's residual
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("top mode"))
+    assert "cyclist 0.5, pedestrian 0.25 (contract 14)" in line
+    assert main(["info", "zara1"]) == 0
+    assert "top mode" not in capsys.readouterr().out
+
+
 def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["predict", str(nomap_model), str(SCENE), "--time", "5500", "--modes", "2"]) == 0
     out = capsys.readouterr().out

@@ -536,7 +536,7 @@ def contract_cases(tmp: Path) -> list[Case]:
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 14, 99, "4", None, -1],
+        "contract_version": [0, 15, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",
@@ -602,6 +602,17 @@ def readers_cases(tmp: Path) -> list[Case]:
         )
         path = sealed_with(src, bad, tmp / f"scene_{len(cases)}.onnx")
         cases.append((f"contract map.scene {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
+    # Contract 14's top-mode scale: not in an older contract, out of [0, 1], of a class the model lacks, not a map.
+    for label, version, scale, msg in [
+        ("in a contract-13 model", 13, {"pedestrian": 0.5}, "top_scale is a contract-14 key"),
+        ("above 1", 14, {"pedestrian": 1.5}, "must lie in \\[0, 1\\]"),
+        ("NaN", 14, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
+        ("of a class the model lacks", 14, {"vehicle": 0.5}, "not among the classes"),
+        ("as a list", 14, [0.5], "invalid type"),
+    ]:
+        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, top_scale=scale)
+        path = sealed_with(src, bad, tmp / f"top_scale_{len(cases)}.onnx")
+        cases.append((f"contract top_scale {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
     return cases
 
 

@@ -28,7 +28,7 @@ from training.ensemble import (
 )
 from training.export import export_model, load_checkpoint, store_half
 from training.losses import Calibration
-from training.modules.dgan import ConsensusEnsemble
+from training.modules.dgan import DGAN, ConsensusEnsemble
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -277,3 +277,27 @@ def test_fold_checkpoints_take_the_models_top_scale(tmp_path: Path) -> None:
     assert model.top_scale.tolist() == [1.0, 0.5, 0.0]
     with pytest.raises(ValueError, match="needs an ensemble checkpoint"):
         with_scale(runs[0] / "best.pt", [1.0, 1.0, 1.0])
+
+
+@pytest.mark.slow
+def test_a_consensus_of_one_exports_as_its_network_with_the_scale_in_the_contract(tmp_path: Path) -> None:
+    from training.release.bundle import with_scale
+
+    runs, _ = _members(tmp_path, (0,))
+    ckpt = ensemble_checkpoint(runs, tmp_path / "one.pt", half=True)
+    with_scale(ckpt, [1.0, 0.5, 0.0])
+    model, spec, anchors, class_of, _, cal = load_checkpoint(ckpt)
+    assert isinstance(model, ConsensusEnsemble)
+    path = export_model(model, spec, anchors, class_of, tmp_path / "one.onnx", "one", temperature=cal)
+    contract = dgan.Predictor(path).contract
+    assert contract["contract_version"] == dgan._dgan.CONTRACT_VERSION >= 14
+    assert contract["top_scale"] == {"cyclist": 0.5, "pedestrian": 0.0}  # vehicles keep all of theirs
+    # The network alone, exported as its own run: the same graph, nothing of the consensus around it.
+    network = model.members[0]
+    assert isinstance(network, DGAN)
+    alone = export_model(network, spec, anchors, class_of, tmp_path / "alone.onnx", "alone")
+    ops = [sorted(n.op_type for n in onnx.load(str(p)).graph.node) for p in (path, alone)]
+    assert ops[0] == ops[1]
+    assert "top_scale" not in dgan.Predictor(alone).contract
+    # The engine's decoding applies the scale as the consensus's graph did: it matches PyTorch.
+    assert_parity(model, spec, anchors, class_of, path, cal)
