@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 import dgan
+from training import metrics
 from training.data.datasets import DATASETS
 from training.evaluate import rows_of, scored_windows
 
@@ -50,13 +51,12 @@ def end_errors(
     """Per target, the final displacement of the top mode (``modes[:, 0]``), of the best of the first 20 modes, of
     staying at ``last_observed`` ``(n, 2)`` and of each constant-velocity variant ``{name: (n, 1, T_f, 2)}``, against
     ``truth`` ``(n, T_f, 2)``; ``modes`` is ``(n, M, T_f, 2)``, most probable first."""
-    end = truth[:, -1]
     out = {
-        "top1": np.linalg.norm(modes[:, 0, -1] - end, axis=-1),
-        "min20": np.linalg.norm(modes[:, :20, -1] - end[:, None], axis=-1).min(axis=1),
-        "stay": np.linalg.norm(last_observed - end, axis=-1),
+        "top1": metrics.ade_fde_top1(modes, truth)[1],
+        "min20": metrics.min_ade_fde(modes, truth, 20)[1],
+        "stay": np.linalg.norm(last_observed - truth[:, -1], axis=-1),
     }
-    out.update({f"cv_{k}": np.linalg.norm(v[:, 0, -1] - end, axis=-1) for k, v in cvs.items()})
+    out.update({f"cv_{k}": metrics.ade_fde_top1(v, truth)[1] for k, v in cvs.items()})
     return out
 
 

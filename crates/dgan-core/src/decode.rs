@@ -528,10 +528,11 @@ mod tests {
             vec![array![[[1.0, 0.0]], [[2.0, 0.0]]], array![[[0.0, 1.0]], [[0.0, 3.0]]]],
         )
         .unwrap();
+        // Agent 0's vehicle anchor 1 (its top mode) has the residual (3, 0).
         let mut offsets = Array4::<f32>::zeros((2, 4, 1, 2));
-        offsets[[0, 1, 0, 0]] = 1.0; // agent 0's vehicle anchor 1 (its top mode): residual (3, 0)
-                                     // Agent 0: vehicle first, its anchor 1 the larger; agent 1: pedestrian first, its two anchors equal (the
-                                     // first, anchor 2, is the one scaled), and a vehicle anchor whose probability is the highest of all.
+        offsets[[0, 1, 0, 0]] = 1.0;
+        // Agent 0: vehicle first, its anchor 1 the larger; agent 1: pedestrian first, its two anchors equal (the
+        // first, anchor 2, is the one scaled), and a vehicle anchor whose probability is the highest of all.
         let class_logits = array![[1.0f32, 0.0], [0.0, 0.5]];
         let anchor_logits = array![[0.0f32, 1.0, 0.0, 0.0], [0.0, 9.0, 0.0, 0.0]];
         let prior = array![[[10.0f32, 0.0]], [[0.0, 10.0]]];
