@@ -14,15 +14,14 @@ of K and standing agents' often; a model whose class is an input has p(c) ≈ 1 
 another class's anchor. The engine applies either in decoding (:class:`training.losses.Calibration`).
 
 ``"per_class"``: one temperature per class's block of anchors, each fitted as ``"temperature"`` is on the targets of
-that class (the class is an input, so p(c) is all but one-hot), and folded into the network as a scale of each
-anchor's logit (``DGAN.set_anchor_logit_scale``, the checkpoint's ``anchor_logit_scale``); the contract's temperature
-is then 1. For single networks.
-
-``"entropy"``: a temperature per agent T_i = exp(a + b · H_i), H_i the entropy of its anchor distribution at T = 1
-(:func:`training.modules.dgan.entropy_tempered`), a and b fitted by the Brier score; folded into the network in the
-same way (the checkpoint's ``anchor_entropy_temperature``), the contract's temperature 1. A distilled student's
-reliability is S-shaped (spread distributions' top modes overconfident, peaked ones' underconfident), which a single
-temperature cannot mend and this can. For single networks.
+that class (the class is an input, so p(c) is all but one-hot), folded into the network as a scale of each anchor's
+logit (``DGAN.set_anchor_logit_scale``, the checkpoint's ``anchor_logit_scale``), contract temperature 1. ``"entropy"``:
+T_i = exp(a + b · H_i), H_i the entropy of the agent's anchor distribution at T = 1
+(:func:`training.modules.dgan.entropy_tempered`), a and b fitted by the Brier score, folded in the same way (the
+checkpoint's ``anchor_entropy_temperature``), contract temperature 1: a distilled student's reliability is S-shaped
+(spread distributions' top modes overconfident, peaked ones' underconfident), which one temperature cannot mend.
+``"entropy_class"``: these (a, b) and contract 9's T_c fitted together (T_c lends other classes' anchors probability,
+which a multi-class best of K uses). The last three are for single networks.
 """
 
 from __future__ import annotations
@@ -43,10 +42,12 @@ from training.metrics import worst_gap
 from training.modules.dgan import DGAN, entropy_tempered
 
 #: ``train.calibration``: what is fitted (:func:`fit_calibration`).
-CALIBRATIONS = ("temperature", "speed_class", "per_class", "entropy")
+CALIBRATIONS = ("temperature", "speed_class", "per_class", "entropy", "entropy_class")
 #: The kinds folded into the network's anchor logits (a consensus of several networks cannot carry them), as a model
 #: card names them.
-FOLDED = {"per_class": "one temperature per class", "entropy": "a temperature set by each agent's anchor entropy"}
+_ENTROPY = "a temperature set by each agent's anchor entropy"
+FOLDED = {"per_class": "one temperature per class", "entropy": _ENTROPY}
+FOLDED["entropy_class"] = "a class temperature and " + _ENTROPY
 #: The class temperatures ``"speed_class"``'s search starts from (log-spaced, 1/e to e³).
 CLASS_TEMPERATURE_STARTS = np.exp(np.linspace(-1.0, 3.0, 9))
 
@@ -173,8 +174,8 @@ class TemperatureFit:
         if self.entropy_temperature is not None:
             a, b = self.entropy_temperature
             extra = f", exp({a:.3f} + {b:.3f} H) by each agent's anchor entropy H, folded into the network"
-        if (self.speed_exponent, self.class_temperature) != (0.0, 1.0):
-            extra = f" x (1 + v)^{self.speed_exponent:.3f}, class temperature {self.class_temperature:.3f}"
+        extra += f" x (1 + v)^{self.speed_exponent:.3f}" if self.speed_exponent else ""
+        extra += f", class temperature {self.class_temperature:.3f}" if self.class_temperature != 1.0 else ""
         return (
             f"temperature {self.temperature:.3f}{extra} (by {self.objective}; {self.targets} targets of {where}): "
             f"best-mode NLL {self.nll_before:.4f} -> {self.nll_after:.4f}, worst reliability gap "
@@ -206,8 +207,8 @@ def fit_calibration(kind: str, modes: BestModes, class_of: torch.Tensor) -> Temp
     single = choose_temperature(modes.class_logits, modes.anchor_logits, modes.best, class_of)
     if kind == "per_class":
         return fit_per_class(modes, class_of, single)
-    if kind == "entropy":
-        return fit_entropy(modes, class_of, single)
+    if kind in ("entropy", "entropy_class"):
+        return fit_entropy(modes, class_of, single, with_class=kind == "entropy_class")
     return single if kind == "temperature" else fit_speed_class(modes, class_of, single)
 
 
@@ -309,24 +310,36 @@ def fit_speed_class(modes: BestModes, class_of: torch.Tensor, single: Temperatur
     )
 
 
-def fit_entropy(modes: BestModes, class_of: torch.Tensor, single: TemperatureFit) -> TemperatureFit:
-    """``"entropy"``: (a, b) of T_i = exp(a + b · H_i) minimising the best mode's Brier score on ``modes``
-    (Nelder-Mead from ``single``'s temperature with b = 0), with a contract temperature of 1."""
+def fit_entropy(modes: BestModes, class_of: torch.Tensor, single: TemperatureFit, with_class: bool) -> TemperatureFit:
+    """``"entropy"``: (a, b) of T_i = exp(a + b · H_i) minimising the best mode's Brier score on ``modes`` (Nelder-Mead
+    from ``single``'s temperature, b = 0), contract temperature 1; ``with_class`` (``"entropy_class"``) searches log T_c
+    too, from the best of :data:`CLASS_TEMPERATURE_STARTS` (a model of one class keeps T_c = 1)."""
     from scipy.optimize import minimize
 
     classes = modes.class_logits.shape[1]
+    with_class &= classes > 1
+
+    def terms(x: np.ndarray) -> tuple[float, float, float]:
+        a, b, *log_tc = (float(v) for v in np.clip(x, -6.9, 6.9))
+        return a, b, float(np.exp(log_tc[0])) if log_tc else 1.0
 
     def probabilities(x: np.ndarray) -> torch.Tensor:
-        a, b = (float(v) for v in np.clip(x, -6.9, 6.9))
-        return mode_probabilities(modes.class_logits, entropy_tempered(modes.anchor_logits, classes, a, b), class_of)
+        a, b, tc = terms(x)
+        anchor_logits = entropy_tempered(modes.anchor_logits, classes, a, b)
+        return mode_probabilities(modes.class_logits, anchor_logits, class_of, 1.0, tc)
 
     def score(x: np.ndarray) -> float:
         return best_mode_brier(probabilities(x), modes.best)
 
     x0 = np.array([np.log(single.temperature), 0.0])
-    x = np.clip(minimize(score, x0, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-8}).x, -6.9, 6.9)
-    ab = (float(x[0]), float(x[1]))
-    return folded_fit(single, "brier (entropy)", probabilities(x), modes.best, entropy_temperature=ab)
+    options: dict[str, Any] = {"xatol": 1e-4, "fatol": 1e-8}
+    if with_class:  # a simplex of 0.5 a side: scipy's default steps a zero coordinate (b) by 0.00025 only
+        x0 = min((np.array([*x0, np.log(tc)]) for tc in CLASS_TEMPERATURE_STARTS), key=score)
+        options["initial_simplex"] = np.vstack([x0, x0 + 0.5 * np.eye(3)])
+    x = np.clip(minimize(score, x0, method="Nelder-Mead", options=options).x, -6.9, 6.9)
+    a, b, tc = terms(x)
+    fit = folded_fit(single, "brier (entropy)", probabilities(x), modes.best, entropy_temperature=(a, b))
+    return replace(fit, class_temperature=tc, objective="brier (entropy, class)") if with_class else fit
 
 
 def calibration_config(cfg: Config) -> Config:

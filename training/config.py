@@ -133,8 +133,9 @@ class TrainConfig:
     # those alone).
     select_split: str = "all"
     # What is fitted (training.calibrate.CALIBRATIONS): "temperature" (one temperature of the anchor logits, contract
-    # 2) or "speed_class" (contract 9: a temperature growing with the prior's speed and one of the class logits,
-    # fitted together by the Brier score of the best mode).
+    # 2), "speed_class" (contract 9: a temperature growing with the prior's speed and one of the class logits,
+    # fitted together by the Brier score of the best mode), "per_class", "entropy" or "entropy_class" (folded into a
+    # single network; the last with contract 9's class temperature).
     calibration: str = "temperature"
     # One anchor of each class held at a zero residual, the kinematic prior itself, so that "nothing to add" is a mode
     # the classifier can pick (training.anchors.kmeans_anchors); the other anchors are k-means around it.

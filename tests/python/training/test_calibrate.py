@@ -1,6 +1,6 @@
 """training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, the
 choice itself on best modes drawn at a known temperature, the speed-dependent and class temperatures of contract 9
-and the entropy temperature given back from best modes drawn with them, a temperature cross-fitted over validation
+and the entropy temperature (alone and with a class temperature) given back from best modes drawn with them, a temperature cross-fitted over validation
 folds, and the validation windows it is fitted on (train.calibration_split)."""
 
 from __future__ import annotations
@@ -146,6 +146,38 @@ def test_an_entropy_temperature_drawn_is_given_back_and_one_temperature_cannot_m
     assert keys["anchor_entropy_temperature"] == list(fit.entropy_temperature)
     assert keys["anchor_logit_scale"] is None  # a refit of this kind clears a per-class one
     assert single.checkpoint_keys()["anchor_entropy_temperature"] is None
+
+
+def test_an_entropy_and_class_temperature_drawn_are_given_back_with_the_class_in_the_contract() -> None:
+    # Two classes of three anchors, the class an input (p(c) confident at T_c = 1): best modes drawn at T_c = 3 and
+    # T_i = exp(a + b H_i) of each class's block. "entropy" alone cannot lend the other class's anchors probability.
+    g = torch.Generator().manual_seed(6)
+    n, a, b, tc = 60000, -0.4, 0.4, 3.0
+    class_of = torch.tensor([0, 0, 0, 1, 1, 1])
+    klass = (torch.rand(n, generator=g) < 0.5).long()
+    cl = 4.0 * torch.nn.functional.one_hot(klass, 2).float() + torch.randn(n, 2, generator=g)
+    al = torch.randn(n, 6, generator=g) * (0.3 + 3.0 * torch.rand(n, 1, generator=g))
+    p = torch.softmax(cl / tc, dim=1)[:, class_of] * entropy_probabilities(al, a, b)
+    modes = BestModes(cl, al, torch.multinomial(p, 1, generator=g).squeeze(1), torch.zeros(n))
+    fit = fit_calibration("entropy_class", modes, class_of)
+    assert fit.objective == "brier (entropy, class)"
+    assert (fit.temperature, fit.speed_exponent) == (1.0, 0.0)
+    assert fit.entropy_temperature == pytest.approx((a, b), abs=0.1)
+    assert fit.class_temperature == pytest.approx(tc, rel=0.15)
+    assert fit.checkpoint_keys()["class_temperature"] == pytest.approx(fit.class_temperature)
+    entropy = fit_calibration("entropy", modes, class_of)
+    assert entropy.class_temperature == 1.0
+    assert fit.gap_after < 0.03 < entropy.gap_after
+    assert "class temperature" in str(fit) and "anchor entropy" in str(fit)
+    # A model of one class has no class temperature to fit.
+    one = fit_calibration("entropy_class", modes._replace(class_logits=torch.zeros(n, 1)), torch.zeros(6).long())
+    assert one.class_temperature == 1.0 and one.objective == "brier (entropy)"
+
+
+def entropy_probabilities(al: torch.Tensor, a: float, b: float) -> torch.Tensor:
+    """p(k | c) of two classes' blocks of three anchors, each at its entropy temperature."""
+    t = entropy_tempered(al, 2, a, b)
+    return torch.cat([torch.softmax(t[:, :3], dim=1), torch.softmax(t[:, 3:], dim=1)], dim=1)
 
 
 def test_entropy_tempered_works_per_class_block() -> None:
