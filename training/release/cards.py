@@ -301,6 +301,9 @@ def distill_words(name: str, cfg: dict[str, Any]) -> str:
         teacher += f" whose heads' layers are {wide} wide (this one's {head})"
     if cfg.get("model", {}).get("map_res_blocks", blocks) < blocks:
         teacher = "a larger network (the same configuration with the map CNN's two residual blocks)"
+    kept = Path(cfg["train"]["distill"]).name
+    if kept.endswith("_crop.pt"):  # a second stage (training.release.retrain.KEPT_STAGE)
+        teacher, name = "the crop model it replaced (itself a student; its crops carry the agents' boxes)", kept[:-3]
     soft = float(cfg["train"].get("distill_soft", 0.0))
     also = f" and its mode probabilities (weight {soft:g})" if soft > 0 else ""
     if not cfg["train"].get("distill_classifier", True):

@@ -12,6 +12,8 @@ from training.release.cards import (
     classification_words,
     contract_line,
     distill_words,
+    map_words,
+    scene_words,
     threads_of,
     training_log,
 )
@@ -82,9 +84,11 @@ def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str
     groups += [(m, r) for m, r in metrics.get("by_motion", {}).items() if r["agents"]]
     groups += [(f"label {k}", r) for k, r in metrics["by_label"].items() if k.lower() not in metrics["by_class"]]
     table = "\n".join(f"| {g} | {r['agents']} | " + " | ".join(f"{r[k]:.2f}" for k in keys) + " |" for g, r in groups)
+    data = cfg["data"]
+    crops = f"{data['map_height_px']}×{data['map_width_px']} px crops at {data['map_resolution_m']} m/px"
+    where = map_words(cfg) if m.get("map_mode", "crop") == "scene" else crops
     map_line = (
-        f"map CNN (width {m['map_channels']}) over {cfg['data']['map_height_px']}×{cfg['data']['map_width_px']} px "
-        f"crops at {cfg['data']['map_resolution_m']} m/px, "
+        f"map CNN (width {m['map_channels']}{scene_words(cfg)}) over {where}, "
         if m["use_map"] and cfg["data"]["use_map"] and cfg["data"]["dataset"] != "apolloscape"
         else ""
     )

@@ -60,6 +60,17 @@ STUDENT_ARGS = {
         *("--set", "train.distill_noisy=false"),
     ),
 }
+#: Distilled models taught once more, by their student (kept among the teachers as ``<model>_crop.pt``) and started
+#: from its weights, with these changes and seed (:data:`KEPT_SEED`): Stanford Drone's reads its map's features kept
+#: with the map (contract 13), without the agents' boxes (runs/RULES-2026-12-06g; docs/results.md). No calibration
+#: folds.
+KEPT_STAGE = {
+    "sdd": (
+        *("--set", "model.map_mode=scene", "--set", "data.map_scene_px=128", "--set", "data.map_draw_agents=false"),
+        *("--set", "data.map_scene_tile_px=64"),
+    )
+}
+KEPT_SEED = {"sdd": 1}
 #: The seed of each distilled model's student and its fold students (0 where not named), chosen on validation.
 STUDENT_SEED = {"apolloscape": 1}
 #: Distilled models whose student is kept as a consensus of one with a top-mode scale fitted on validation.
@@ -80,6 +91,10 @@ def _distilled(
     calibration)."""
     student_args, seed = STUDENT_ARGS.get(ds, ()), STUDENT_SEED.get(ds, 0)
     student = _student(members, TEACHERS / f"{ds}.pt", toml, root, f"{ds}_student", *student_args, seed=seed)
+    if ds in KEPT_STAGE:
+        crop = TEACHERS / f"{ds}_crop.pt"
+        init = ("--set", f"train.init={crop}")
+        student = _student(student, crop, toml, root, f"{ds}_kept", *KEPT_STAGE[ds], *init, seed=KEPT_SEED[ds])
     fold_students = []
     for i, (recordings, runs) in enumerate(folds):
         fold_teacher = model_checkpoint(runs, ROOT / "runs" / f"{ds}_fold{i}_teacher.pt")

@@ -22,7 +22,7 @@ def frame_and_spec(name: str) -> tuple[dgan.Frame, dgan.InputSpec]:
 
 def per_call(spec: dgan.InputSpec) -> dgan.InputSpec:
     """A scene model's spec read as contract 12 (rasters of the agents' groups each call, the agents' boxes drawn):
-    the bundled ``zara1`` keeps its features with the map (contract 13)."""
+    the bundled ``zara1`` and ``sdd`` keep their features with the map (contract 13)."""
     assert spec.map is not None
     assert spec.map.scene is not None
     scene = dataclasses.replace(spec.map.scene, tile_px=0, halo_px=0, channels=0)
@@ -40,11 +40,13 @@ def test_the_network_inputs_are_the_engines(name: str) -> None:
             np.testing.assert_allclose(ours[key], engine[key], atol=1e-5, err_msg=key)
 
 
-@pytest.mark.parametrize("name", ["zara1", "sdd"])
+@pytest.mark.parametrize("name", ["zara1", "sdd", "univ"])
 def test_raster_crops_are_the_engines(name: str) -> None:
-    """The crops (or a scene model's raster and grids, contract 12: ``zara1`` read so) of a raster map."""
+    """The crops (``univ``), or a scene model's raster and grids (contract 12: ``zara1`` and ``sdd``, which keep their
+    features with the map, read so) of a raster map."""
     frame, spec = frame_and_spec(name)
-    spec = per_call(spec) if name == "zara1" else spec
+    assert spec.map is not None
+    spec = per_call(spec) if spec.map.scene is not None else spec
     assert spec.map is not None
     bare = dataclasses.replace(spec, map=dataclasses.replace(spec.map, draw_agents=False))
     np.testing.assert_array_equal(research.preprocess(frame, bare)["map"], dgan.preprocess(frame, bare)["map"])

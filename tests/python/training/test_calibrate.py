@@ -1,7 +1,8 @@
 """training.calibrate: the two proper scores, the reliability gap that chooses between their temperatures, the
 choice itself on best modes drawn at a known temperature, the speed-dependent and class temperatures of contract 9
-and the entropy temperature (alone and with a class temperature) given back from best modes drawn with them, a temperature cross-fitted over validation
-folds, and the validation windows it is fitted on (train.calibration_split)."""
+and the entropy temperature (alone and with a class temperature) given back from best modes drawn with them, a
+temperature cross-fitted over validation folds, and the validation windows it is fitted on
+(train.calibration_split)."""
 
 from __future__ import annotations
 
@@ -168,10 +169,12 @@ def test_an_entropy_and_class_temperature_drawn_are_given_back_with_the_class_in
     entropy = fit_calibration("entropy", modes, class_of)
     assert entropy.class_temperature == 1.0
     assert fit.gap_after < 0.03 < entropy.gap_after
-    assert "class temperature" in str(fit) and "anchor entropy" in str(fit)
+    assert "class temperature" in str(fit)
+    assert "anchor entropy" in str(fit)
     # A model of one class has no class temperature to fit.
     one = fit_calibration("entropy_class", modes._replace(class_logits=torch.zeros(n, 1)), torch.zeros(6).long())
-    assert one.class_temperature == 1.0 and one.objective == "brier (entropy)"
+    assert one.class_temperature == 1.0
+    assert one.objective == "brier (entropy)"
 
 
 def entropy_probabilities(al: torch.Tensor, a: float, b: float) -> torch.Tensor:

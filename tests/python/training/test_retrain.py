@@ -13,6 +13,8 @@ from training.config import Config
 from training.release.retrain import (
     DISTILLED,
     DISTILLED_SCENES,
+    KEPT_SEED,
+    KEPT_STAGE,
     SCENE_STUDENT_ARGS,
     STUDENT_ARGS,
     STUDENT_SEED,
@@ -26,7 +28,7 @@ CHECKPOINTS = ROOT / "training" / "checkpoints"
 
 def _students() -> list[tuple[str, str, tuple[str, ...]]]:
     """(bundled name, configuration file, the student's extra arguments) of every distilled bundled model."""
-    out = [(ds, f"{ds}.toml", STUDENT_ARGS.get(ds, ())) for ds in DISTILLED]
+    out = [(ds, f"{ds}.toml", KEPT_STAGE.get(ds, STUDENT_ARGS.get(ds, ()))) for ds in DISTILLED]
     return out + [(s, f"ethucy_{s}.toml", SCENE_STUDENT_ARGS.get(s, ())) for s in DISTILLED_SCENES]
 
 
@@ -42,7 +44,8 @@ def test_a_students_arguments_give_the_bundled_students_settings(
         ckpt = ckpt["members"][0]
     else:
         assert "members" not in ckpt, f"{name} is bundled as one network"
-    assert ckpt["config"]["train"]["seed"] == STUDENT_SEED.get(name, 0), f"{name}: the student's seed"
+    seed = KEPT_SEED.get(name, STUDENT_SEED.get(name, 0))
+    assert ckpt["config"]["train"]["seed"] == seed, f"{name}: the student's seed"
     kept = Config.from_dict({"name": name, **{k: ckpt["config"][k] for k in ("data", "model", "train")}})
     changed = [tuple(a.split("=")[0].split(".")) for a in args if a != "--set"]
     for section, key in [*changed, ("model", "head_dim"), ("model", "map_res_blocks"), ("train", "calibration")]:
