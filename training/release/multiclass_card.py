@@ -89,7 +89,7 @@ def multiclass_card(name: str, run: Path, metrics: dict[str, Any], cfg: dict[str
     where = map_words(cfg) if m.get("map_mode", "crop") == "scene" else crops
     map_line = (
         f"map CNN (width {m['map_channels']}{scene_words(cfg)}) over {where}, "
-        if m["use_map"] and cfg["data"]["use_map"] and cfg["data"]["dataset"] != "apolloscape"
+        if m["use_map"] and data["use_map"] and data["dataset"] != "apolloscape"
         else ""
     )
     return f"""# Model card: `{name}`

@@ -60,6 +60,12 @@ def test_what_a_student_learned_from_its_teacher_is_named() -> None:
     wider = {"data": {}, "model": {"head_dim": 512}, "train": student["train"]}
     assert "consensus of runs whose heads' layers are 256 wide (this one's 512)" in distill_words("hotel", wider)
     assert "wide" not in words
+    # A second stage (training.release.retrain.KEPT_STAGE) names the crop model it was taught by, and that file.
+    second = {"data": {}, "train": {"distill": "training/checkpoints/teachers/sdd_crop.pt", "distill_weight": 1.0}}
+    kept = distill_words("sdd", second)
+    assert "the crop model it replaced" in kept
+    assert "`training/checkpoints/teachers/sdd_crop.pt`" in kept
+    assert "consensus" not in kept
 
 
 def test_a_cross_fitted_temperature_is_named() -> None:

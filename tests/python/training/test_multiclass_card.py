@@ -55,3 +55,16 @@ def test_the_card_of_the_bundled_hdmap_configuration(tmp_path: Path) -> None:
     assert "3.0 min on" in text  # the epochs' seconds summed
     assert "weights of epoch 2" in text  # train.select = "val_ade"
     assert "training/configs/hdmap.toml" in text
+
+
+def test_the_card_of_a_scene_model_that_keeps_its_features(tmp_path: Path) -> None:
+    ckpt = torch.load(ROOT / "training" / "checkpoints" / "sdd.pt", weights_only=False)
+    cfg = ckpt["config"]
+    (tmp_path / "log.csv").write_text("epoch,val_ade,val_loss,seconds\n1,0.60,3.0,60\n")
+    (tmp_path / "config.json").write_text(json.dumps({"config": cfg}))
+    text = multiclass_card("sdd", tmp_path, _metrics(), cfg)
+    assert "its features kept with the map in north-up tiles of 64 px (contract 13" in text
+    assert "a call pays only for the reading" in text
+    assert "px crops at" not in text  # a crop model's words
+    crop = {**cfg, "model": {**cfg["model"], "map_mode": "crop"}}
+    assert "map CNN (width 8) over 32×31 px crops at 1.0 m/px, " in multiclass_card("sdd", tmp_path, _metrics(), crop)
