@@ -38,12 +38,16 @@ def _metrics() -> dict[str, Any]:
     }
 
 
+def _bundled_run(name: str, run: Path) -> dict[str, Any]:
+    """The bundled model ``name``'s configuration, written with a three-epoch log as the run folder ``run``."""
+    cfg: dict[str, Any] = torch.load(ROOT / "training" / "checkpoints" / f"{name}.pt", weights_only=False)["config"]
+    (run / "log.csv").write_text("epoch,val_ade,val_loss,seconds\n1,0.60,3.0,60\n2,0.55,3.1,60\n3,0.58,2.9,60\n")
+    (run / "config.json").write_text(json.dumps({"config": cfg}))
+    return cfg
+
+
 def test_the_card_of_the_bundled_hdmap_configuration(tmp_path: Path) -> None:
-    ckpt = torch.load(ROOT / "training" / "checkpoints" / "hdmap.pt", weights_only=False)
-    cfg = ckpt["config"]
-    (tmp_path / "log.csv").write_text("epoch,val_ade,val_loss,seconds\n1,0.60,3.0,60\n2,0.55,3.1,60\n3,0.58,2.9,60\n")
-    (tmp_path / "config.json").write_text(json.dumps({"config": cfg}))
-    text = multiclass_card("hdmap", tmp_path, _metrics(), cfg)
+    text = multiclass_card("hdmap", tmp_path, _metrics(), _bundled_run("hdmap", tmp_path))
     assert text.startswith("# Model card: `hdmap`")
     assert MULTICLASS["hdmap"]["title"] in text
     assert MULTICLASS["hdmap"]["licence"] in text
@@ -58,10 +62,7 @@ def test_the_card_of_the_bundled_hdmap_configuration(tmp_path: Path) -> None:
 
 
 def test_the_card_of_a_scene_model_that_keeps_its_features(tmp_path: Path) -> None:
-    ckpt = torch.load(ROOT / "training" / "checkpoints" / "sdd.pt", weights_only=False)
-    cfg = ckpt["config"]
-    (tmp_path / "log.csv").write_text("epoch,val_ade,val_loss,seconds\n1,0.60,3.0,60\n")
-    (tmp_path / "config.json").write_text(json.dumps({"config": cfg}))
+    cfg = _bundled_run("sdd", tmp_path)
     text = multiclass_card("sdd", tmp_path, _metrics(), cfg)
     assert "its features kept with the map in north-up tiles of 64 px (contract 13" in text
     assert "a call pays only for the reading" in text
