@@ -23,9 +23,11 @@ that their ratios hold on a machine whose speed drifts:
   single-thread float32 sgemm (numpy, 1024², printed first).
 
 ``--session-options``: the bare session under other ONNX Runtime options (no memory arena, no memory pattern, fewer
-graph optimisations) as multiples of the engine's options' time.
+graph optimisations, two intra-op threads, the parallel executor on two inter-op threads) as multiples of the engine's
+options' time.
 
-Then one `predict` on 1 and 2 threads (also as multiples of the run's single-thread 512³ matmul), the
+Then one `predict` on 1 and 2 threads (also as multiples of the run's single-thread 512³ matmul, and beside the floor
+two side-by-side matmul loops set for evenly split work on this machine), the
 throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of `predict`
 (on one thread, and with ``threads=2`` against the loop on one and on two threads).
 The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark, not a test;
@@ -54,7 +56,7 @@ sys.path.insert(0, str(ROOT))
 
 import dgan  # noqa: E402
 from benches import research  # noqa: E402
-from benches.flops import graph_flops, sgemm_gflops  # noqa: E402
+from benches.flops import graph_flops, sgemm_gflops, two_core_slowdown  # noqa: E402
 from dgan.contract import KEPT_INPUTS, KEPT_OUTPUT  # noqa: E402
 from dgan.demo import scene_for  # noqa: E402
 
@@ -155,7 +157,9 @@ def bare_session(path: Path, options: dict[str, Any] | None = None) -> Any:
     opts.intra_op_num_threads = 1
     opts.inter_op_num_threads = 1
     for key, value in (options or {}).items():
-        setattr(opts, key, getattr(ort.GraphOptimizationLevel, value) if isinstance(value, str) else value)
+        if isinstance(value, str):  # an enumeration's member by its name
+            value = getattr(ort.ExecutionMode if key == "execution_mode" else ort.GraphOptimizationLevel, value)
+        setattr(opts, key, value)
     return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
 
 
@@ -319,6 +323,11 @@ def latency_table(models: list[str], repeat: int, matmul_ms: float) -> None:
     print("|---|---|---|---|---|---|---|---|")
     for name in models:
         latency(name, [32, 256], repeat, matmul_ms)
+    slow = two_core_slowdown()
+    print(
+        f"\nTwo single-thread 512³ matmul loops side by side: each {slow:.2f}× as long as one alone, so evenly split "
+        f"work takes at least {slow / 2:.2f} of its one-thread time on two threads here."
+    )
 
 
 def matched_difference(a: dgan.Prediction, b: dgan.Prediction) -> tuple[float, float]:
@@ -470,18 +479,23 @@ SESSION_VARIANTS: dict[str, dict[str, Any]] = {
     "no memory pattern": {"enable_mem_pattern": False},
     "extended optimisations only": {"graph_optimization_level": "ORT_ENABLE_EXTENDED"},
     "basic optimisations only": {"graph_optimization_level": "ORT_ENABLE_BASIC"},
+    # What a frame that does not split has on two cores: one call on two intra-op threads, or the parallel executor
+    # running independent branches (the trajectory LSTM beside the map CNN) on two inter-op threads.
+    "two intra-op threads": {"intra_op_num_threads": 2},
+    "parallel executor, two inter-op threads": {"execution_mode": "ORT_PARALLEL", "inter_op_num_threads": 2},
 }
 
 
 def session_options_table(models: list[str], agents: list[int], repeat: int) -> None:
-    """The bare session (one thread) under each of :data:`SESSION_VARIANTS`, as a multiple of the engine's options'
-    time (above 1: slower), every session of a row timed in interleaved rounds on the same inputs."""
+    """The bare session (the engine's options, one thread) under each of :data:`SESSION_VARIANTS` (one thread unless
+    the variant names more), as a multiple of the engine's options' time (above 1: slower), every session of a row
+    timed in interleaved rounds on the same inputs."""
     print("\n| model | N | engine's options ms | " + " | ".join(SESSION_VARIANTS) + " |")
     print("|---|---|---|" + "---|" * len(SESSION_VARIANTS))
     for name in models:
         p = dgan.Predictor(name, sessions=1)
         for n in agents:
-            x = dgan.preprocess(tiled(scene_for(p.spec).frame, n), p.spec)
+            x = call_inputs(p, tiled(scene_for(p.spec).frame, n))  # a kept-features model's: its tiles kept
             sessions = {"engine": bare_session(p.path)}
             sessions.update({label: bare_session(p.path, options) for label, options in SESSION_VARIANTS.items()})
             feed = {i.name: x[i.name] for i in sessions["engine"].get_inputs()}

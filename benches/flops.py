@@ -138,3 +138,30 @@ def sgemm_gflops(n: int = 1024, repeat: int = 5) -> float:
         a @ b
         times.append(time.perf_counter() - t0)
     return 2 * n**3 / float(np.median(times)) / 1e9
+
+
+def two_core_slowdown(n: int = 512, calls: int = 100) -> float:
+    """How much slower each of two threads runs ``calls`` single-thread ``n``³ float32 products side by side than
+    one thread alone (numpy's BLAS on one thread; it releases the GIL): with work split evenly in two, one call on
+    two threads can take no less than half this of its one-thread time on this machine."""
+    import threading
+    import time
+
+    rng = np.random.default_rng(0)
+    a, b = rng.random((n, n), dtype=np.float32), rng.random((n, n), dtype=np.float32)
+
+    def loop() -> None:
+        for _ in range(calls):
+            a @ b
+
+    loop()
+    t0 = time.perf_counter()
+    loop()
+    alone = time.perf_counter() - t0
+    threads = [threading.Thread(target=loop) for _ in range(2)]
+    t0 = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return (time.perf_counter() - t0) / alone

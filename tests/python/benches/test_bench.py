@@ -1,10 +1,14 @@
-"""benches/bench.py times the figures of a row in interleaved rounds, the slow ones in fewer of them."""
+"""benches/bench.py times the figures of a row in interleaved rounds, the slow ones in fewer of them, and builds the
+bare sessions its option variants name."""
 
 from __future__ import annotations
 
 from itertools import pairwise
 
-from benches.bench import interleaved_ms
+import onnxruntime as ort  # type: ignore[import-untyped]
+
+import dgan
+from benches.bench import SESSION_VARIANTS, bare_session, interleaved_ms
 
 
 def test_rounds_interleave_and_slow_pipelines_run_less_often() -> None:
@@ -24,3 +28,16 @@ def test_rounds_interleave_and_slow_pipelines_run_less_often() -> None:
     # Every round calls the fast ones in turn: never twice in a row.
     fast = [c for c in calls if c != "slow"]
     assert all(x != y for x, y in pairwise(fast))
+
+
+def test_each_session_variant_sets_what_it_names_beside_one_thread() -> None:
+    path = dgan.Predictor("zara1").path
+    base = bare_session(path).get_session_options()
+    assert (base.intra_op_num_threads, base.inter_op_num_threads) == (1, 1)
+    assert base.execution_mode == ort.ExecutionMode.ORT_SEQUENTIAL
+    parallel = bare_session(path, SESSION_VARIANTS["parallel executor, two inter-op threads"]).get_session_options()
+    assert parallel.execution_mode == ort.ExecutionMode.ORT_PARALLEL
+    assert (parallel.intra_op_num_threads, parallel.inter_op_num_threads) == (1, 2)
+    basic = bare_session(path, SESSION_VARIANTS["basic optimisations only"]).get_session_options()
+    assert basic.graph_optimization_level == ort.GraphOptimizationLevel.ORT_ENABLE_BASIC
+    assert bare_session(path, SESSION_VARIANTS["two intra-op threads"]).get_session_options().intra_op_num_threads == 2
