@@ -110,6 +110,10 @@ STILL_ON_MAP_FAILS: dict[tuple[str, str], float] = {
 }
 
 
+#: Every bundled model and class, each model loaded once for the tests parametrised by them.
+MODEL_CLASSES = [(name, klass) for name in dgan.models.list() for klass in dgan.Predictor(name).classes]
+
+
 def by_class(fails: dict[tuple[str, str], float]) -> list[Any]:
     """Every bundled model and class, those of ``fails`` as strict expected failures naming how far they move."""
     return [
@@ -120,8 +124,7 @@ def by_class(fails: dict[tuple[str, str], float]) -> list[Any]:
             if (name, klass) in fails
             else [],
         )
-        for name in dgan.models.list()
-        for klass in dgan.Predictor(name).classes
+        for name, klass in MODEL_CLASSES
     ]
 
 
