@@ -156,10 +156,9 @@ def bare_session(path: Path, options: dict[str, Any] | None = None) -> Any:
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = 1
     opts.inter_op_num_threads = 1
+    enums = {"execution_mode": ort.ExecutionMode, "graph_optimization_level": ort.GraphOptimizationLevel}
     for key, value in (options or {}).items():
-        if isinstance(value, str):  # an enumeration's member by its name
-            value = getattr(ort.ExecutionMode if key == "execution_mode" else ort.GraphOptimizationLevel, value)
-        setattr(opts, key, value)
+        setattr(opts, key, getattr(enums[key], value) if isinstance(value, str) else value)  # a member by its name
     return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
 
 
