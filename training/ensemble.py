@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ import numpy.typing as npt
 import torch
 
 from training.calibrate import calibrate_checkpoint
-from training.export import SLIM_KEYS, export_checkpoint, load_checkpoint
+from training.export import SLIM_KEYS, Checkpoint, export_checkpoint, load_checkpoint
 from training.losses import Calibration
 from training.modules.dgan import ConsensusEnsemble
 
@@ -78,27 +79,23 @@ def scaled_errors(
 
 
 @torch.no_grad()
-def top_mode_errors(
-    path: Path, data_root: Path | None = None, progress: bool = False
-) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """For every validation target of the ensemble checkpoint at ``path`` (its configuration's validation windows,
-    as the temperature's fit uses; scale 1 whatever the checkpoint holds): the ADE of its most probable mode at each
-    of :data:`TOP_SCALES` ``(N, S)`` (:func:`scaled_errors`), its class index ``(N,)``, and the model's classes."""
+def validation_top_modes(
+    ckpt: Checkpoint, data_root: Path | None = None, progress: bool = False
+) -> Iterator[tuple[dict[str, torch.Tensor], torch.Tensor]]:
+    """Over the validation windows of the loaded checkpoint ``ckpt`` (its configuration's, as the temperature's fit
+    uses), batch by batch: the batch, and its targets' most probable mode's residual over the prior ``(n, T, 2)``
+    (the model's own top mode at its calibration); the targets are the batch's ``target`` rows."""
     from dataclasses import replace
 
     from training.data.batches import forward_inputs, prepared_batch, windows_with_targets
     from training.data.splits import split_windows
     from training.losses import mode_probabilities
 
-    model, spec, anchors_np, class_of_np, cfg, cal = load_checkpoint(path)
-    if not isinstance(model, ConsensusEnsemble):
-        raise ValueError(f"{path}: not an ensemble checkpoint (training.ensemble); a top-mode scale needs one")
-    model.top_scale.fill_(1.0)
+    model, spec, anchors_np, class_of_np, cfg, cal = ckpt
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     w = split_windows(cfg, spec, "val", progress)
     anchors, class_of = torch.from_numpy(anchors_np).float(), torch.from_numpy(class_of_np).long()
-    errors, classes = [], []
     keep = windows_with_targets(w)
     for start in range(0, len(keep), 64):
         b = prepared_batch(w, keep[start : start + 64], spec)
@@ -106,11 +103,26 @@ def top_mode_errors(
         t = b["target"]
         temperature = cal.anchor_temperatures(b["prior"][t], spec.dt_s)
         top = mode_probabilities(cl[t], al[t], class_of, temperature, cal.class_temperature).argmax(dim=1)
-        residual = (anchors.unsqueeze(0) + off[t].float())[torch.arange(len(top)), top]  # (n, T, 2)
+        yield b, (anchors.unsqueeze(0) + off[t].float())[torch.arange(len(top)), top]
+
+
+def top_mode_errors(
+    path: Path, data_root: Path | None = None, progress: bool = False
+) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """For every validation target of the ensemble checkpoint at ``path`` (:func:`validation_top_modes`; scale 1
+    whatever the checkpoint holds): the ADE of its most probable mode at each of :data:`TOP_SCALES` ``(N, S)``
+    (:func:`scaled_errors`), its class index ``(N,)``, and the model's classes."""
+    ckpt = load_checkpoint(path)
+    if not isinstance(ckpt.model, ConsensusEnsemble):
+        raise ValueError(f"{path}: not an ensemble checkpoint (training.ensemble); a top-mode scale needs one")
+    ckpt.model.top_scale.fill_(1.0)
+    errors, classes = [], []
+    for b, residual in validation_top_modes(ckpt, data_root, progress):
+        t = b["target"]
         prior = b["prior"][t].double()
         errors.append(scaled_errors((prior + residual).numpy(), prior.numpy(), b["future"][t].numpy()))
         classes.append(b["state"][t, 7:].argmax(dim=1))
-    return np.concatenate(errors), torch.cat(classes).numpy(), tuple(spec.classes)
+    return np.concatenate(errors), torch.cat(classes).numpy(), tuple(ckpt.spec.classes)
 
 
 @dataclass(frozen=True)

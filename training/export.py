@@ -98,13 +98,17 @@ def contract(
     description: str,
     temperature: float | Calibration = 1.0,
     top_scale: list[float] | None = None,
+    still_radius: list[float] | None = None,
 ) -> dict[str, Any]:
     """The contract of an export: ``temperature`` a single temperature of the anchor logits or a contract-9
     :class:`~training.losses.Calibration` (its keys written only where they differ from a single temperature);
-    ``top_scale`` each class's top-mode scale (contract 14; written for the classes whose scale is not 1)."""
+    ``top_scale`` each class's top-mode scale (contract 14; written for the classes whose scale is not 1);
+    ``still_radius`` each class's still radius (contract 15, ``training.still``; written for the classes above 0)."""
     cal = temperature if isinstance(temperature, Calibration) else Calibration(float(temperature))
     pairs = zip(spec.classes, top_scale, strict=True) if top_scale else ()
     scaled = {c: float(s) for c, s in pairs if float(s) != 1.0}
+    radii = zip(spec.classes, still_radius, strict=True) if still_radius else ()
+    held = {c: float(r) for c, r in radii if float(r) > 0.0}
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
@@ -115,6 +119,7 @@ def contract(
         anchors={c: rounded[class_of == i].tolist() for i, c in enumerate(spec.classes)},
         **cal.keys(),
         **({"top_scale": scaled} if scaled else {}),
+        **({"still_radius_m": held} if held else {}),
         name=name,
         description=description,
         weights_sha256=UNSEALED,
@@ -189,9 +194,11 @@ def export_model(
     name: str,
     description: str = "",
     temperature: float | Calibration = 1.0,
+    still_radius: list[float] | None = None,
 ) -> Path:
     """Exports under the contract (version 3: the padded neighbour layout, whatever layout the model trained on);
-    anchors must be grouped by class in the spec's class order. ``temperature``: as :func:`contract`. A consensus of
+    anchors must be grouped by class in the spec's class order. ``temperature``, ``still_radius``: as
+    :func:`contract`. A consensus of
     one network is exported as that network, its top-mode scale in the contract (contract 14: the engine's decoding
     applies it), so that the file runs one network and nothing around it."""
     from training.modules.dgan import PaddedDGAN
@@ -229,7 +236,7 @@ def export_model(
     )
     m = onnx.load(str(path))
     store_half(m)
-    meta = contract(spec, anchors, class_of, name, description, temperature, top_scale)
+    meta = contract(spec, anchors, class_of, name, description, temperature, top_scale, still_radius)
     onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(meta)})
     onnx.save(m, str(path))
     seal(path)
@@ -288,9 +295,10 @@ def store_half(m: onnx.ModelProto) -> int:
 
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
-    """Exports the checkpoint at ``ckpt`` with the calibration it holds."""
+    """Exports the checkpoint at ``ckpt`` with the calibration and still radius (``training.still``) it holds."""
     model, spec, anchors, class_of, _, calibration = load_checkpoint(ckpt)
-    return export_model(model, spec, anchors, class_of, path, name, description, calibration)
+    still = torch.load(ckpt, weights_only=False).get("still_radius")
+    return export_model(model, spec, anchors, class_of, path, name, description, calibration, still)
 
 
 def main() -> None:

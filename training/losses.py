@@ -210,14 +210,20 @@ def decode_torch(
     prior: Tensor | None = None,
     temperature: float | Tensor = 1.0,
     class_temperature: float = 1.0,
+    still: Tensor | None = None,
 ) -> tuple[Tensor, Tensor]:
     """Agent-frame modes ``(N, K, T, 2)`` (the kinematic ``prior (N, T, 2)`` + anchor + offset) sorted by
     p(c) · p(k | c), and those probabilities ``(N, K)``; the engine's decoding, in PyTorch (temperatures as in
-    :func:`mode_probabilities`; :meth:`Calibration.anchor_temperatures` gives a speed-dependent one)."""
+    :func:`mode_probabilities`; :meth:`Calibration.anchor_temperatures` gives a speed-dependent one). ``still (N,)``:
+    the agents whose most probable mode is held at the prior (contract 15, ``dgan.still_agents``)."""
     p = mode_probabilities(class_logits, anchor_logits, class_of_anchor, temperature, class_temperature)
     order = torch.argsort(-p, dim=1, stable=True)
     modes = anchors.unsqueeze(0) + offsets
     if prior is not None:
         modes = modes + prior.unsqueeze(1)
     traj = modes.gather(1, order[..., None, None].expand(-1, -1, *offsets.shape[2:]))
+    if still is not None and bool(still.any()):
+        held = prior[still] if prior is not None else torch.zeros_like(traj[still, 0])
+        traj = traj.clone()
+        traj[still, 0] = held.to(traj.dtype)
     return traj, p.gather(1, order)

@@ -28,6 +28,7 @@ from dgan.spec import (
     preprocess,
     read_kept,
     scene_raster,
+    still_agents,
     to_agent_frame,
     to_world_frame,
 )
@@ -65,6 +66,7 @@ __all__ = [
     "scene_map",
     "scene_raster",
     "scenes",
+    "still_agents",
     "tables",
     "to_agent_frame",
     "to_world_frame",

@@ -29,6 +29,7 @@ __all__ = [
     "read_kept",
     "scene_raster",
     "seal_model",
+    "still_agents",
     "to_agent_frame",
     "to_world_frame",
     "validate_spec",
@@ -184,6 +185,12 @@ def kinematic_prior(
     state: npt.NDArray[np.float32],
     spec_json: str,
 ) -> npt.NDArray[np.float32]: ...
+def still_agents(
+    trajectory: npt.NDArray[np.float32],
+    trajectory_mask: npt.NDArray[np.float32],
+    state: npt.NDArray[np.float32],
+    radius: list[float],
+) -> npt.NDArray[np.bool_]: ...
 def to_agent_frame(
     points_world: npt.NDArray[np.float64], origins: npt.NDArray[np.float64], headings: npt.NDArray[np.float64]
 ) -> npt.NDArray[np.float64]: ...

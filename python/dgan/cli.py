@@ -68,6 +68,9 @@ def _info(args: argparse.Namespace) -> int:
     if c.get("top_scale"):
         kept = ", ".join(f"{k} {v:g}" for k, v in c["top_scale"].items())
         print(f"top mode   keeps this share of its residual over the prior: {kept} (contract 14)")
+    if c.get("still_radius_m"):
+        held = ", ".join(f"{k} {v:g} m" for k, v in c["still_radius_m"].items())
+        print(f"still      top mode at the prior for a history within this of its last position: {held} (contract 15)")
     print(f"providers  {', '.join(dgan.available_execution_providers())} (in this ONNX Runtime library)")
     if c.get("description"):
         print(f"about      {c['description']}")

@@ -252,6 +252,17 @@ def kinematic_prior(
     return _dgan.kinematic_prior(t, m, s, _spec_json(spec))
 
 
+def still_agents(
+    trajectory: npt.ArrayLike, trajectory_mask: npt.ArrayLike, state: npt.ArrayLike, radius: Sequence[float]
+) -> npt.NDArray[np.bool_]:
+    """Which agents of the network inputs ``trajectory``, ``trajectory_mask`` and ``state`` have a still history
+    (contract 15): every observed step present and each within ``radius[c]`` metres of the last observed position, c
+    the agent's class in the model's order (0: never held). The engine holds such an agent's most probable mode at its
+    prior when the model declares ``still_radius_m``."""
+    t, m, s = (np.ascontiguousarray(a, dtype=np.float32) for a in (trajectory, trajectory_mask, state))
+    return _dgan.still_agents(t, m, s, [float(r) for r in radius])
+
+
 def to_agent_frame(
     points_world: npt.ArrayLike, origins: npt.ArrayLike, headings: npt.ArrayLike
 ) -> npt.NDArray[np.float64]:

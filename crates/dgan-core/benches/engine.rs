@@ -131,8 +131,14 @@ fn bench_decode(c: &mut Criterion) {
         let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, 0.0], i as f64 * 0.1)).collect();
         let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
         let calibration = Calibration { temperature: 1.3, speed_exponent: 0.5, class_temperature: 2.0 };
-        let params =
-            DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5, top_scale: &[] };
+        let params = DecodeParams {
+            anchors: &anchors,
+            prior: Some(prior.view()),
+            calibration,
+            dt_s: 0.5,
+            top_scale: &[],
+            still: &[],
+        };
         let id = if threads == 1 { format!("{n}") } else { format!("{n}/{threads}_threads") };
         g.bench_function(id, |b| b.iter(|| decode_on(out, params, &poses, 60, threads)));
     }
@@ -230,6 +236,7 @@ fn bench_hdmap(c: &mut Criterion) {
         calibration: contract.calibration(),
         dt_s: spec.dt_s,
         top_scale: &top_scale,
+        still: &[],
     };
     g.bench_function("decode", |b| b.iter(|| decode(out, params, &pre.poses, anchors.total())));
     g.finish();

@@ -2,7 +2,7 @@
 //! `docs/model-contract.md`; this module is the one the runtime checks against.
 
 use crate::class::AgentClass;
-use crate::decode::{check_top_scale, Anchors, Calibration};
+use crate::decode::{check_top_scale, Anchors, Calibration, MAX_STILL_RADIUS_M};
 use crate::error::{DganError, Result};
 use crate::prior::{PriorKind, PriorSpec, VelocityFit};
 use crate::spec::{is_zero, GraphLayout, HeadingSource, InputSpec, MapRender, EDGE_FEATURES};
@@ -19,11 +19,12 @@ use std::collections::BTreeMap;
 /// version 10 histories denoised before preprocessing (`denoise_gate_m`); version 11 the classes that read the map
 /// (`map.classes`); version 12 rasters of the scene for the map CNN (`map.scene`: `map_grid`, `map_slot`); version 13
 /// the map CNN's features kept with the map (`map.scene.tile_px`: input `map_patches`, output `map_features`); version
-/// 14 the share of its residual over the prior that each class's most probable mode keeps (`top_scale`).
-pub const CONTRACT_VERSION: u32 = 14;
+/// 14 the share of its residual over the prior that each class's most probable mode keeps (`top_scale`); version 15
+/// the most probable mode held at the prior for agents whose history is still (`still_radius_m`).
+pub const CONTRACT_VERSION: u32 = 15;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 14] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 15] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -137,6 +138,11 @@ pub struct ModelContract {
     /// [`crate::decode::DecodeParams::top_scale`]); a class not named keeps all of it (1). Each in [0, 1].
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub top_scale: BTreeMap<String, f64>,
+    /// Contract 15: per class name, a radius r (metres, in (0, 10]): an agent of that class whose every observed step
+    /// is present and within r of its last observed position has its most probable mode at the prior alone (see
+    /// [`crate::decode::still_agents`]); a class not named is never held.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub still_radius_m: BTreeMap<String, f64>,
     /// A short model name.
     #[serde(default)]
     pub name: String,
@@ -321,6 +327,7 @@ impl ModelContract {
         }
         self.check_calibration()?;
         self.top_scales()?;
+        self.still_radii()?;
         if self.units != "m" {
             return Err(DganError::Contract(format!("units must be \"m\", got {:?}", self.units)));
         }
@@ -362,6 +369,30 @@ impl ModelContract {
             self.input.classes.iter().map(|c| self.top_scale.get(c.name()).copied().unwrap_or(1.0)).collect();
         check_top_scale(&scales, scales.len())?;
         Ok(scales)
+    }
+
+    /// Each class's still radius, in the model's class order (0 where the contract names none); empty without any.
+    pub fn still_radii(&self) -> Result<Vec<f64>> {
+        if self.still_radius_m.is_empty() {
+            return Ok(Vec::new());
+        }
+        if self.contract_version < 15 {
+            return Err(DganError::Contract(
+                "still_radius_m is a contract-15 key; versions 1 to 14 hold no agent at its prior".into(),
+            ));
+        }
+        if let Some(extra) = self.still_radius_m.keys().find(|k| !self.input.classes.iter().any(|c| c.name() == *k)) {
+            return Err(DganError::Contract(format!(
+                "still_radius_m given for {extra:?}, which is not among the classes ({})",
+                class_names(&self.input.classes)
+            )));
+        }
+        if let Some((k, r)) = self.still_radius_m.iter().find(|(_, r)| !(**r > 0.0 && **r <= MAX_STILL_RADIUS_M)) {
+            return Err(DganError::Contract(format!(
+                "still_radius_m of {k:?} must lie in (0, {MAX_STILL_RADIUS_M}] metres, got {r}"
+            )));
+        }
+        Ok(self.input.classes.iter().map(|c| self.still_radius_m.get(c.name()).copied().unwrap_or(0.0)).collect())
     }
 
     fn check_calibration(&self) -> Result<()> {
@@ -763,6 +794,25 @@ mod tests {
             (scaled("{\"truck\": 0.5}"), "not among the classes"),
             (scaled("{\"pedestrian\": 1.5}"), "[0, 1]"),
             (scaled("{\"pedestrian\": -0.1}"), "[0, 1]"),
+        ] {
+            let err = ModelContract::from_json(&case).unwrap_err().to_string();
+            assert!(err.contains(says), "{err}");
+        }
+
+        // Version 15 holds the most probable mode at the prior for a still history; unnamed classes are never held.
+        let v15 = v14.replace("\"contract_version\": 14", "\"contract_version\": 15");
+        assert!(ModelContract::from_json(&v15).unwrap().still_radii().unwrap().is_empty());
+        let held = |s: &str| v15.replace("\"units\"", &format!("\"still_radius_m\": {s}, \"units\""));
+        let c = ModelContract::from_json(&held("{\"pedestrian\": 0.05}")).unwrap();
+        assert_eq!(c.still_radii().unwrap(), [0.0, 0.05]);
+        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+        let older = held("{\"pedestrian\": 0.05}").replace("\"contract_version\": 15", "\"contract_version\": 14");
+        for (case, says) in [
+            (older, "contract-15 key"),
+            (held("{\"truck\": 0.1}"), "not among the classes"),
+            (held("{\"pedestrian\": 0}"), "(0, 10]"),
+            (held("{\"pedestrian\": 11}"), "(0, 10]"),
+            (held("{\"pedestrian\": -0.1}"), "(0, 10]"),
         ] {
             let err = ModelContract::from_json(&case).unwrap_err().to_string();
             assert!(err.contains(says), "{err}");

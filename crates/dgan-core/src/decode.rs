@@ -215,6 +215,48 @@ pub struct DecodeParams<'a> {
     /// largest class logit; the mode: that class's largest anchor logit, the first of equals). Every other mode, and
     /// every probability, stays as the network gives it. Empty: every class keeps all of it (contracts 1 to 13).
     pub top_scale: &'a [f64],
+    /// Contract 15: per agent of the call, whether its history is still ([`still_agents`]); such an agent's most
+    /// probable mode is the prior alone (its residual dropped, whatever `top_scale` keeps). Every other mode, and every
+    /// probability, stays as the network gives it. Empty: no agent is held (contracts 1 to 14).
+    pub still: &'a [bool],
+}
+
+/// The farthest a still history may reach from the last observed position (contract 15's `still_radius_m`), metres.
+pub const MAX_STILL_RADIUS_M: f64 = 10.0;
+
+/// Contract 15: which agents' histories are still, from the network inputs `trajectory (N, T_obs, 2)` (agent frame:
+/// the last observed position at the origin), `trajectory_mask (N, T_obs)` and `state (N, 7 + C)` (its one-hot class,
+/// the largest of the C columns): every observed step present and each within `radius[class]` metres of the origin
+/// (strictly; a radius of 0 holds no agent of that class). Empty when `radius` is.
+pub fn still_agents(
+    trajectory: ArrayView3<'_, f32>,
+    mask: ArrayView2<'_, f32>,
+    state: ArrayView2<'_, f32>,
+    radius: &[f64],
+) -> Result<Vec<bool>> {
+    if radius.is_empty() {
+        return Ok(Vec::new());
+    }
+    let (n, t_obs, two) = trajectory.dim();
+    let c = radius.len();
+    if two != 2 || mask.dim() != (n, t_obs) || state.dim() != (n, 7 + c) {
+        return Err(DganError::Inference(format!(
+            "still_agents takes trajectory (N, T_obs, 2), trajectory_mask (N, T_obs) and state (N, {}) for {c} classes; \
+             got {:?}, {:?} and {:?}",
+            7 + c,
+            trajectory.dim(),
+            mask.dim(),
+            state.dim()
+        )));
+    }
+    Ok((0..n)
+        .map(|i| {
+            let r = radius[first_argmax(state.row(i).iter().skip(7).copied())];
+            r > 0.0
+                && mask.row(i).iter().all(|&v| v > 0.0)
+                && trajectory.slice(s![i, .., ..]).outer_iter().all(|p| f64::from(p[0]).hypot(f64::from(p[1])) < r)
+        })
+        .collect())
 }
 
 /// Checks a top-mode scale ([`DecodeParams::top_scale`]) for `classes` classes: empty, or one value in [0, 1] each.
@@ -292,10 +334,13 @@ pub fn decode_on(
 /// The shapes of the outputs and the prior against N agents and the anchors; the calibration and time step.
 fn check_outputs(out: &NetworkOutputs<'_>, params: &DecodeParams<'_>, n: usize) -> Result<()> {
     let NetworkOutputs { class_logits, anchor_logits, offsets } = out;
-    let DecodeParams { anchors, prior, calibration, dt_s, top_scale } = params;
+    let DecodeParams { anchors, prior, calibration, dt_s, top_scale, still } = params;
     let (c, k_total, t_f) = (anchors.classes().len(), anchors.total(), anchors.steps());
     check_top_scale(top_scale, c)?;
     let bad = |m: String| Err(DganError::Inference(m));
+    if !still.is_empty() && still.len() != n {
+        return bad(format!("still has {} agents, expected {n}", still.len()));
+    }
     if class_logits.dim() != (n, c) {
         return bad(format!("class_logits has shape {:?}, expected ({n}, {c})", class_logits.dim()));
     }
@@ -336,7 +381,7 @@ fn decode_rows(
     first: usize,
     part: &mut DecodedMut<'_>,
 ) -> Result<()> {
-    let DecodeParams { anchors, prior, calibration, dt_s, top_scale } = *params;
+    let DecodeParams { anchors, prior, calibration, dt_s, top_scale, still } = *params;
     let (rows, m, t_f, _) = part.trajectories.dim();
     let agents = first..first + rows;
     // Each output's rows of this share, contiguous (copied once into that layout if they are not).
@@ -402,6 +447,8 @@ fn decode_rows(
             let block = (start..start + per_class[top_class]).map(|k| anchor_logits[[r, k]]);
             (start + first_argmax(block), top_scale[top_class])
         };
+        // Contract 15: a still agent's most probable mode (the first in order) is its prior alone.
+        let held = still.get(first + r).copied().unwrap_or(false);
         let off_agent = &offsets[r * k_total * step..(r + 1) * k_total * step];
         let mut traj = part.trajectories.slice_mut(s![r, .., .., ..]);
         let traj = traj.as_slice_mut().ok_or_else(|| DganError::Inference("trajectories are not contiguous".into()))?;
@@ -410,7 +457,13 @@ fn decode_rows(
             part.mode_classes[[r, mi]] = class_of[k] as i64;
             part.mode_anchors[[r, mi]] = k as i64;
             let (anchor, off) = (&anchor_flat[k * step..(k + 1) * step], &off_agent[k * step..(k + 1) * step]);
-            let s = if k == scaled { scale } else { 1.0 };
+            let s = if held && mi == 0 {
+                0.0
+            } else if k == scaled {
+                scale
+            } else {
+                1.0
+            };
             for (t, w_out) in traj[mi * step..(mi + 1) * step].chunks_exact_mut(2).enumerate() {
                 let local = [
                     f64::from(base[2 * t]) + s * (anchor[2 * t] + f64::from(off[2 * t])),
@@ -452,6 +505,7 @@ mod tests {
             calibration: Calibration::single(temperature),
             dt_s: 0.5,
             top_scale: &[],
+            still: &[],
         };
         decode(out, params, &[pose], modes)
     }
@@ -496,8 +550,14 @@ mod tests {
         };
         let poses = [AgentPose::new([0.0, 0.0], 0.0); 2];
         let calibration = Calibration { temperature: 0.5, speed_exponent: 0.5, class_temperature: 2.0 };
-        let params =
-            DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5, top_scale: &[] };
+        let params = DecodeParams {
+            anchors: &anchors,
+            prior: Some(prior.view()),
+            calibration,
+            dt_s: 0.5,
+            top_scale: &[],
+            still: &[],
+        };
         let d = decode(out, params, &poses, 3).unwrap();
         // p(c) = softmax(ln 2 / 2, 0) = (√2, 1) / (1 + √2) for both agents.
         let pv = 2f64.sqrt() / (1.0 + 2f64.sqrt());
@@ -521,13 +581,30 @@ mod tests {
         assert!(decode(out, DecodeParams { dt_s: 0.0, ..params }, &poses, 3).is_err());
     }
 
-    #[test]
-    fn top_scale_shrinks_the_most_probable_class_top_mode_alone() {
-        let anchors = Anchors::new(
+    /// Two classes of two one-step anchors each: vehicles (1, 0), (2, 0); pedestrians (0, 1), (0, 3).
+    fn vehicle_and_pedestrian() -> Anchors {
+        Anchors::new(
             vec![AgentClass::Vehicle, AgentClass::Pedestrian],
             vec![array![[[1.0, 0.0]], [[2.0, 0.0]]], array![[[0.0, 1.0]], [[0.0, 3.0]]]],
         )
-        .unwrap();
+        .unwrap()
+    }
+
+    /// Decoding at temperature 1 with a prior, no top-mode scale and no agent held.
+    fn plain_params<'a>(anchors: &'a Anchors, prior: &'a Array3<f32>) -> DecodeParams<'a> {
+        DecodeParams {
+            anchors,
+            prior: Some(prior.view()),
+            calibration: Calibration::single(1.0),
+            dt_s: 0.5,
+            top_scale: &[],
+            still: &[],
+        }
+    }
+
+    #[test]
+    fn top_scale_shrinks_the_most_probable_class_top_mode_alone() {
+        let anchors = vehicle_and_pedestrian();
         // Agent 0's vehicle anchor 1 (its top mode) has the residual (3, 0).
         let mut offsets = Array4::<f32>::zeros((2, 4, 1, 2));
         offsets[[0, 1, 0, 0]] = 1.0;
@@ -543,13 +620,7 @@ mod tests {
         };
         let poses = [AgentPose::new([0.0, 0.0], 0.0); 2];
         let scale = [0.5, 0.25];
-        let base = DecodeParams {
-            anchors: &anchors,
-            prior: Some(prior.view()),
-            calibration: Calibration::single(1.0),
-            dt_s: 0.5,
-            top_scale: &[],
-        };
+        let base = plain_params(&anchors, &prior);
         let plain = decode(out, base, &poses, 4).unwrap();
         let scaled = decode(out, DecodeParams { top_scale: &scale, ..base }, &poses, 4).unwrap();
         assert_eq!(scaled.probabilities, plain.probabilities);
@@ -570,6 +641,49 @@ mod tests {
     }
 
     #[test]
+    fn a_still_agent_keeps_its_most_probable_mode_at_the_prior_alone() {
+        let anchors = vehicle_and_pedestrian();
+        let offsets = Array4::<f32>::from_elem((2, 4, 1, 2), 0.5);
+        let class_logits = array![[1.0f32, 0.0], [0.0, 1.0]];
+        let anchor_logits = array![[0.0f32, 1.0, 0.0, 0.0], [0.0, 0.0, 2.0, 0.0]];
+        let prior = array![[[0.25f32, 0.0]], [[0.0, 0.5]]];
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let poses = [AgentPose::new([1.0, 2.0], 0.0); 2];
+        let base = DecodeParams { top_scale: &[0.5, 0.5], ..plain_params(&anchors, &prior) };
+        let plain = decode(out, base, &poses, 4).unwrap();
+        let held = decode(out, DecodeParams { still: &[false, true], ..base }, &poses, 4).unwrap();
+        assert_eq!(held.probabilities, plain.probabilities);
+        assert_eq!(held.mode_anchors, plain.mode_anchors);
+        assert_eq!(held.trajectories.slice(s![0, .., .., ..]), plain.trajectories.slice(s![0, .., .., ..]));
+        assert_eq!(plain.mode_anchors[[1, 0]], 2, "agent 1's most probable mode: pedestrian anchor 0");
+        assert_eq!([held.trajectories[[1, 0, 0, 0]], held.trajectories[[1, 0, 0, 1]]], [1.0, 2.5], "origin + prior");
+        assert_eq!(held.trajectories.slice(s![1, 1.., .., ..]), plain.trajectories.slice(s![1, 1.., .., ..]));
+        assert!(decode(out, DecodeParams { still: &[true], ..base }, &poses, 4).is_err(), "one flag for two agents");
+    }
+
+    #[test]
+    fn still_agents_are_those_whose_every_step_is_observed_and_within_their_class_radius() {
+        // Agents 0-1 vehicles, 2-4 pedestrians: radius 0 (never held) for vehicles, 0.1 m for pedestrians.
+        let mut trajectory = Array3::<f32>::zeros((5, 3, 2));
+        let mut mask = Array2::<f32>::ones((5, 3));
+        let mut state = Array2::<f32>::zeros((5, 9));
+        for i in 0..5 {
+            state[[i, if i < 2 { 7 } else { 8 }]] = 1.0;
+        }
+        trajectory[[3, 0, 1]] = 0.1; // at the radius: not within it
+        mask[[4, 0]] = 0.0; // a step not observed
+        let still = still_agents(trajectory.view(), mask.view(), state.view(), &[0.0, 0.1]).unwrap();
+        assert_eq!(still, [false, false, true, false, false]);
+        assert!(still_agents(trajectory.view(), mask.view(), state.view(), &[]).unwrap().is_empty());
+        let err = still_agents(trajectory.view(), mask.view(), state.view(), &[0.1]).unwrap_err();
+        assert!(err.to_string().contains("state (N, 8)"), "{err}");
+    }
+
+    #[test]
     fn threads_give_the_single_threaded_result_and_refuse_nan_in_any_share() {
         let anchors = Anchors::new(
             vec![AgentClass::Vehicle, AgentClass::Pedestrian],
@@ -584,8 +698,14 @@ mod tests {
         let prior = Array3::from_shape_fn((n, 2, 2), |(i, t, d)| (t + 1) as f32 * wave(i, d + 9));
         let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, -(i as f64)], i as f64 * 0.1)).collect();
         let calibration = Calibration { temperature: 0.8, speed_exponent: 0.3, class_temperature: 1.5 };
-        let params =
-            DecodeParams { anchors: &anchors, prior: Some(prior.view()), calibration, dt_s: 0.5, top_scale: &[] };
+        let params = DecodeParams {
+            anchors: &anchors,
+            prior: Some(prior.view()),
+            calibration,
+            dt_s: 0.5,
+            top_scale: &[],
+            still: &[],
+        };
         let out = NetworkOutputs {
             class_logits: class_logits.view(),
             anchor_logits: anchor_logits.view(),
@@ -683,6 +803,7 @@ mod tests {
             calibration: Calibration::single(1.0),
             dt_s: 0.4,
             top_scale: &[],
+            still: &[],
         };
         let all = decode(out, params, &poses, k).unwrap();
         for i in 0..n {

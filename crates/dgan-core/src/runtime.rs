@@ -265,6 +265,8 @@ pub struct Predictor {
     anchors: Anchors,
     /// The contract's top-mode scale per class (contract 14; empty without one).
     top_scale: Vec<f64>,
+    /// The contract's still radius per class (contract 15; empty without one).
+    still_radius: Vec<f64>,
     path: PathBuf,
     limits: Limits,
     threads: usize,
@@ -420,6 +422,7 @@ impl Predictor {
         }
         let anchors = contract.anchors()?;
         let top_scale = contract.top_scales()?;
+        let still_radius = contract.still_radii()?;
 
         let expected = contract.expected_inputs();
         for input in session.inputs() {
@@ -469,6 +472,7 @@ impl Predictor {
             contract,
             anchors,
             top_scale,
+            still_radius,
             path,
             limits: options.limits,
             threads: options.intra_threads,
@@ -655,10 +659,11 @@ impl Predictor {
                     inputs.map = Some(rasterize_rows(frame, &pre.states, m, rows, 1)?);
                 }
             }
+            let still = self.still(&inputs)?;
             let outputs = self.run_on(Pool::Lanes, inputs)?;
             let prior = pre.prior.select(Axis(0), rows);
             let poses: Vec<_> = rows.iter().map(|&i| pre.poses[i]).collect();
-            self.decode_outputs(&outputs, prior.view(), &poses, modes, 1)
+            self.decode_outputs(&outputs, prior.view(), &still, &poses, modes, 1)
         };
         let panicked = || Err(DganError::Inference("a network thread panicked".into()));
         let decoded: Vec<Decoded> =
@@ -667,11 +672,18 @@ impl Predictor {
         Ok(Prediction::of(frame, Decoded::gather(pre.poses.len(), &parts)?, edge_array(&pre.edges)))
     }
 
-    /// Decodes one network call's outputs ([`Predictor::run`]'s) on `threads`.
+    /// Which agents of a network call's inputs are held at their prior (contract 15; empty without a still radius).
+    fn still(&self, inputs: &NetworkInputs) -> Result<Vec<bool>> {
+        let (t, m, st) = (inputs.trajectory.view(), inputs.trajectory_mask.view(), inputs.state.view());
+        crate::decode::still_agents(t, m, st, &self.still_radius)
+    }
+
+    /// Decodes one network call's outputs ([`Predictor::run`]'s) on `threads`; `still` as [`Predictor::still`].
     fn decode_outputs(
         &self,
         (class_logits, anchor_logits, offsets): &(Array2<f32>, Array2<f32>, Array4<f32>),
         prior: ArrayView3<'_, f32>,
+        still: &[bool],
         poses: &[AgentPose],
         modes: usize,
         threads: usize,
@@ -687,6 +699,7 @@ impl Predictor {
             calibration: self.contract.calibration(),
             dt_s: self.contract.input.dt_s,
             top_scale: &self.top_scale,
+            still,
         };
         decode_on(out, params, poses, modes, threads)
     }
@@ -822,6 +835,7 @@ impl Predictor {
         } else {
             // A kept-features model's reading of the map (and the tiles it had not kept) timed with the crops.
             let reading = Instant::now();
+            let still = self.still(&inputs)?;
             let (inputs, patches) = self.read_kept(pool, inputs)?;
             let read = if patches.is_some() { reading.elapsed() } else { Duration::ZERO };
             let started = Instant::now();
@@ -833,7 +847,7 @@ impl Predictor {
                 let views: Vec<_> = priors.iter().map(|p| p.view()).collect();
                 ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?
             };
-            let decoded = self.decode_outputs(&outputs, prior.view(), &poses, modes, threads)?;
+            let decoded = self.decode_outputs(&outputs, prior.view(), &still, &poses, modes, threads)?;
             if let Some(times) = times {
                 (times.network, times.decode) = (ran, started.elapsed().saturating_sub(ran));
                 times.crops += read;

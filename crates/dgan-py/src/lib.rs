@@ -37,6 +37,7 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(preprocess::preprocess, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::validate_spec, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::kinematic_prior, m)?)?;
+    m.add_function(wrap_pyfunction!(preprocess::still_agents, m)?)?;
     m.add_function(wrap_pyfunction!(geometry::to_agent_frame, m)?)?;
     m.add_function(wrap_pyfunction!(geometry::to_world_frame, m)?)?;
     m.add_function(wrap_pyfunction!(geometry::attention_graph, m)?)?;

@@ -5,7 +5,7 @@ use crate::frame::PyFrame;
 use dgan_core::preprocess::{preprocess_on, Limits};
 use dgan_core::{DganError, InputSpec};
 use ndarray::Array2;
-use numpy::{IntoPyArray, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::{IntoPyArray, PyArray1, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -99,4 +99,20 @@ pub fn kinematic_prior<'py>(
     let (t, m, s) = (trajectory.as_array(), trajectory_mask.as_array(), state.as_array());
     let prior = py.detach(|| spec.prior.rollout(t, m, s, spec.dt_s, spec.t_f, &spec.classes)).py()?;
     Ok(prior.into_pyarray(py))
+}
+
+/// Contract 15: which agents' histories are still (`dgan_core::decode::still_agents`), from network inputs
+/// `trajectory (N, T_obs, 2)`, `trajectory_mask (N, T_obs)` and `state (N, 7 + C)` and a radius per class (metres,
+/// the model's class order; 0: never held).
+#[pyfunction]
+pub fn still_agents<'py>(
+    py: Python<'py>,
+    trajectory: PyReadonlyArray3<'py, f32>,
+    trajectory_mask: PyReadonlyArray2<'py, f32>,
+    state: PyReadonlyArray2<'py, f32>,
+    radius: Vec<f64>,
+) -> PyResult<Bound<'py, PyArray1<bool>>> {
+    let (t, m, s) = (trajectory.as_array(), trajectory_mask.as_array(), state.as_array());
+    let still = dgan_core::decode::still_agents(t, m, s, &radius).py()?;
+    Ok(still.into_pyarray(py))
 }

@@ -47,6 +47,14 @@ def test_info_names_contract_14s_top_mode_scale(capsys: pytest.CaptureFixture[st
     assert "top mode" not in capsys.readouterr().out
 
 
+def test_info_names_contract_15s_still_radius(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", "hdmap"]) == 0  # its cyclists' top mode is held at the prior for a still history
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("still"))
+    assert "cyclist 0.02 m (contract 15)" in line
+    assert main(["info", "zara1"]) == 0
+    assert not any(x.startswith("still") for x in capsys.readouterr().out.splitlines())
+
+
 def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["predict", str(nomap_model), str(SCENE), "--time", "5500", "--modes", "2"]) == 0
     out = capsys.readouterr().out

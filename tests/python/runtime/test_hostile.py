@@ -536,7 +536,7 @@ def contract_cases(tmp: Path) -> list[Case]:
         "anchors": [None, {}, {"pedestrian": [[[0, 0]]]}, {"pedestrian": "x"}, {**meta["anchors"], "bus": []}],
         "temperature": [0, -1, 1e9, "warm"],
         "units": ["ft", None, 1],
-        "contract_version": [0, 15, 99, "4", None, -1],
+        "contract_version": [0, dgan.contract.VERSION + 1, 99, "4", None, -1],
     }.items():
         expected = {
             "dt_s": "dt_s",
@@ -613,6 +613,18 @@ def readers_cases(tmp: Path) -> list[Case]:
         bad = dict(meta, weights_sha256="0" * 64, contract_version=version, top_scale=scale)
         path = sealed_with(src, bad, tmp / f"top_scale_{len(cases)}.onnx")
         cases.append((f"contract top_scale {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
+    # Contract 15's still radius: not in an older contract, not in (0, 10] metres, of a class the model lacks.
+    for label, version, radius, msg in [
+        ("in a contract-14 model", 14, {"pedestrian": 0.05}, "still_radius_m is a contract-15 key"),
+        ("zero", 15, {"pedestrian": 0.0}, "must lie in \\(0, 10\\]"),
+        ("above 10 m", 15, {"pedestrian": 12.0}, "must lie in \\(0, 10\\]"),
+        ("NaN", 15, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
+        ("of a class the model lacks", 15, {"vehicle": 0.05}, "not among the classes"),
+        ("as a list", 15, [0.05], "invalid type"),
+    ]:
+        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, still_radius_m=radius)
+        path = sealed_with(src, bad, tmp / f"still_radius_{len(cases)}.onnx")
+        cases.append((f"contract still_radius_m {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
     return cases
 
 

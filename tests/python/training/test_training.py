@@ -177,6 +177,8 @@ def assert_parity(
     their map."""
     cal = temperature if isinstance(temperature, Calibration) else Calibration(temperature)
     predictor = dgan.Predictor(onnx_path)
+    still_radius = predictor.contract.get("still_radius_m", {})  # contract 15: held most probable modes
+    radii = [float(still_radius.get(c, 0.0)) for c in spec.classes] if still_radius else []
     frames = real_frames(spec)
     if spec.map is not None and spec.map.optional:
         frames += [frame.without_map() for frame in frames]
@@ -193,7 +195,8 @@ def assert_parity(
             prior = torch.from_numpy(x["prior"])
             a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
             t = cal.anchor_temperatures(prior, spec.dt_s)
-            traj, prob = decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature)
+            held = torch.from_numpy(dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], radii))
+            traj, prob = decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature, held if radii else None)
         n, k = traj.shape[:2]
         flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
         world = dgan.to_world_frame(flat, x["origin"], x["heading"]).reshape(n, k, -1, 2)
