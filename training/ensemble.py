@@ -109,13 +109,13 @@ def validation_top_modes(
 def top_mode_errors(
     path: Path, data_root: Path | None = None, progress: bool = False
 ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """For every validation target of the ensemble checkpoint at ``path`` (:func:`validation_top_modes`; scale 1
-    whatever the checkpoint holds): the ADE of its most probable mode at each of :data:`TOP_SCALES` ``(N, S)``
-    (:func:`scaled_errors`), its class index ``(N,)``, and the model's classes."""
+    """For every validation target of the checkpoint at ``path`` (an ensemble's, or a single network's whose scale
+    the contract carries; :func:`validation_top_modes`; scale 1 whatever the checkpoint holds): the ADE of its most
+    probable mode at each of :data:`TOP_SCALES` ``(N, S)`` (:func:`scaled_errors`), its class index ``(N,)``, and the
+    model's classes."""
     ckpt = load_checkpoint(path)
-    if not isinstance(ckpt.model, ConsensusEnsemble):
-        raise ValueError(f"{path}: not an ensemble checkpoint (training.ensemble); a top-mode scale needs one")
-    ckpt.model.top_scale.fill_(1.0)
+    if isinstance(ckpt.model, ConsensusEnsemble):  # a single network's scale is not in its forward
+        ckpt.model.top_scale.fill_(1.0)
     errors, classes = [], []
     for b, residual in validation_top_modes(ckpt, data_root, progress):
         t = b["target"]
@@ -143,9 +143,9 @@ class TopScaleFit:
 
 
 def fit_top_scale(path: Path, data_root: Path | None = None, progress: bool = False) -> TopScaleFit:
-    """Fits the top-mode residual scale of each class of the ensemble checkpoint at ``path`` on its validation split
-    (:func:`top_mode_errors`, :func:`choose_scale`; a class without validation targets keeps 1) and stores it there
-    as ``top_scale``."""
+    """Fits the top-mode residual scale of each class of the checkpoint at ``path`` (an ensemble's or a single
+    network's) on its validation split (:func:`top_mode_errors`, :func:`choose_scale`; a class without validation
+    targets keeps 1) and stores it there as ``top_scale``."""
     from training.checkpoint import update_checkpoint
 
     errors, klass, names = top_mode_errors(path, data_root, progress)

@@ -195,15 +195,17 @@ def export_model(
     description: str = "",
     temperature: float | Calibration = 1.0,
     still_radius: list[float] | None = None,
+    top_scale: list[float] | None = None,
 ) -> Path:
     """Exports under the contract (version 3: the padded neighbour layout, whatever layout the model trained on);
-    anchors must be grouped by class in the spec's class order. ``temperature``, ``still_radius``: as
-    :func:`contract`. A consensus of
+    anchors must be grouped by class in the spec's class order. ``temperature``, ``still_radius``, ``top_scale`` (of a
+    single network): as :func:`contract`. A consensus of
     one network is exported as that network, its top-mode scale in the contract (contract 14: the engine's decoding
     applies it), so that the file runs one network and nothing around it."""
     from training.modules.dgan import PaddedDGAN
 
-    top_scale = None
+    if isinstance(model, ConsensusEnsemble) and top_scale is not None:
+        raise ValueError("a consensus applies its own top-mode scale (ConsensusEnsemble.top_scale)")
     if isinstance(model, ConsensusEnsemble) and len(model.members) == 1:
         top_scale = [float(s) for s in model.top_scale]
         model = cast(DGAN, model.members[0])
@@ -295,10 +297,13 @@ def store_half(m: onnx.ModelProto) -> int:
 
 
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
-    """Exports the checkpoint at ``ckpt`` with the calibration and still radius (``training.still``) it holds."""
+    """Exports the checkpoint at ``ckpt`` with the calibration, still radius (``training.still``) and, for a single
+    network, top-mode scale (``training.ensemble.fit_top_scale``) it holds."""
     model, spec, anchors, class_of, _, calibration = load_checkpoint(ckpt)
-    still = torch.load(ckpt, weights_only=False).get("still_radius")
-    return export_model(model, spec, anchors, class_of, path, name, description, calibration, still)
+    held = torch.load(ckpt, weights_only=False)
+    top = None if "members" in held else held.get("top_scale")  # a consensus's is in its graph
+    args = (calibration, held.get("still_radius"), top)
+    return export_model(model, spec, anchors, class_of, path, name, description, *args)
 
 
 def main() -> None:

@@ -211,14 +211,24 @@ def decode_torch(
     temperature: float | Tensor = 1.0,
     class_temperature: float = 1.0,
     still: Tensor | None = None,
+    top_scale: Tensor | None = None,
 ) -> tuple[Tensor, Tensor]:
     """Agent-frame modes ``(N, K, T, 2)`` (the kinematic ``prior (N, T, 2)`` + anchor + offset) sorted by
     p(c) · p(k | c), and those probabilities ``(N, K)``; the engine's decoding, in PyTorch (temperatures as in
     :func:`mode_probabilities`; :meth:`Calibration.anchor_temperatures` gives a speed-dependent one). ``still (N,)``:
-    the agents whose most probable mode is held at the prior (contract 15, ``dgan.still_agents``)."""
+    the agents whose most probable mode is held at the prior (contract 15, ``dgan.still_agents``). ``top_scale (C,)``:
+    contract 14's share of the residual kept by the most probable class's top anchor (the first of equal logits), for
+    a single network (a consensus applies its own in its graph)."""
     p = mode_probabilities(class_logits, anchor_logits, class_of_anchor, temperature, class_temperature)
     order = torch.argsort(-p, dim=1, stable=True)
     modes = anchors.unsqueeze(0) + offsets
+    if top_scale is not None:
+        top_class = class_logits.argmax(dim=1)
+        block = class_of_anchor.unsqueeze(0) == top_class.unsqueeze(1)
+        k = anchor_logits.masked_fill(~block, float("-inf")).argmax(dim=1)
+        rows = torch.arange(len(k))
+        modes = modes.clone()
+        modes[rows, k] = modes[rows, k] * top_scale.to(modes.dtype)[top_class][:, None, None]
     if prior is not None:
         modes = modes + prior.unsqueeze(1)
     traj = modes.gather(1, order[..., None, None].expand(-1, -1, *offsets.shape[2:]))

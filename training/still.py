@@ -47,6 +47,7 @@ class StillErrors:
 @torch.no_grad()
 def still_errors(path: Path, data_root: Path | None = None, progress: bool = False) -> tuple[StillErrors, list[str]]:
     """:class:`StillErrors` of the checkpoint at ``path`` on its validation split, and its classes."""
+    from training.data.batches import INPUTS
     from training.ensemble import validation_top_modes
 
     ckpt = load_checkpoint(path)
@@ -55,7 +56,7 @@ def still_errors(path: Path, data_root: Path | None = None, progress: bool = Fal
     for b, residual in validation_top_modes(ckpt, data_root, progress):
         t = b["target"]
         prior, future = b["prior"][t].double().numpy(), b["future"][t].double().numpy()
-        traj, mask, state = (b[k][t].numpy() for k in ("trajectory", "trajectory_mask", "state"))
+        traj, mask, state = (b[k][t].numpy() for k in INPUTS[:3])  # the contract's first three inputs
         still = np.stack([dgan.still_agents(traj, mask, state, [r] * c) for r in RADII], axis=1)
         net = _errors(prior + residual.double().numpy(), future)
         parts.append((state[:, 7:].argmax(axis=1), still, net, _errors(prior, future)))

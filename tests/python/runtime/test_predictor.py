@@ -392,6 +392,44 @@ def test_two_threads_split_frames_and_batches_with_the_one_thread_results() -> N
             np.testing.assert_allclose(got.trajectories, one.predict(frame, modes=4).trajectories, atol=1e-5)
 
 
+def test_a_still_cyclist_is_held_at_its_prior_on_every_path() -> None:
+    """Contract 15: `hdmap` holds a cyclist whose history stays within 0.02 m: its most probable mode is its kinematic
+    prior in predict, on two threads (a frame split in two calls) and in predict_batch; no other agent is held."""
+    from dgan.demo import scene_for
+
+    one, two = dgan.Predictor("hdmap"), dgan.Predictor("hdmap", threads=2)
+    assert one.contract["still_radius_m"] == {"cyclist": 0.02}
+    radii = [0.02 if c == "cyclist" else 0.0 for c in one.classes]
+    base = scene_for(one.spec).frame
+    history = np.broadcast_to(base.positions[0, -1] + 3.0, (1, one.spec.t_obs, 2)).copy()
+    history[0, ::2, 0] += 0.005  # jitter within the radius
+    still = dgan.Frame(
+        np.concatenate([base.positions, history]),
+        mask=np.concatenate([base.mask, np.ones((1, one.spec.t_obs), bool)]),
+        classes=[*base.classes, "cyclist"],
+        map=base.map,
+    )
+    doubled = dgan.Frame(
+        np.concatenate([still.positions, still.positions + 2000.0]),
+        mask=np.concatenate([still.mask, still.mask]),
+        classes=list(still.classes) * 2,
+        map=still.map,
+    )
+
+    def held_at_prior(frame: dgan.Frame, got: dgan.Prediction) -> None:
+        x = dgan.preprocess(frame, one.spec)
+        held = dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], radii)
+        assert held.sum() == len(frame) // len(still)  # the added cyclist (twice in the doubled frame)
+        prior = dgan.to_world_frame(x["prior"].astype(np.float64), x["origin"], x["heading"])
+        np.testing.assert_allclose(got.trajectories[held, 0], prior[held], atol=1e-5)
+        assert np.abs(got.trajectories[~held, 0] - prior[~held]).max() > 0.01  # the others keep the network's
+
+    held_at_prior(still, one.predict(still))
+    held_at_prior(doubled, two.predict(doubled))
+    assert (two.last_timings or {}).get("parts", 0.0) > 0.0
+    held_at_prior(still, one.predict_batch([base, still])[1])
+
+
 def test_execution_providers_and_thread_bounds(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert dgan.available_execution_providers()[0] == "cpu"
     assert dgan.Predictor("zara1", execution_provider="CPU").num_modes > 0

@@ -149,10 +149,34 @@ def test_the_top_scale_is_fitted_on_validation_stored_and_exported(tmp_path: Pat
     assert fit_top_scale(ckpt).scale == fit.scale
 
 
-def test_a_single_run_has_no_top_scale(tmp_path: Path) -> None:
-    run = _apollo_runs(tmp_path, (0,))[0]
-    with pytest.raises(ValueError, match="not an ensemble checkpoint"):
-        top_mode_errors(run / "best.pt")
+def test_a_single_network_keeps_its_top_scale_in_its_contract(tmp_path: Path) -> None:
+    import shutil
+
+    from training.checkpoint import update_checkpoint
+    from training.export import export_checkpoint
+
+    ckpt = tmp_path / "single.pt"
+    shutil.copy(_apollo_runs(tmp_path, (0,))[0] / "best.pt", ckpt)
+    errors, _, names = top_mode_errors(ckpt)  # a single network's forward is at scale 1
+    assert errors.shape[1] == len(TOP_SCALES)
+    scales = [0.5, 1.0, 0.25]
+    assert len(names) == len(scales)
+    update_checkpoint(ckpt, top_scale=scales)
+    path = export_checkpoint(ckpt, tmp_path / "single.onnx", "single")
+    assert dgan.Predictor(path).contract["top_scale"] == {n: s for n, s in zip(names, scales, strict=True) if s != 1.0}
+    model, spec, anchors, class_of, _, cal = load_checkpoint(ckpt)
+    assert isinstance(model, DGAN)  # the engine's decoding applies the scale; the parity check's decoding too
+    assert_parity(model, spec, anchors, class_of, path, cal)
+    with pytest.raises(ValueError, match="applies its own top-mode scale"):
+        export_model(
+            ConsensusEnsemble([model], [torch.from_numpy(anchors).float()], len(names)),
+            spec,
+            anchors,
+            class_of,
+            tmp_path / "x.onnx",
+            "x",
+            top_scale=[1.0] * len(names),
+        )
 
 
 def test_members_need_the_same_anchor_layout() -> None:

@@ -37,3 +37,23 @@ def test_the_ablations_are_kept_and_read_back_without_the_runs(tmp_path: Path) -
     assert "| constant velocity (the better of its two variants), same targets | | 0.500/1.000 |" in table
     assert "without the map branch" not in table  # not run
     assert "No ablation runs" in ablation_table("zara1", ablation_runs("zara1", tmp_path / "no_runs", tmp_path / "x"))
+
+
+def test_docs_results_is_its_template_with_the_generated_sections() -> None:
+    """Every field of the template is a named section (a stray brace in the prose breaks ``str.format``), and
+    ``docs/results.md`` holds the template's prose between them verbatim and in order: prose is edited in both."""
+    import string
+
+    from training.results import TEMPLATE
+
+    text = TEMPLATE.read_text()
+    fields = [f for _, f, _, _ in string.Formatter().parse(text) if f is not None]
+    assert fields
+    assert all(f.isidentifier() for f in fields), [f for f in fields if not f.isidentifier()]
+    marker = "\x00"
+    doc = (Path(__file__).parents[3] / "docs" / "results.md").read_text()
+    at = 0
+    for chunk in text.format(**dict.fromkeys(fields, marker)).split(marker):
+        found = doc.find(chunk, at)
+        assert found >= 0, f"docs/results.md lacks the template's prose: {chunk[:300]!r}"
+        at = found + len(chunk)

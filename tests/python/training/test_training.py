@@ -22,7 +22,7 @@ from training.config import Config
 from training.data.batches import INPUTS, forward_inputs
 from training.export import export_model, load_checkpoint
 from training.losses import Calibration, anchor_pool, class_weights, closest_anchor, decode_torch, dgan_loss
-from training.modules.dgan import DGAN
+from training.modules.dgan import DGAN, ConsensusEnsemble
 
 ROOT = Path(__file__).resolve().parents[3]
 CHECKPOINTS = ROOT / "training" / "checkpoints"
@@ -179,6 +179,10 @@ def assert_parity(
     predictor = dgan.Predictor(onnx_path)
     still_radius = predictor.contract.get("still_radius_m", {})  # contract 15: held most probable modes
     radii = [float(still_radius.get(c, 0.0)) for c in spec.classes] if still_radius else []
+    # Contract 14's top-mode scale of a single network (a consensus applies its own in its forward).
+    top = predictor.contract.get("top_scale", {})
+    single = top and not isinstance(model, ConsensusEnsemble)
+    scale = torch.tensor([float(top.get(c, 1.0)) for c in spec.classes]) if single else None
     frames = real_frames(spec)
     if spec.map is not None and spec.map.optional:
         frames += [frame.without_map() for frame in frames]
@@ -196,7 +200,9 @@ def assert_parity(
             a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
             t = cal.anchor_temperatures(prior, spec.dt_s)
             held = torch.from_numpy(dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], radii))
-            traj, prob = decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature, held if radii else None)
+            traj, prob = decode_torch(
+                cl, al, off, a, c, prior, t, cal.class_temperature, held if radii else None, scale
+            )
         n, k = traj.shape[:2]
         flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
         world = dgan.to_world_frame(flat, x["origin"], x["heading"]).reshape(n, k, -1, 2)
