@@ -237,10 +237,13 @@ pub fn still_agents(
     if radius.is_empty() {
         return Ok(Vec::new());
     }
+    if let Some(bad) = radius.iter().find(|r| !(r.is_finite() && **r >= 0.0)) {
+        return Err(DganError::InvalidSpec(format!("still radii must be finite and not negative, got {bad}")));
+    }
     let (n, t_obs, two) = trajectory.dim();
     let c = radius.len();
     if two != 2 || mask.dim() != (n, t_obs) || state.dim() != (n, 7 + c) {
-        return Err(DganError::Inference(format!(
+        return Err(DganError::InvalidSpec(format!(
             "still_agents takes trajectory (N, T_obs, 2), trajectory_mask (N, T_obs) and state (N, {}) for {c} classes; \
              got {:?}, {:?} and {:?}",
             7 + c,
@@ -681,6 +684,10 @@ mod tests {
         assert!(still_agents(trajectory.view(), mask.view(), state.view(), &[]).unwrap().is_empty());
         let err = still_agents(trajectory.view(), mask.view(), state.view(), &[0.1]).unwrap_err();
         assert!(err.to_string().contains("state (N, 8)"), "{err}");
+        for bad in [f64::NAN, -0.1, f64::INFINITY] {
+            let err = still_agents(trajectory.view(), mask.view(), state.view(), &[0.0, bad]).unwrap_err();
+            assert!(err.to_string().contains("finite and not negative"), "{err}");
+        }
     }
 
     #[test]

@@ -200,3 +200,21 @@ def test_a_scene_models_grid_is_the_engines(zara1_frame: dgan.Frame) -> None:
     assert spec.map.scene_grid == (8, 8)
     assert dgan.preprocess(zara1_frame, spec)["map_index"].shape[1] == 8 * 8 * 4
     assert dgan.MapSpec().scene_grid is None
+
+
+def test_still_agents_are_the_engines_still_histories_and_refuse_bad_input(zara1_frame: dgan.Frame) -> None:
+    spec = dgan.Predictor("zara1").spec
+    still = np.broadcast_to(zara1_frame.positions[0, -1], (1, spec.t_obs, 2))
+    frame = dgan.Frame(
+        np.concatenate([zara1_frame.positions, still]), mask=np.concatenate([zara1_frame.mask, [[True] * spec.t_obs]])
+    )
+    x = dgan.preprocess(frame, spec)
+    held = dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], [0.05])
+    assert held.dtype == np.bool_
+    assert held[-1]
+    assert not held[:-1].all()
+    assert not dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], [0.0]).any()
+    assert dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], []).shape == (0,)
+    for radius, says in [([0.05, 0.05], "state \\(N, 9\\)"), ([float("nan")], "finite"), ([-1.0], "not negative")]:
+        with pytest.raises(exc.InvalidSpecError, match=says):
+            dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], radius)
