@@ -258,8 +258,9 @@ def still_agents(
     """Which agents of the network inputs ``trajectory``, ``trajectory_mask`` and ``state`` have a still history
     (contract 15): every observed step present and each within ``radius[c]`` metres of the last observed position, c
     the agent's class in the model's order (0: never held). The engine holds such an agent's most probable mode at its
-    prior when the model declares ``still_radius_m``. Shapes that disagree (``state`` must have 7 + len(radius)
-    columns) or a radius that is negative or not finite raise :class:`dgan.exceptions.InvalidSpecError`."""
+    prior when the model declares ``still_radius_m``. Shapes that disagree (``state`` must be as wide as
+    ``dgan.contract.state_width`` gives for one radius per class) or a radius that is negative or not finite raise
+    :class:`dgan.exceptions.InvalidSpecError`."""
     t, m, s = (np.ascontiguousarray(a, dtype=np.float32) for a in (trajectory, trajectory_mask, state))
     return _dgan.still_agents(t, m, s, [float(r) for r in radius])
 
