@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
+from dgan.contract import STATE_FEATURES
 from training.calibrate import calibrate_checkpoint
 from training.export import SLIM_KEYS, Checkpoint, export_checkpoint, load_checkpoint
 from training.losses import Calibration
@@ -121,7 +122,7 @@ def top_mode_errors(
         t = b["target"]
         prior = b["prior"][t].double()
         errors.append(scaled_errors((prior + residual).numpy(), prior.numpy(), b["future"][t].numpy()))
-        classes.append(b["state"][t, 7:].argmax(dim=1))
+        classes.append(b["state"][t, len(STATE_FEATURES) :].argmax(dim=1))
     return np.concatenate(errors), torch.cat(classes).numpy(), tuple(ckpt.spec.classes)
 
 

@@ -54,7 +54,11 @@ def load_checkpoint(path: Path) -> Checkpoint:
     checkpoint without one). An ensemble's checkpoint (``training.ensemble``) holds its members' checkpoints: its
     anchors and config are its first member's, and its ``top_scale`` (per class, ``training.ensemble.fit_top_scale``)
     if fitted."""
-    ckpt = torch.load(path, weights_only=False)
+    return checkpoint_of(torch.load(path, weights_only=False), path)
+
+
+def checkpoint_of(ckpt: dict[str, Any], path: Path) -> Checkpoint:
+    """:func:`load_checkpoint` of a checkpoint's dict already loaded from ``path`` (named in errors)."""
     calibration = Calibration.of(ckpt)
     if "members" in ckpt:
         members = [network_of(m) for m in ckpt["members"]]
@@ -299,8 +303,8 @@ def store_half(m: onnx.ModelProto) -> int:
 def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
     """Exports the checkpoint at ``ckpt`` with the calibration, still radius (``training.still``) and, for a single
     network, top-mode scale (``training.ensemble.fit_top_scale``) it holds."""
-    model, spec, anchors, class_of, _, calibration = load_checkpoint(ckpt)
     held = torch.load(ckpt, weights_only=False)
+    model, spec, anchors, class_of, _, calibration = checkpoint_of(held, ckpt)
     top = None if "members" in held else held.get("top_scale")  # a consensus's is in its graph
     args = (calibration, held.get("still_radius"), top)
     return export_model(model, spec, anchors, class_of, path, name, description, *args)

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 import dgan
+from dgan.contract import STATE_FEATURES
 from training.export import load_checkpoint
 
 #: The radii tried, metres.
@@ -59,7 +60,7 @@ def still_errors(path: Path, data_root: Path | None = None, progress: bool = Fal
         traj, mask, state = (b[k][t].numpy() for k in INPUTS[:3])  # the contract's first three inputs
         still = np.stack([dgan.still_agents(traj, mask, state, [r] * c) for r in RADII], axis=1)
         net = _errors(prior + residual.double().numpy(), future)
-        parts.append((state[:, 7:].argmax(axis=1), still, net, _errors(prior, future)))
+        parts.append((state[:, len(STATE_FEATURES) :].argmax(axis=1), still, net, _errors(prior, future)))
     if not parts:
         raise ValueError(f"{path}: no validation targets")
     cols = [np.concatenate(col) for col in zip(*parts, strict=True)]

@@ -349,21 +349,12 @@ impl ModelContract {
         if self.top_scale.is_empty() {
             return Ok(Vec::new());
         }
-        if self.contract_version < 14 {
-            return Err(DganError::Contract(
-                "top_scale is a contract-14 key; versions 1 to 13 keep every mode as the network gives it".into(),
-            ));
-        }
+        let older = "versions 1 to 13 keep every mode as the network gives it";
+        self.by_class("top_scale", &self.top_scale, 14, older)?;
         if self.input.prior.kind == PriorKind::None {
             return Err(DganError::Contract(
                 "top_scale scales a mode's residual over the kinematic prior; this model declares none".into(),
             ));
-        }
-        if let Some(extra) = self.top_scale.keys().find(|k| !self.input.classes.iter().any(|c| c.name() == *k)) {
-            return Err(DganError::Contract(format!(
-                "top_scale given for {extra:?}, which is not among the classes ({})",
-                class_names(&self.input.classes)
-            )));
         }
         let scales: Vec<f64> =
             self.input.classes.iter().map(|c| self.top_scale.get(c.name()).copied().unwrap_or(1.0)).collect();
@@ -376,23 +367,28 @@ impl ModelContract {
         if self.still_radius_m.is_empty() {
             return Ok(Vec::new());
         }
-        if self.contract_version < 15 {
-            return Err(DganError::Contract(
-                "still_radius_m is a contract-15 key; versions 1 to 14 hold no agent at its prior".into(),
-            ));
-        }
-        if let Some(extra) = self.still_radius_m.keys().find(|k| !self.input.classes.iter().any(|c| c.name() == *k)) {
-            return Err(DganError::Contract(format!(
-                "still_radius_m given for {extra:?}, which is not among the classes ({})",
-                class_names(&self.input.classes)
-            )));
-        }
+        self.by_class("still_radius_m", &self.still_radius_m, 15, "versions 1 to 14 hold no agent at its prior")?;
         if let Some((k, r)) = self.still_radius_m.iter().find(|(_, r)| !(**r > 0.0 && **r <= MAX_STILL_RADIUS_M)) {
             return Err(DganError::Contract(format!(
                 "still_radius_m of {k:?} must lie in (0, {MAX_STILL_RADIUS_M}] metres, got {r}"
             )));
         }
         Ok(self.input.classes.iter().map(|c| self.still_radius_m.get(c.name()).copied().unwrap_or(0.0)).collect())
+    }
+
+    /// Checks a per-class key of the decoding (`top_scale`, `still_radius_m`): a contract-`since` key (`older`: what
+    /// the versions before it do instead) whose names are all among the model's classes.
+    fn by_class(&self, key: &str, values: &BTreeMap<String, f64>, since: u32, older: &str) -> Result<()> {
+        if self.contract_version < since {
+            return Err(DganError::Contract(format!("{key} is a contract-{since} key; {older}")));
+        }
+        if let Some(extra) = values.keys().find(|k| !self.input.classes.iter().any(|c| c.name() == *k)) {
+            return Err(DganError::Contract(format!(
+                "{key} given for {extra:?}, which is not among the classes ({})",
+                class_names(&self.input.classes)
+            )));
+        }
+        Ok(())
     }
 
     fn check_calibration(&self) -> Result<()> {

@@ -5,6 +5,8 @@
 use crate::class::AgentClass;
 use crate::error::{DganError, Result};
 use crate::limits::on_threads;
+use crate::prior::hot_class;
+use crate::spec::STATE_FEATURES;
 use crate::transform::AgentPose;
 use ndarray::{s, Array2, Array3, Array4, ArrayView2, ArrayView3, ArrayView4, ArrayViewMut2, ArrayViewMut4, Axis};
 
@@ -226,8 +228,9 @@ pub const MAX_STILL_RADIUS_M: f64 = 10.0;
 
 /// Contract 15: which agents' histories are still, from the network inputs `trajectory (N, T_obs, 2)` (agent frame:
 /// the last observed position at the origin), `trajectory_mask (N, T_obs)` and `state (N, 7 + C)` (its one-hot class,
-/// the largest of the C columns): every observed step present and each within `radius[class]` metres of the origin
-/// (strictly; a radius of 0 holds no agent of that class). Empty when `radius` is.
+/// [`crate::prior`]'s reading of it): every observed step present and each within `radius[class]` metres of the origin
+/// (strictly; a radius of 0 holds no agent of that class, nor is an agent without a class held). Empty when `radius`
+/// is.
 pub fn still_agents(
     trajectory: ArrayView3<'_, f32>,
     mask: ArrayView2<'_, f32>,
@@ -241,12 +244,11 @@ pub fn still_agents(
         return Err(DganError::InvalidSpec(format!("still radii must be finite and not negative, got {bad}")));
     }
     let (n, t_obs, two) = trajectory.dim();
-    let c = radius.len();
-    if two != 2 || mask.dim() != (n, t_obs) || state.dim() != (n, 7 + c) {
+    let (c, width) = (radius.len(), STATE_FEATURES.len() + radius.len());
+    if two != 2 || mask.dim() != (n, t_obs) || state.dim() != (n, width) {
         return Err(DganError::InvalidSpec(format!(
-            "still_agents takes trajectory (N, T_obs, 2), trajectory_mask (N, T_obs) and state (N, {}) for {c} classes; \
-             got {:?}, {:?} and {:?}",
-            7 + c,
+            "still_agents takes trajectory (N, T_obs, 2), trajectory_mask (N, T_obs) and state (N, {width}) for {c} \
+             classes; got {:?}, {:?} and {:?}",
             trajectory.dim(),
             mask.dim(),
             state.dim()
@@ -254,7 +256,7 @@ pub fn still_agents(
     }
     Ok((0..n)
         .map(|i| {
-            let r = radius[first_argmax(state.row(i).iter().skip(7).copied())];
+            let r = hot_class(state, i, c).map_or(0.0, |k| radius[k]);
             r > 0.0
                 && mask.row(i).iter().all(|&v| v > 0.0)
                 && trajectory.slice(s![i, .., ..]).outer_iter().all(|p| f64::from(p[0]).hypot(f64::from(p[1])) < r)
@@ -670,17 +672,18 @@ mod tests {
 
     #[test]
     fn still_agents_are_those_whose_every_step_is_observed_and_within_their_class_radius() {
-        // Agents 0-1 vehicles, 2-4 pedestrians: radius 0 (never held) for vehicles, 0.1 m for pedestrians.
-        let mut trajectory = Array3::<f32>::zeros((5, 3, 2));
-        let mut mask = Array2::<f32>::ones((5, 3));
-        let mut state = Array2::<f32>::zeros((5, 9));
+        // Agents 0-1 vehicles, 2-4 pedestrians, 5 without a class: radius 0 (never held) for vehicles, 0.1 m for
+        // pedestrians.
+        let mut trajectory = Array3::<f32>::zeros((6, 3, 2));
+        let mut mask = Array2::<f32>::ones((6, 3));
+        let mut state = Array2::<f32>::zeros((6, 9));
         for i in 0..5 {
             state[[i, if i < 2 { 7 } else { 8 }]] = 1.0;
         }
         trajectory[[3, 0, 1]] = 0.1; // at the radius: not within it
         mask[[4, 0]] = 0.0; // a step not observed
         let still = still_agents(trajectory.view(), mask.view(), state.view(), &[0.0, 0.1]).unwrap();
-        assert_eq!(still, [false, false, true, false, false]);
+        assert_eq!(still, [false, false, true, false, false, false]);
         assert!(still_agents(trajectory.view(), mask.view(), state.view(), &[]).unwrap().is_empty());
         let err = still_agents(trajectory.view(), mask.view(), state.view(), &[0.1]).unwrap_err();
         assert!(err.to_string().contains("state (N, 8)"), "{err}");

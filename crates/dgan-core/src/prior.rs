@@ -278,13 +278,12 @@ impl PriorSpec {
                 7 + classes.len()
             )));
         }
-        let one_hot = state.ncols() - classes.len().min(state.ncols());
         // Each agent's class: the hot column of its one-hot (none if no column is set).
         let class_of = |i: usize| {
             if self.by_class.is_empty() {
                 return None;
             }
-            classes.iter().enumerate().find(|&(j, _)| state[[i, one_hot + j]] > 0.5).map(|(_, &c)| c)
+            hot_class(state, i, classes.len()).map(|j| classes[j])
         };
         let mut mask = vec![false; t_obs];
         for i in 0..n {
@@ -441,6 +440,13 @@ fn det3(m: [[f64; 3]; 3]) -> f64 {
 fn quadratic_slope(valid: &[usize], last: usize, p: impl Fn(usize, usize) -> f64) -> [f64; 2] {
     let fit = parabola(valid, last, p);
     [fit.coef[0][1], fit.coef[1][1]]
+}
+
+/// The class of agent `i` of a traffic state whose last `classes` columns are its one-hot class, as an index into
+/// them: the first column above 0.5, None where none is.
+pub(crate) fn hot_class(state: ArrayView2<'_, f32>, i: usize, classes: usize) -> Option<usize> {
+    let one_hot = state.ncols() - classes.min(state.ncols());
+    (0..classes.min(state.ncols())).find(|&j| state[[i, one_hot + j]] > 0.5)
 }
 
 #[cfg(test)]

@@ -602,29 +602,24 @@ def readers_cases(tmp: Path) -> list[Case]:
         )
         path = sealed_with(src, bad, tmp / f"scene_{len(cases)}.onnx")
         cases.append((f"contract map.scene {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
-    # Contract 14's top-mode scale: not in an older contract, out of [0, 1], of a class the model lacks, not a map.
-    for label, version, scale, msg in [
-        ("in a contract-13 model", 13, {"pedestrian": 0.5}, "top_scale is a contract-14 key"),
-        ("above 1", 14, {"pedestrian": 1.5}, "must lie in \\[0, 1\\]"),
-        ("NaN", 14, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
-        ("of a class the model lacks", 14, {"vehicle": 0.5}, "not among the classes"),
-        ("as a list", 14, [0.5], "invalid type"),
+    # The decoding's per-class keys, not in an older contract, out of range, of a class the model lacks, not a map:
+    # contract 14's top-mode scale in [0, 1] and contract 15's still radius in (0, 10] metres.
+    for key, label, version, value, msg in [
+        ("top_scale", "in a contract-13 model", 13, {"pedestrian": 0.5}, "top_scale is a contract-14 key"),
+        ("top_scale", "above 1", 14, {"pedestrian": 1.5}, "must lie in \\[0, 1\\]"),
+        ("top_scale", "NaN", 14, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
+        ("top_scale", "of a class the model lacks", 14, {"vehicle": 0.5}, "not among the classes"),
+        ("top_scale", "as a list", 14, [0.5], "invalid type"),
+        ("still_radius_m", "in a contract-14 model", 14, {"pedestrian": 0.05}, "still_radius_m is a contract-15 key"),
+        ("still_radius_m", "zero", 15, {"pedestrian": 0.0}, "must lie in \\(0, 10\\]"),
+        ("still_radius_m", "above 10 m", 15, {"pedestrian": 12.0}, "must lie in \\(0, 10\\]"),
+        ("still_radius_m", "NaN", 15, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
+        ("still_radius_m", "of a class the model lacks", 15, {"vehicle": 0.05}, "not among the classes"),
+        ("still_radius_m", "as a list", 15, [0.05], "invalid type"),
     ]:
-        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, top_scale=scale)
-        path = sealed_with(src, bad, tmp / f"top_scale_{len(cases)}.onnx")
-        cases.append((f"contract top_scale {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
-    # Contract 15's still radius: not in an older contract, not in (0, 10] metres, of a class the model lacks.
-    for label, version, radius, msg in [
-        ("in a contract-14 model", 14, {"pedestrian": 0.05}, "still_radius_m is a contract-15 key"),
-        ("zero", 15, {"pedestrian": 0.0}, "must lie in \\(0, 10\\]"),
-        ("above 10 m", 15, {"pedestrian": 12.0}, "must lie in \\(0, 10\\]"),
-        ("NaN", 15, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
-        ("of a class the model lacks", 15, {"vehicle": 0.05}, "not among the classes"),
-        ("as a list", 15, [0.05], "invalid type"),
-    ]:
-        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, still_radius_m=radius)
-        path = sealed_with(src, bad, tmp / f"still_radius_{len(cases)}.onnx")
-        cases.append((f"contract still_radius_m {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
+        bad = dict(meta, weights_sha256="0" * 64, contract_version=version, **{key: value})
+        path = sealed_with(src, bad, tmp / f"{key}_{len(cases)}.onnx")
+        cases.append((f"contract {key} {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
     return cases
 
 
