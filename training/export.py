@@ -103,16 +103,20 @@ def contract(
     temperature: float | Calibration = 1.0,
     top_scale: list[float] | None = None,
     still_radius: list[float] | None = None,
+    top_mean: list[float] | None = None,
 ) -> dict[str, Any]:
     """The contract of an export: ``temperature`` a single temperature of the anchor logits or a contract-9
     :class:`~training.losses.Calibration` (its keys written only where they differ from a single temperature);
     ``top_scale`` each class's top-mode scale (contract 14; written for the classes whose scale is not 1);
-    ``still_radius`` each class's still radius (contract 15, ``training.still``; written for the classes above 0)."""
+    ``still_radius`` each class's still radius (contract 15, ``training.still``; written for the classes above 0);
+    ``top_mean`` each class's top-mean power (contract 16, ``training.top_mean``; written for the classes above 0)."""
     cal = temperature if isinstance(temperature, Calibration) else Calibration(float(temperature))
     pairs = zip(spec.classes, top_scale, strict=True) if top_scale else ()
     scaled = {c: float(s) for c, s in pairs if float(s) != 1.0}
     radii = zip(spec.classes, still_radius, strict=True) if still_radius else ()
     held = {c: float(r) for c, r in radii if float(r) > 0.0}
+    powers = zip(spec.classes, top_mean, strict=True) if top_mean else ()
+    averaged = {c: float(b) for c, b in powers if float(b) > 0.0}
     d: dict[str, Any] = json.loads(spec.to_json())
     rounded = np.round(anchors.astype(np.float64), 6)
     d.update(
@@ -124,6 +128,7 @@ def contract(
         **cal.keys(),
         **({"top_scale": scaled} if scaled else {}),
         **({"still_radius_m": held} if held else {}),
+        **({"top_mean_power": averaged} if averaged else {}),
         name=name,
         description=description,
         weights_sha256=UNSEALED,
@@ -200,10 +205,11 @@ def export_model(
     temperature: float | Calibration = 1.0,
     still_radius: list[float] | None = None,
     top_scale: list[float] | None = None,
+    top_mean: list[float] | None = None,
 ) -> Path:
     """Exports under the contract (version 3: the padded neighbour layout, whatever layout the model trained on);
     anchors must be grouped by class in the spec's class order. ``temperature``, ``still_radius``, ``top_scale`` (of a
-    single network): as :func:`contract`. A consensus of
+    single network), ``top_mean``: as :func:`contract`. A consensus of
     one network is exported as that network, its top-mode scale in the contract (contract 14: the engine's decoding
     applies it), so that the file runs one network and nothing around it."""
     from training.modules.dgan import PaddedDGAN
@@ -242,7 +248,7 @@ def export_model(
     )
     m = onnx.load(str(path))
     store_half(m)
-    meta = contract(spec, anchors, class_of, name, description, temperature, top_scale, still_radius)
+    meta = contract(spec, anchors, class_of, name, description, temperature, top_scale, still_radius, top_mean)
     onnx.helper.set_model_props(m, {"dgan_contract": json.dumps(meta)})
     onnx.save(m, str(path))
     seal(path)
@@ -300,13 +306,17 @@ def store_half(m: onnx.ModelProto) -> int:
     return len(casts)
 
 
-def export_checkpoint(ckpt: Path, path: Path, name: str, description: str = "") -> Path:
-    """Exports the checkpoint at ``ckpt`` with the calibration, still radius (``training.still``) and, for a single
-    network, top-mode scale (``training.ensemble.fit_top_scale``) it holds."""
+def export_checkpoint(
+    ckpt: Path, path: Path, name: str, description: str = "", top_mean: list[float] | None = None
+) -> Path:
+    """Exports the checkpoint at ``ckpt`` with the calibration, still radius (``training.still``), top-mean power
+    (``training.top_mean``; ``top_mean`` in its place if given) and, for a single network, top-mode scale
+    (``training.ensemble.fit_top_scale``) it holds."""
     held = torch.load(ckpt, weights_only=False)
     model, spec, anchors, class_of, _, calibration = checkpoint_of(held, ckpt)
     top = None if "members" in held else held.get("top_scale")  # a consensus's is in its graph
-    args = (calibration, held.get("still_radius"), top)
+    power = held.get("top_mean_power") if top_mean is None else top_mean
+    args = (calibration, held.get("still_radius"), top, power)
     return export_model(model, spec, anchors, class_of, path, name, description, *args)
 
 

@@ -212,13 +212,15 @@ def decode_torch(
     class_temperature: float = 1.0,
     still: Tensor | None = None,
     top_scale: Tensor | None = None,
+    top_mean: Tensor | None = None,
 ) -> tuple[Tensor, Tensor]:
     """Agent-frame modes ``(N, K, T, 2)`` (the kinematic ``prior (N, T, 2)`` + anchor + offset) sorted by
     p(c) · p(k | c), and those probabilities ``(N, K)``; the engine's decoding, in PyTorch (temperatures as in
     :func:`mode_probabilities`; :meth:`Calibration.anchor_temperatures` gives a speed-dependent one). ``still (N,)``:
     the agents whose most probable mode is held at the prior (contract 15, ``dgan.still_agents``). ``top_scale (C,)``:
     contract 14's share of the residual kept by the most probable class's top anchor (the first of equal logits), for
-    a single network (a consensus applies its own in its graph)."""
+    a single network (a consensus applies its own in its graph). ``top_mean (C,)``: contract 16's power β of the most
+    probable class (0: none): the most probable mode becomes the mean of all modes weighted by p^β."""
     p = mode_probabilities(class_logits, anchor_logits, class_of_anchor, temperature, class_temperature)
     order = torch.argsort(-p, dim=1, stable=True)
     modes = anchors.unsqueeze(0) + offsets
@@ -232,6 +234,12 @@ def decode_torch(
     if prior is not None:
         modes = modes + prior.unsqueeze(1)
     traj = modes.gather(1, order[..., None, None].expand(-1, -1, *offsets.shape[2:]))
+    if top_mean is not None:
+        beta = top_mean.to(traj.dtype)[class_logits.argmax(dim=1)]
+        ps = p.gather(1, order).to(traj.dtype)
+        w = (ps / ps[:, :1]) ** beta[:, None]
+        mean = (w[..., None, None] * traj).sum(1) / w.sum(1)[:, None, None]
+        traj = torch.cat([torch.where((beta > 0)[:, None, None], mean, traj[:, 0])[:, None], traj[:, 1:]], dim=1)
     if still is not None and bool(still.any()):
         held = prior[still] if prior is not None else torch.zeros_like(traj[still, 0])
         traj = traj.clone()

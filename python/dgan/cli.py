@@ -71,6 +71,9 @@ def _info(args: argparse.Namespace) -> int:
     if c.get("still_radius_m"):
         held = ", ".join(f"{k} {v:g} m" for k, v in c["still_radius_m"].items())
         print(f"still      top mode at the prior for a history within this of its last position: {held} (contract 15)")
+    if c.get("top_mean_power"):
+        powers = ", ".join(f"{k} {v:g}" for k, v in c["top_mean_power"].items())
+        print(f"top mean   top mode as the mean of the modes weighted by p to this power: {powers} (contract 16)")
     print(f"providers  {', '.join(dgan.available_execution_providers())} (in this ONNX Runtime library)")
     if c.get("description"):
         print(f"about      {c['description']}")

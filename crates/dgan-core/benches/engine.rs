@@ -138,6 +138,7 @@ fn bench_decode(c: &mut Criterion) {
             dt_s: 0.5,
             top_scale: &[],
             still: &[],
+            top_mean: &[],
         };
         let id = if threads == 1 { format!("{n}") } else { format!("{n}/{threads}_threads") };
         g.bench_function(id, |b| b.iter(|| decode_on(out, params, &poses, 60, threads)));
@@ -230,6 +231,7 @@ fn bench_hdmap(c: &mut Criterion) {
     let anchors = predictor.anchors();
     let contract = predictor.contract();
     let top_scale = contract.top_scales().expect("the contract's top-mode scale");
+    let top_mean = contract.top_mean_powers().expect("the contract's top-mean power");
     let params = DecodeParams {
         anchors,
         prior: Some(pre.prior.view()),
@@ -237,6 +239,7 @@ fn bench_hdmap(c: &mut Criterion) {
         dt_s: spec.dt_s,
         top_scale: &top_scale,
         still: &[],
+        top_mean: &top_mean,
     };
     g.bench_function("decode", |b| b.iter(|| decode(out, params, &pre.poses, anchors.total())));
     g.finish();

@@ -2,7 +2,7 @@
 //! `docs/model-contract.md`; this module is the one the runtime checks against.
 
 use crate::class::AgentClass;
-use crate::decode::{check_top_scale, Anchors, Calibration, MAX_STILL_RADIUS_M};
+use crate::decode::{check_top_scale, Anchors, Calibration, MAX_STILL_RADIUS_M, MAX_TOP_MEAN_POWER};
 use crate::error::{DganError, Result};
 use crate::prior::{PriorKind, PriorSpec, VelocityFit};
 use crate::spec::{is_zero, GraphLayout, HeadingSource, InputSpec, MapRender, EDGE_FEATURES};
@@ -20,11 +20,12 @@ use std::collections::BTreeMap;
 /// (`map.classes`); version 12 rasters of the scene for the map CNN (`map.scene`: `map_grid`, `map_slot`); version 13
 /// the map CNN's features kept with the map (`map.scene.tile_px`: input `map_patches`, output `map_features`); version
 /// 14 the share of its residual over the prior that each class's most probable mode keeps (`top_scale`); version 15
-/// the most probable mode held at the prior for agents whose history is still (`still_radius_m`).
-pub const CONTRACT_VERSION: u32 = 15;
+/// the most probable mode held at the prior for agents whose history is still (`still_radius_m`); version 16 the most
+/// probable mode as the probability-weighted mean of the modes (`top_mean_power`).
+pub const CONTRACT_VERSION: u32 = 16;
 /// The versions this engine reads: a version-1 model has no prior, a temperature of 1 and a map it cannot run
 /// without; versions 1 and 2 take the graph as an edge list.
-pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 15] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
+pub const SUPPORTED_CONTRACT_VERSIONS: [u32; 16] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
 /// The farthest an anchor point may lie from the agent, metres (a horizon of minutes at motorway speed).
 pub const MAX_ANCHOR_M: f64 = 1e5;
 /// The most anchors a class may have (checked before the anchor arrays are allocated).
@@ -143,6 +144,11 @@ pub struct ModelContract {
     /// [`crate::decode::still_agents`]); a class not named is never held.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub still_radius_m: BTreeMap<String, f64>,
+    /// Contract 16: per class name, a power β (in (0, 64]): an agent whose most probable class that is has as its most
+    /// probable mode the mean of all its modes weighted by p^β (see [`crate::decode::DecodeParams::top_mean`]); a
+    /// class not named keeps the most probable mode as it is.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub top_mean_power: BTreeMap<String, f64>,
     /// A short model name.
     #[serde(default)]
     pub name: String,
@@ -328,6 +334,7 @@ impl ModelContract {
         self.check_calibration()?;
         self.top_scales()?;
         self.still_radii()?;
+        self.top_mean_powers()?;
         if self.units != "m" {
             return Err(DganError::Contract(format!("units must be \"m\", got {:?}", self.units)));
         }
@@ -376,7 +383,22 @@ impl ModelContract {
         Ok(self.input.classes.iter().map(|c| self.still_radius_m.get(c.name()).copied().unwrap_or(0.0)).collect())
     }
 
-    /// Checks a per-class key of the decoding (`top_scale`, `still_radius_m`): a contract-`since` key (`older`: what
+    /// Each class's top-mean power, in the model's class order (0 where the contract names none); empty without any.
+    pub fn top_mean_powers(&self) -> Result<Vec<f64>> {
+        if self.top_mean_power.is_empty() {
+            return Ok(Vec::new());
+        }
+        let older = "versions 1 to 15 keep the most probable mode as decoded";
+        self.by_class("top_mean_power", &self.top_mean_power, 16, older)?;
+        if let Some((k, b)) = self.top_mean_power.iter().find(|(_, b)| !(**b > 0.0 && **b <= MAX_TOP_MEAN_POWER)) {
+            return Err(DganError::Contract(format!(
+                "top_mean_power of {k:?} must lie in (0, {MAX_TOP_MEAN_POWER}], got {b}"
+            )));
+        }
+        Ok(self.input.classes.iter().map(|c| self.top_mean_power.get(c.name()).copied().unwrap_or(0.0)).collect())
+    }
+
+    /// Checks a per-class key of the decoding (`top_scale`, `still_radius_m`, `top_mean_power`): a contract-`since` key (`older`: what
     /// the versions before it do instead) whose names are all among the model's classes.
     fn by_class(&self, key: &str, values: &BTreeMap<String, f64>, since: u32, older: &str) -> Result<()> {
         if self.contract_version < since {
@@ -777,41 +799,76 @@ mod tests {
         let err = ModelContract::from_json(&v13.replace("\"channels\": 16", "\"channels\": 0")).unwrap_err();
         assert!(err.to_string().contains("channels"), "{err}");
 
-        // Version 14 keeps a share of the most probable mode's residual per class; unnamed classes keep all of it.
-        let v14 = v13.replace("\"contract_version\": 13", "\"contract_version\": 14");
-        assert!(ModelContract::from_json(&v14).unwrap().top_scales().unwrap().is_empty());
-        let scaled = |s: &str| v14.replace("\"units\"", &format!("\"top_scale\": {s}, \"units\""));
-        let c = ModelContract::from_json(&scaled("{\"pedestrian\": 0.25}")).unwrap();
-        assert_eq!(c.top_scales().unwrap(), [1.0, 0.25]);
-        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
-        let older = scaled("{\"pedestrian\": 0.25}").replace("\"contract_version\": 14", "\"contract_version\": 13");
-        for (case, says) in [
-            (older, "contract-14 key"),
-            (scaled("{\"truck\": 0.5}"), "not among the classes"),
-            (scaled("{\"pedestrian\": 1.5}"), "[0, 1]"),
-            (scaled("{\"pedestrian\": -0.1}"), "[0, 1]"),
-        ] {
-            let err = ModelContract::from_json(&case).unwrap_err().to_string();
-            assert!(err.contains(says), "{err}");
+        // Versions 14 to 16, the decoding's per-class keys: the share of its residual over the prior that the most
+        // probable mode keeps (unnamed classes keep all of it), the radius of a still history held at the prior
+        // (unnamed classes are never held) and the power of the weighted mean taken as the most probable mode
+        // (unnamed classes keep it as decoded). Each is refused below its version, for a class the model lacks and
+        // out of its range.
+        struct Key {
+            version: u32,
+            name: &'static str,
+            values: fn(&ModelContract) -> Result<Vec<f64>>,
+            class: &'static str,
+            good: f64,
+            want: [f64; 2],
+            bad: &'static [f64],
+            range: &'static str,
         }
-
-        // Version 15 holds the most probable mode at the prior for a still history; unnamed classes are never held.
-        let v15 = v14.replace("\"contract_version\": 14", "\"contract_version\": 15");
-        assert!(ModelContract::from_json(&v15).unwrap().still_radii().unwrap().is_empty());
-        let held = |s: &str| v15.replace("\"units\"", &format!("\"still_radius_m\": {s}, \"units\""));
-        let c = ModelContract::from_json(&held("{\"pedestrian\": 0.05}")).unwrap();
-        assert_eq!(c.still_radii().unwrap(), [0.0, 0.05]);
-        assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
-        let older = held("{\"pedestrian\": 0.05}").replace("\"contract_version\": 15", "\"contract_version\": 14");
-        for (case, says) in [
-            (older, "contract-15 key"),
-            (held("{\"truck\": 0.1}"), "not among the classes"),
-            (held("{\"pedestrian\": 0}"), "(0, 10]"),
-            (held("{\"pedestrian\": 11}"), "(0, 10]"),
-            (held("{\"pedestrian\": -0.1}"), "(0, 10]"),
-        ] {
-            let err = ModelContract::from_json(&case).unwrap_err().to_string();
-            assert!(err.contains(says), "{err}");
+        let keys = [
+            Key {
+                version: 14,
+                name: "top_scale",
+                values: ModelContract::top_scales,
+                class: "pedestrian",
+                good: 0.25,
+                want: [1.0, 0.25],
+                bad: &[1.5, -0.1],
+                range: "[0, 1]",
+            },
+            Key {
+                version: 15,
+                name: "still_radius_m",
+                values: ModelContract::still_radii,
+                class: "pedestrian",
+                good: 0.05,
+                want: [0.0, 0.05],
+                bad: &[0.0, 11.0, -0.1],
+                range: "(0, 10]",
+            },
+            Key {
+                version: 16,
+                name: "top_mean_power",
+                values: ModelContract::top_mean_powers,
+                class: "vehicle",
+                good: 2.0,
+                want: [2.0, 0.0],
+                bad: &[0.0, 65.0, -1.0],
+                range: "(0, 64]",
+            },
+        ];
+        let mut base = v13;
+        for Key { version, name: key, values, class, good, want, bad, range } in keys {
+            base = base.replace(
+                &format!("\"contract_version\": {}", version - 1),
+                &format!("\"contract_version\": {version}"),
+            );
+            assert!(values(&ModelContract::from_json(&base).unwrap()).unwrap().is_empty(), "{key}");
+            let with =
+                |class: &str, v: f64| base.replace("\"units\"", &format!("\"{key}\": {{\"{class}\": {v}}}, \"units\""));
+            let c = ModelContract::from_json(&with(class, good)).unwrap();
+            assert_eq!(values(&c).unwrap(), want, "{key}");
+            assert_eq!(ModelContract::from_json(&c.to_json().unwrap()).unwrap(), c);
+            let older = with(class, good).replace(
+                &format!("\"contract_version\": {version}"),
+                &format!("\"contract_version\": {}", version - 1),
+            );
+            let mut cases =
+                vec![(older, format!("contract-{version} key")), (with("truck", good), "not among the classes".into())];
+            cases.extend(bad.iter().map(|&v| (with(class, v), range.to_string())));
+            for (case, says) in cases {
+                let err = ModelContract::from_json(&case).unwrap_err().to_string();
+                assert!(err.contains(&says), "{key}: {err}");
+            }
         }
     }
 

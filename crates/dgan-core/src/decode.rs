@@ -221,7 +221,15 @@ pub struct DecodeParams<'a> {
     /// probable mode is the prior alone (its residual dropped, whatever `top_scale` keeps). Every other mode, and every
     /// probability, stays as the network gives it. Empty: no agent is held (contracts 1 to 14).
     pub still: &'a [bool],
+    /// Contract 16: per class (the model's order), a power β: an agent whose most probable class is that one (as for
+    /// `top_scale`) has as its most probable mode the mean of all K of its modes (each as decoded, the scaled one
+    /// included) weighted by p^β, p their probabilities; 0 keeps the mode as decoded. A still agent keeps its prior.
+    /// The mode keeps its probability, and every other mode stays as it is. Empty: no class (contracts 1 to 15).
+    pub top_mean: &'a [f64],
 }
+
+/// The largest power of contract 16's `top_mean_power` (beyond it the mean is the most probable mode to rounding).
+pub const MAX_TOP_MEAN_POWER: f64 = 64.0;
 
 /// The farthest a still history may reach from the last observed position (contract 15's `still_radius_m`), metres.
 pub const MAX_STILL_RADIUS_M: f64 = 10.0;
@@ -274,6 +282,21 @@ pub fn check_top_scale(top_scale: &[f64], classes: usize) -> Result<()> {
     }
     if let Some(bad) = top_scale.iter().find(|s| !(0.0..=1.0).contains(*s)) {
         return Err(DganError::Contract(format!("top_scale values must lie in [0, 1], got {bad}")));
+    }
+    Ok(())
+}
+
+/// Checks a top-mean power ([`DecodeParams::top_mean`]) for `classes` classes: empty, or one value each, 0 (none)
+/// or in (0, [`MAX_TOP_MEAN_POWER`]].
+pub fn check_top_mean(top_mean: &[f64], classes: usize) -> Result<()> {
+    if top_mean.is_empty() {
+        return Ok(());
+    }
+    if top_mean.len() != classes {
+        return Err(DganError::Contract(format!("top_mean has {} values for {classes} classes", top_mean.len())));
+    }
+    if let Some(bad) = top_mean.iter().find(|b| !(0.0..=MAX_TOP_MEAN_POWER).contains(*b)) {
+        return Err(DganError::Contract(format!("top_mean powers must lie in [0, {MAX_TOP_MEAN_POWER}], got {bad}")));
     }
     Ok(())
 }
@@ -339,9 +362,10 @@ pub fn decode_on(
 /// The shapes of the outputs and the prior against N agents and the anchors; the calibration and time step.
 fn check_outputs(out: &NetworkOutputs<'_>, params: &DecodeParams<'_>, n: usize) -> Result<()> {
     let NetworkOutputs { class_logits, anchor_logits, offsets } = out;
-    let DecodeParams { anchors, prior, calibration, dt_s, top_scale, still } = params;
+    let DecodeParams { anchors, prior, calibration, dt_s, top_scale, still, top_mean } = params;
     let (c, k_total, t_f) = (anchors.classes().len(), anchors.total(), anchors.steps());
     check_top_scale(top_scale, c)?;
+    check_top_mean(top_mean, c)?;
     let bad = |m: String| Err(DganError::Inference(m));
     if !still.is_empty() && still.len() != n {
         return bad(format!("still has {} agents, expected {n}", still.len()));
@@ -386,7 +410,7 @@ fn decode_rows(
     first: usize,
     part: &mut DecodedMut<'_>,
 ) -> Result<()> {
-    let DecodeParams { anchors, prior, calibration, dt_s, top_scale, still } = *params;
+    let DecodeParams { anchors, prior, calibration, dt_s, top_scale, still, top_mean } = *params;
     let (rows, m, t_f, _) = part.trajectories.dim();
     let agents = first..first + rows;
     // Each output's rows of this share, contiguous (copied once into that layout if they are not).
@@ -417,7 +441,7 @@ fn decode_rows(
     };
     let mut p = Vec::with_capacity(k_total);
     let mut order: Vec<(u64, usize)> = Vec::with_capacity(k_total);
-    let (mut pc, mut scratch) = (Vec::new(), Vec::new());
+    let (mut pc, mut scratch, mut mean) = (Vec::new(), Vec::new(), vec![0f64; step]);
     for (r, pose) in poses[agents].iter().enumerate() {
         softmax_into(class_logits.row(r).iter().map(|&v| f64::from(v) / calibration.class_temperature), &mut pc);
         let base = &prior_rows[r * step..(r + 1) * step];
@@ -443,11 +467,16 @@ fn decode_rows(
         }
         order[..m].sort_unstable();
         part.class_probabilities.row_mut(r).iter_mut().zip(&pc).for_each(|(o, v)| *o = *v);
+        // The agent's most probable class (the largest class logit), which contracts 14 and 16 read.
+        let top_class = if top_scale.is_empty() && top_mean.is_empty() {
+            0
+        } else {
+            first_argmax(class_logits.row(r).iter().copied())
+        };
         // Contract 14: the anchor whose residual is scaled (none without a scale), and by how much.
         let (scaled, scale) = if top_scale.is_empty() {
             (usize::MAX, 1.0)
         } else {
-            let top_class = first_argmax(class_logits.row(r).iter().copied());
             let start: usize = per_class[..top_class].iter().sum();
             let block = (start..start + per_class[top_class]).map(|k| anchor_logits[[r, k]]);
             (start + first_argmax(block), top_scale[top_class])
@@ -455,6 +484,24 @@ fn decode_rows(
         // Contract 15: a still agent's most probable mode (the first in order) is its prior alone.
         let held = still.get(first + r).copied().unwrap_or(false);
         let off_agent = &offsets[r * k_total * step..(r + 1) * k_total * step];
+        // Contract 16: the most probable mode's residual over the prior as the p^β-weighted mean of every mode's
+        // (each probability over the largest, so that the weights cannot all underflow).
+        let beta = if held || top_mean.is_empty() { 0.0 } else { top_mean[top_class] };
+        if beta > 0.0 {
+            let top = f64::from_bits(!order[0].0);
+            mean.iter_mut().for_each(|v| *v = 0.0);
+            let mut total = 0.0;
+            for (k, &pk) in p.iter().enumerate() {
+                let q = (pk / top).powf(beta);
+                total += q;
+                let w = q * if k == scaled { scale } else { 1.0 };
+                let (anchor, off) = (&anchor_flat[k * step..(k + 1) * step], &off_agent[k * step..(k + 1) * step]);
+                for ((v, a), o) in mean.iter_mut().zip(anchor).zip(off) {
+                    *v += w * (a + f64::from(*o));
+                }
+            }
+            mean.iter_mut().for_each(|v| *v /= total);
+        }
         let mut traj = part.trajectories.slice_mut(s![r, .., .., ..]);
         let traj = traj.as_slice_mut().ok_or_else(|| DganError::Inference("trajectories are not contiguous".into()))?;
         for (mi, &(key, k)) in order.iter().take(m).enumerate() {
@@ -469,11 +516,16 @@ fn decode_rows(
             } else {
                 1.0
             };
+            let averaged = beta > 0.0 && mi == 0;
             for (t, w_out) in traj[mi * step..(mi + 1) * step].chunks_exact_mut(2).enumerate() {
-                let local = [
-                    f64::from(base[2 * t]) + s * (anchor[2 * t] + f64::from(off[2 * t])),
-                    f64::from(base[2 * t + 1]) + s * (anchor[2 * t + 1] + f64::from(off[2 * t + 1])),
-                ];
+                let local = if averaged {
+                    [f64::from(base[2 * t]) + mean[2 * t], f64::from(base[2 * t + 1]) + mean[2 * t + 1]]
+                } else {
+                    [
+                        f64::from(base[2 * t]) + s * (anchor[2 * t] + f64::from(off[2 * t])),
+                        f64::from(base[2 * t + 1]) + s * (anchor[2 * t + 1] + f64::from(off[2 * t + 1])),
+                    ]
+                };
                 let w = pose.to_world(local);
                 w_out[0] = w[0];
                 w_out[1] = w[1];
@@ -511,6 +563,7 @@ mod tests {
             dt_s: 0.5,
             top_scale: &[],
             still: &[],
+            top_mean: &[],
         };
         decode(out, params, &[pose], modes)
     }
@@ -562,6 +615,7 @@ mod tests {
             dt_s: 0.5,
             top_scale: &[],
             still: &[],
+            top_mean: &[],
         };
         let d = decode(out, params, &poses, 3).unwrap();
         // p(c) = softmax(ln 2 / 2, 0) = (√2, 1) / (1 + √2) for both agents.
@@ -604,6 +658,7 @@ mod tests {
             dt_s: 0.5,
             top_scale: &[],
             still: &[],
+            top_mean: &[],
         }
     }
 
@@ -642,6 +697,57 @@ mod tests {
         }
         for bad in [&[0.5][..], &[0.5, 1.5], &[f64::NAN, 1.0]] {
             assert!(decode(out, DecodeParams { top_scale: bad, ..base }, &poses, 4).is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn top_mean_makes_the_most_probable_mode_the_weighted_mean_of_every_mode() {
+        let anchors = vehicle_and_pedestrian();
+        let mut offsets = Array4::<f32>::zeros((3, 4, 1, 2));
+        offsets[[0, 1, 0, 1]] = 0.5;
+        // Agents 0 and 2 most probably vehicles, agent 1 a pedestrian (whose class has no power).
+        let class_logits = array![[1.0f32, 0.0], [0.0, 2.0], [3.0, 0.0]];
+        let anchor_logits = array![[0.0f32, 1.0, 0.5, 0.0], [0.0, 0.0, 2.0, 1.0], [2.0, 0.0, 0.0, 1.0]];
+        let prior = array![[[1.0f32, 0.0]], [[0.0, 1.0]], [[0.5, 0.5]]];
+        let out = NetworkOutputs {
+            class_logits: class_logits.view(),
+            anchor_logits: anchor_logits.view(),
+            offsets: offsets.view(),
+        };
+        let poses = [AgentPose::new([1.0, 2.0], 0.5); 3];
+        let beta = 2.0;
+        for scale in [&[][..], &[0.5, 1.0]] {
+            let base = DecodeParams { top_scale: scale, ..plain_params(&anchors, &prior) };
+            let plain = decode(out, base, &poses, 4).unwrap();
+            let mean = DecodeParams { top_mean: &[beta, 0.0], ..base };
+            let averaged = decode(out, mean, &poses, 4).unwrap();
+            assert_eq!(averaged.probabilities, plain.probabilities);
+            assert_eq!(averaged.mode_anchors, plain.mode_anchors);
+            assert_eq!(averaged.trajectories.slice(s![.., 1.., .., ..]), plain.trajectories.slice(s![.., 1.., .., ..]));
+            assert_eq!(averaged.trajectories.slice(s![1, .., .., ..]), plain.trajectories.slice(s![1, .., .., ..]));
+            for i in [0, 2] {
+                // The weights sum to 1, so the mean of the modes in the world is the mean in the agent frame.
+                let w = plain.probabilities.row(i).mapv(|p| p.powf(beta));
+                let want = (0..4).fold([0.0, 0.0], |acc, k| {
+                    let x = plain.trajectories[[i, k, 0, 0]];
+                    [acc[0] + w[k] * x, acc[1] + w[k] * plain.trajectories[[i, k, 0, 1]]]
+                });
+                let got = [averaged.trajectories[[i, 0, 0, 0]], averaged.trajectories[[i, 0, 0, 1]]];
+                for d in 0..2 {
+                    assert!((got[d] - want[d] / w.sum()).abs() < 1e-12, "agent {i}: {got:?} against {want:?}");
+                }
+            }
+            // The mean is over all K modes, however many are kept.
+            let one = decode(out, mean, &poses, 1).unwrap();
+            assert_eq!(one.trajectories.slice(s![.., 0, .., ..]), averaged.trajectories.slice(s![.., 0, .., ..]));
+            // A still agent keeps its prior.
+            let held = decode(out, DecodeParams { still: &[true, false, false], ..mean }, &poses, 4).unwrap();
+            let prior_world = poses[0].to_world([1.0, 0.0]);
+            assert_eq!([held.trajectories[[0, 0, 0, 0]], held.trajectories[[0, 0, 0, 1]]], prior_world);
+        }
+        for bad in [&[2.0][..], &[2.0, -1.0], &[f64::NAN, 0.0], &[65.0, 0.0]] {
+            let params = DecodeParams { top_mean: bad, ..plain_params(&anchors, &prior) };
+            assert!(decode(out, params, &poses, 4).is_err(), "{bad:?}");
         }
     }
 
@@ -715,6 +821,7 @@ mod tests {
             dt_s: 0.5,
             top_scale: &[],
             still: &[],
+            top_mean: &[],
         };
         let out = NetworkOutputs {
             class_logits: class_logits.view(),
@@ -814,6 +921,7 @@ mod tests {
             dt_s: 0.4,
             top_scale: &[],
             still: &[],
+            top_mean: &[],
         };
         let all = decode(out, params, &poses, k).unwrap();
         for i in 0..n {

@@ -267,6 +267,8 @@ pub struct Predictor {
     top_scale: Vec<f64>,
     /// The contract's still radius per class (contract 15; empty without one).
     still_radius: Vec<f64>,
+    /// The contract's top-mean power per class (contract 16; empty without one).
+    top_mean: Vec<f64>,
     path: PathBuf,
     limits: Limits,
     threads: usize,
@@ -423,6 +425,7 @@ impl Predictor {
         let anchors = contract.anchors()?;
         let top_scale = contract.top_scales()?;
         let still_radius = contract.still_radii()?;
+        let top_mean = contract.top_mean_powers()?;
 
         let expected = contract.expected_inputs();
         for input in session.inputs() {
@@ -473,6 +476,7 @@ impl Predictor {
             anchors,
             top_scale,
             still_radius,
+            top_mean,
             path,
             limits: options.limits,
             threads: options.intra_threads,
@@ -700,6 +704,7 @@ impl Predictor {
             dt_s: self.contract.input.dt_s,
             top_scale: &self.top_scale,
             still,
+            top_mean: &self.top_mean,
         };
         decode_on(out, params, poses, modes, threads)
     }

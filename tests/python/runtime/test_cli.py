@@ -55,6 +55,14 @@ def test_info_names_contract_15s_still_radius(capsys: pytest.CaptureFixture[str]
     assert not any(x.startswith("still") for x in capsys.readouterr().out.splitlines())
 
 
+def test_info_names_contract_16s_top_mean_power(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", "sdd"]) == 0  # its most probable modes are weighted means of its modes
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("top mean"))
+    assert "cyclist 8, pedestrian 4, vehicle 2 (contract 16)" in line
+    assert main(["info", "zara1"]) == 0
+    assert "top mean" not in capsys.readouterr().out
+
+
 def test_predict_a_real_scene(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["predict", str(nomap_model), str(SCENE), "--time", "5500", "--modes", "2"]) == 0
     out = capsys.readouterr().out

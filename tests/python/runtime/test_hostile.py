@@ -603,7 +603,8 @@ def readers_cases(tmp: Path) -> list[Case]:
         path = sealed_with(src, bad, tmp / f"scene_{len(cases)}.onnx")
         cases.append((f"contract map.scene {label}", lambda p=path: dgan.Predictor(p), exc.ContractError, msg))
     # The decoding's per-class keys, not in an older contract, out of range, of a class the model lacks, not a map:
-    # contract 14's top-mode scale in [0, 1] and contract 15's still radius in (0, 10] metres.
+    # contract 14's top-mode scale in [0, 1], contract 15's still radius in (0, 10] metres and contract 16's top-mean
+    # power in (0, 64].
     for key, label, version, value, msg in [
         ("top_scale", "in a contract-13 model", 13, {"pedestrian": 0.5}, "top_scale is a contract-14 key"),
         ("top_scale", "above 1", 14, {"pedestrian": 1.5}, "must lie in \\[0, 1\\]"),
@@ -616,6 +617,12 @@ def readers_cases(tmp: Path) -> list[Case]:
         ("still_radius_m", "NaN", 15, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
         ("still_radius_m", "of a class the model lacks", 15, {"vehicle": 0.05}, "not among the classes"),
         ("still_radius_m", "as a list", 15, [0.05], "invalid type"),
+        ("top_mean_power", "in a contract-15 model", 15, {"pedestrian": 2.0}, "top_mean_power is a contract-16 key"),
+        ("top_mean_power", "zero", 16, {"pedestrian": 0.0}, "must lie in \\(0, 64\\]"),
+        ("top_mean_power", "above 64", 16, {"pedestrian": 100.0}, "must lie in \\(0, 64\\]"),
+        ("top_mean_power", "NaN", 16, {"pedestrian": float("nan")}, "must lie in|not valid JSON|expected a number"),
+        ("top_mean_power", "of a class the model lacks", 16, {"vehicle": 2.0}, "not among the classes"),
+        ("top_mean_power", "as a list", 16, [2.0], "invalid type"),
     ]:
         bad = dict(meta, weights_sha256="0" * 64, contract_version=version, **{key: value})
         path = sealed_with(src, bad, tmp / f"{key}_{len(cases)}.onnx")

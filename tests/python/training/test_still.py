@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 import torch
@@ -46,13 +48,21 @@ def test_no_radius_is_kept_otherwise(
     assert choose_radius(errors(n_still, network, held), 0)[0] == 0.0, why
 
 
-def test_the_contract_names_the_held_classes_alone() -> None:
+@pytest.mark.parametrize(("argument", "key"), [("still_radius", "still_radius_m"), ("top_mean", "top_mean_power")])
+def test_the_contract_names_the_classes_with_a_value_alone(argument: str, key: str) -> None:
+    """Contract 15's still radius and 16's top-mean power: written for the classes above 0 (training.top_mean too)."""
     spec = dgan.Predictor("hdmap").spec
     anchors = np.zeros((len(spec.classes), spec.t_f, 2))
     class_of = np.arange(len(spec.classes))
-    meta = contract(spec, anchors, class_of, "m", "", still_radius=[0.2, 0.0, 0.02])
-    assert meta["still_radius_m"] == {spec.classes[0]: 0.2, spec.classes[2]: 0.02}
-    assert "still_radius_m" not in contract(spec, anchors, class_of, "m", "", still_radius=[0.0] * 3)
+
+    def meta(values: list[float]) -> dict[str, Any]:
+        kept = {argument: values}
+        return contract(
+            spec, anchors, class_of, "m", "", still_radius=kept.get("still_radius"), top_mean=kept.get("top_mean")
+        )
+
+    assert meta([0.2, 0.0, 2.0])[key] == {spec.classes[0]: 0.2, spec.classes[2]: 2.0}
+    assert key not in meta([0.0] * 3)
 
 
 def test_decode_torch_holds_the_most_probable_mode_of_a_still_agent_at_its_prior() -> None:

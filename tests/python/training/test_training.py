@@ -183,6 +183,8 @@ def assert_parity(
     top = predictor.contract.get("top_scale", {})
     single = top and not isinstance(model, ConsensusEnsemble)
     scale = torch.tensor([float(top.get(c, 1.0)) for c in spec.classes]) if single else None
+    powers = predictor.contract.get("top_mean_power", {})  # contract 16: the most probable mode as a mean
+    power = torch.tensor([float(powers.get(c, 0.0)) for c in spec.classes]) if powers else None
     frames = real_frames(spec)
     if spec.map is not None and spec.map.optional:
         frames += [frame.without_map() for frame in frames]
@@ -201,7 +203,7 @@ def assert_parity(
             t = cal.anchor_temperatures(prior, spec.dt_s)
             held = torch.from_numpy(dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], radii))
             traj, prob = decode_torch(
-                cl, al, off, a, c, prior, t, cal.class_temperature, held if radii else None, scale
+                cl, al, off, a, c, prior, t, cal.class_temperature, held if radii else None, scale, power
             )
         n, k = traj.shape[:2]
         flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
