@@ -259,7 +259,7 @@ def test_bundled_map_models_also_serve_frames_without_a_map(zara1_frame: dgan.Fr
 def test_the_prior_and_temperature_are_declared(zara1_frame: dgan.Frame) -> None:
     predictor = dgan.Predictor("zara1")
     c = predictor.contract
-    assert dgan._dgan.CONTRACT_VERSION == 15
+    assert dgan._dgan.CONTRACT_VERSION == 16
     assert c["contract_version"] == 13  # the scene's features kept with the map (map.scene.tile_px)
     assert c["denoise_gate_m"] == predictor.spec.denoise_gate_m == 0.1
     assert c["graph"] == "padded"
