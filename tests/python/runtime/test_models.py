@@ -105,7 +105,7 @@ STILL_AGENT_FAILS: dict[tuple[str, str], float] = {}
 #: still agent of the classes that read it. Worst over the placements, metres. `hdmap`'s cyclists (0.18) stay put
 #: since its cyclists' still radius (contract 15, chosen on validation: `training.still`); its pedestrians' radius and
 #: one for `zara2` were not chosen there (runs/RULES-2026-12-06n, docs/results.md).
-STILL_ON_MAP_FAILS: dict[tuple[str, str], float] = {("hdmap", "pedestrian"): 0.094, ("zara2", "pedestrian"): 0.0995}
+STILL_ON_MAP_FAILS: dict[tuple[str, str], float] = {("hdmap", "pedestrian"): 0.133, ("zara2", "pedestrian"): 0.0995}
 
 
 #: Every bundled model and class, each model loaded once for the tests parametrised by them.
