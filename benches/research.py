@@ -532,8 +532,11 @@ def softmax(x: Arr) -> Arr:
     return out
 
 
-def decode(outputs: tuple[Arr, Arr, Arr], x: dict[str, Arr], contract_: dict[str, Any]) -> tuple[Arr, Arr]:
-    """World trajectories ``(N, K, T_f, 2)`` and probabilities ``(N, K)`` of every mode, most probable first."""
+def decode(
+    outputs: tuple[Arr, Arr, Arr], x: dict[str, Arr], contract_: dict[str, Any], scaled: bool = False
+) -> tuple[Arr, Arr]:
+    """World trajectories ``(N, K, T_f, 2)`` and probabilities ``(N, K)`` of every mode, most probable first;
+    ``scaled``: the network's outputs already carry contract 14's top-mode scale (a consensus of one in training)."""
     class_logits, anchor_logits, offsets = (np.asarray(o, dtype=np.float64) for o in outputs)
     classes = list(contract_["classes"])
     anchors = np.concatenate([np.asarray(contract_["anchors"][c], dtype=np.float64) for c in classes])
@@ -548,10 +551,30 @@ def decode(outputs: tuple[Arr, Arr, Arr], x: dict[str, Arr], contract_: dict[str
         block = class_of == k
         p[:, block] = p_class[:, k : k + 1] * softmax(anchor_logits[:, block] / t)
     order = np.argsort(-p, axis=1, kind="stable")
-    local = x["prior"][:, None].astype(np.float64) + anchors[None] + offsets
-    world = to_world(local, x["origin"], x["heading"])
     rows = np.arange(len(p))[:, None]
-    return world[rows, order], p[rows, order]
+    residual = anchors[None] + offsets
+    # Contracts 14 and 16 read the most probable class; 14 scales its top anchor's residual.
+    top_class = class_logits.argmax(axis=1)
+
+    def per_class(key: str, neutral: float) -> Arr:
+        return np.array([float(contract_.get(key, {}).get(c, neutral)) for c in classes])
+
+    block = np.where(class_of[None] == top_class[:, None], anchor_logits, -np.inf)
+    scale = np.ones(len(classes)) if scaled else per_class("top_scale", 1.0)
+    residual[rows[:, 0], block.argmax(axis=1)] *= scale[top_class][:, None, None]
+    local = (x["prior"][:, None].astype(np.float64) + residual)[rows, order]
+    p = p[rows, order]
+    # Contract 16: the most probable mode as the p^β-weighted mean of every mode.
+    beta = per_class("top_mean_power", 0.0)[top_class]
+    w = (p / p[:, :1]) ** beta[:, None]
+    mean = np.einsum("nk,nktd->ntd", w / w.sum(axis=1, keepdims=True), local)
+    local[:, 0] = np.where((beta > 0)[:, None, None], mean, local[:, 0])
+    # Contract 15: a still history (every step present, each within its class's radius) keeps its prior.
+    radius = per_class("still_radius_m", 0.0)[x["state"][:, -len(classes) :].argmax(axis=1)]
+    near = np.hypot(x["trajectory"][..., 0], x["trajectory"][..., 1]) < radius[:, None]
+    still = (radius > 0) & (x["trajectory_mask"] > 0).all(axis=1) & near.all(axis=1)
+    local[still, 0] = x["prior"][still]
+    return to_world(local, x["origin"], x["heading"]), p
 
 
 def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
@@ -561,7 +584,7 @@ def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
         import torch
 
         from training.export import load_checkpoint
-        from training.modules.dgan import DGAN
+        from training.modules.dgan import DGAN, ConsensusEnsemble
     except ImportError:
         return None
     torch.set_num_threads(1)
@@ -584,6 +607,7 @@ def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
                 x["map_patches"] = read_rows(np.concatenate([x["map_rows"], rows]), x, spec.map)
                 x["map"] = x["map"][:0]
             out = model(**{k: torch.from_numpy(x[k]) for k in inputs})
-        return decode((out[0].numpy(), out[1].numpy(), out[2].numpy()), x, contract_)
+        scaled = isinstance(model, ConsensusEnsemble)  # its forward applies its own top-mode scale
+        return decode((out[0].numpy(), out[1].numpy(), out[2].numpy()), x, contract_, scaled)
 
     return run

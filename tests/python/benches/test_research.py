@@ -95,7 +95,10 @@ def test_the_prior_fits_are_the_engines(fit: str) -> None:
     np.testing.assert_allclose(ours, engine, atol=2e-5)
 
 
-@pytest.mark.parametrize(("name", "atol", "n"), [("apolloscape", 1e-3, 0), ("zara1", 1e-3, 0), ("zara1", 1e-3, 400)])
+@pytest.mark.parametrize(
+    ("name", "atol", "n"),
+    [("apolloscape", 1e-3, 0), ("sdd", 1e-3, 0), ("zara1", 1e-3, 0), ("zara1", 1e-3, 400)],
+)
 def test_the_pipeline_predicts_what_the_engine_does(name: str, atol: float, n: int) -> None:
     """Also ``zara1`` (its map features kept, contract 13) on its scene tiled to 400 agents, whose agents read more
     tiles than one network run of the engine computes."""

@@ -48,9 +48,9 @@ def test_info_names_contract_14s_top_mode_scale(capsys: pytest.CaptureFixture[st
 
 
 def test_info_names_contract_15s_still_radius(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["info", "hdmap"]) == 0  # its cyclists' top mode is held at the prior for a still history
+    assert main(["info", "hdmap"]) == 0  # its cyclists' and pedestrians' top mode is held for a still history
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("still"))
-    assert "cyclist 0.02 m (contract 15)" in line
+    assert "cyclist 0.02 m, pedestrian 0.02 m (contract 15)" in line
     assert main(["info", "zara1"]) == 0
     assert not any(x.startswith("still") for x in capsys.readouterr().out.splitlines())
 
