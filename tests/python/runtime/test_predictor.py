@@ -398,8 +398,8 @@ def test_a_still_cyclist_is_held_at_its_prior_on_every_path() -> None:
     from dgan.demo import scene_for
 
     one, two = dgan.Predictor("hdmap"), dgan.Predictor("hdmap", threads=2)
-    assert one.contract["still_radius_m"] == {"cyclist": 0.02}
-    radii = [0.02 if c == "cyclist" else 0.0 for c in one.classes]
+    assert one.contract["still_radius_m"] == {"cyclist": 0.02, "pedestrian": 0.02}
+    radii = [one.contract["still_radius_m"].get(c, 0.0) for c in one.classes]
     base = scene_for(one.spec).frame
     history = np.broadcast_to(base.positions[0, -1] + 3.0, (1, one.spec.t_obs, 2)).copy()
     history[0, ::2, 0] += 0.005  # jitter within the radius
