@@ -301,6 +301,28 @@ pub fn check_top_mean(top_mean: &[f64], classes: usize) -> Result<()> {
     Ok(())
 }
 
+/// Contract 16's mean into `out` (one mode's `T_f · 2` residual): every mode's residual over the prior, anchor plus
+/// offset (`scaled`'s anchor times its share), weighted by p^`beta` over their sum; each probability is taken over
+/// the largest, so that the weights cannot all underflow.
+fn mean_residual(p: &[f64], beta: f64, scaled: (usize, f64), anchors: &[f64], offsets: &[f32], out: &mut [f64]) {
+    let step = out.len();
+    let top = p.iter().copied().fold(0.0, f64::max);
+    out.iter_mut().for_each(|v| *v = 0.0);
+    let mut total = 0.0;
+    // A whole power (every bundled model's) by multiplications: powf is most of the mean's cost.
+    let whole = (beta.fract() == 0.0).then_some(beta as i32);
+    for (k, &pk) in p.iter().enumerate() {
+        let q = whole.map_or_else(|| (pk / top).powf(beta), |b| (pk / top).powi(b));
+        total += q;
+        let w = q * if k == scaled.0 { scaled.1 } else { 1.0 };
+        let (anchor, off) = (&anchors[k * step..(k + 1) * step], &offsets[k * step..(k + 1) * step]);
+        for ((v, a), o) in out.iter_mut().zip(anchor).zip(off) {
+            *v += w * (a + f64::from(*o));
+        }
+    }
+    out.iter_mut().for_each(|v| *v /= total);
+}
+
 /// The first index of the largest value (NaN never larger); 0 for an empty row.
 fn first_argmax(v: impl Iterator<Item = f32>) -> usize {
     let mut best = (0, f32::NEG_INFINITY);
@@ -484,25 +506,10 @@ fn decode_rows(
         // Contract 15: a still agent's most probable mode (the first in order) is its prior alone.
         let held = still.get(first + r).copied().unwrap_or(false);
         let off_agent = &offsets[r * k_total * step..(r + 1) * k_total * step];
-        // Contract 16: the most probable mode's residual over the prior as the p^β-weighted mean of every mode's
-        // (each probability over the largest, so that the weights cannot all underflow).
+        // Contract 16: the most probable mode's residual over the prior as the p^β-weighted mean of every mode's.
         let beta = if held || top_mean.is_empty() { 0.0 } else { top_mean[top_class] };
         if beta > 0.0 {
-            let top = f64::from_bits(!order[0].0);
-            mean.iter_mut().for_each(|v| *v = 0.0);
-            let mut total = 0.0;
-            // A whole power (every bundled model's) by multiplications: powf is most of the mean's cost.
-            let whole = (beta.fract() == 0.0).then_some(beta as i32);
-            for (k, &pk) in p.iter().enumerate() {
-                let q = whole.map_or_else(|| (pk / top).powf(beta), |b| (pk / top).powi(b));
-                total += q;
-                let w = q * if k == scaled { scale } else { 1.0 };
-                let (anchor, off) = (&anchor_flat[k * step..(k + 1) * step], &off_agent[k * step..(k + 1) * step]);
-                for ((v, a), o) in mean.iter_mut().zip(anchor).zip(off) {
-                    *v += w * (a + f64::from(*o));
-                }
-            }
-            mean.iter_mut().for_each(|v| *v /= total);
+            mean_residual(&p, beta, (scaled, scale), anchor_flat, off_agent, &mut mean);
         }
         let mut traj = part.trajectories.slice_mut(s![r, .., .., ..]);
         let traj = traj.as_slice_mut().ok_or_else(|| DganError::Inference("trajectories are not contiguous".into()))?;
