@@ -15,7 +15,17 @@ import dgan
 from training.checkpoint import update_checkpoint
 from training.export import export_checkpoint, load_checkpoint
 from training.losses import decode_torch
-from training.top_mean import MIN_GAIN, MIN_TARGETS, POWERS, choose_power, fit_top_mean
+from training.top_mean import (
+    CALIBRATION_BOUND,
+    MAX_MIN20_RISE,
+    MIN_GAIN,
+    MIN_TARGETS,
+    POWERS,
+    Errors,
+    choose_power,
+    class_powers,
+    fit_top_mean,
+)
 
 
 def powered(best: tuple[float, float], at: float = 4.0) -> dict[float, dict[str, tuple[float, float, int]]]:
@@ -39,6 +49,30 @@ def test_the_power_of_lowest_ade_is_kept_where_it_gains_enough() -> None:
 )
 def test_no_power_is_kept_otherwise(targets: int, best: tuple[float, float], why: str) -> None:
     assert choose_power({"pedestrian": (1.0, 2.0, targets)}, powered(best), "pedestrian") == 0.0, why
+
+
+def test_class_powers_are_every_power_within_the_class_clauses_best_first() -> None:
+    plain = {"pedestrian": (1.0, 2.0, MIN_TARGETS)}
+    powered = {1.0: (1.2, 2.1), 2.0: (0.98, 1.99), 4.0: (0.97, 2.01), 8.0: (0.99, 1.9)}
+    errors = {p: {"pedestrian": (*e, MIN_TARGETS)} for p, e in powered.items()}
+    assert class_powers(plain, errors, "pedestrian") == [2.0, 8.0], "4 raises FDE, 1 raises ADE"
+    assert choose_power(plain, errors, "pedestrian") == 0.0, "the best ADE (4) raises FDE"
+
+
+@pytest.mark.parametrize(
+    ("min20", "worst_bin", "own_bin", "keeps"),
+    [
+        ((1.0 + MAX_MIN20_RISE, 2.0), CALIBRATION_BOUND, 0.05, True),
+        ((1.0, 2.0 * (1.0 + 2 * MAX_MIN20_RISE)), 0.05, 0.05, False),
+        ((1.0, 2.0), CALIBRATION_BOUND + 0.01, 0.05, False),
+        ((1.0, 2.0), 0.15, 0.15, True),
+    ],
+)
+def test_a_power_keeps_the_model_within_best_of_20_and_calibration_bounds(
+    min20: tuple[float, float], worst_bin: float, own_bin: float, keeps: bool
+) -> None:
+    plain = Errors({}, (1.0, 2.0), own_bin)
+    assert Errors({}, min20, worst_bin).keeps(plain) == keeps
 
 
 def test_decode_torch_averages_the_modes_of_the_classes_with_a_power() -> None:
@@ -66,7 +100,12 @@ def test_the_power_is_fitted_on_validation_by_the_engine_stored_and_exported(tmp
     fit = fit_top_mean(ckpt)
     assert fit.classes == list(dgan.CLASSES)
     assert set(fit.powered) == set(POWERS)
-    assert fit.power == [choose_power(fit.plain, fit.powered, c) for c in fit.classes]
+    by_class = {p: e.by_class for p, e in fit.powered.items()}
+    for c, kept in zip(fit.classes, fit.power, strict=True):
+        tried = [(p, ok) for k, p, ok in fit.trials if k == c]
+        # The class's candidates best first, up to the first that keeps the model's bounds (or all of them).
+        assert [p for p, _ in tried] == class_powers(fit.plain.by_class, by_class, c)[: len(tried)]
+        assert [p for p, ok in tried if ok] == ([kept] if kept else [])
     assert torch.load(ckpt, weights_only=False)["top_mean_power"] == fit.power
     assert "targets" in str(fit)
     # Powers in the checkpoint reach the contract; the engine matches PyTorch's decoding with them.
