@@ -126,7 +126,7 @@ def torch_pipeline(name: str, device: str = "cpu") -> Callable[[dict[str, np.nda
 
         from training.data.batches import INPUTS
         from training.export import load_checkpoint
-        from training.losses import decode_torch
+        from training.losses import DecodingKeys, decode_torch
         from training.modules.dgan import ConsensusEnsemble
     except ImportError:
         return None
@@ -135,17 +135,9 @@ def torch_pipeline(name: str, device: str = "cpu") -> Callable[[dict[str, np.nda
     model, spec, anchors, class_of, _, cal = load_checkpoint(ckpt)
     model = model.to(device)
     a, c = torch.from_numpy(anchors).to(device), torch.from_numpy(class_of).long().to(device)
-    # The contract's decoding keys, as the engine applies them: a single network's top-mode scale (a consensus's is
-    # in its forward), the still radius and the mean top mode.
+    # The contract's decoding keys, as the engine applies them (a consensus's top-mode scale is in its forward).
     declared = dgan.Predictor(name, sessions=1).contract
-
-    def per_class(key: str, neutral: float) -> Any:
-        values = declared.get(key, {})
-        return torch.tensor([float(values.get(k, neutral)) for k in spec.classes]).to(device) if values else None
-
-    scale = None if isinstance(model, ConsensusEnsemble) else per_class("top_scale", 1.0)
-    power, radii = per_class("top_mean_power", 0.0), declared.get("still_radius_m", {})
-    radius = [float(radii.get(k, 0.0)) for k in spec.classes] if radii else []
+    keys = DecodingKeys.of(declared, spec.classes, isinstance(model, ConsensusEnsemble), device)
 
     def run(x: dict[str, np.ndarray]) -> Any:
         with torch.no_grad():
@@ -154,8 +146,7 @@ def torch_pipeline(name: str, device: str = "cpu") -> Callable[[dict[str, np.nda
             cl, al, off = out[0], out[1], out[2]
             prior = torch.from_numpy(x["prior"]).to(device)
             t = cal.anchor_temperatures(prior, spec.dt_s)
-            held = dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], radius) if radius else None
-            still = torch.from_numpy(held).to(device) if held is not None else None
+            still, scale, power = keys.still(x), keys.top_scale, keys.top_mean
             modes, p = decode_torch(cl, al, off, a, c, prior, t, cal.class_temperature, still, scale, power)
             return modes.cpu().numpy(), p.cpu().numpy()
 

@@ -4,12 +4,15 @@ anchors, or among all with ``train.anchor_pool = "all_classes"``; c* is k*'s cla
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+import numpy as np
 import torch
 from torch import Tensor
+
+import dgan
 
 
 def closest_anchor(future: Tensor, anchors: Tensor, pool: Tensor) -> Tensor:
@@ -245,3 +248,38 @@ def decode_torch(
         traj = traj.clone()
         traj[still, 0] = held.to(traj.dtype)
     return traj, p.gather(1, order)
+
+
+@dataclass(frozen=True)
+class DecodingKeys:
+    """A contract's per-class decoding keys as :func:`decode_torch` takes them, in the model's class order: contract
+    14's top-mode scale (None without one, or for a consensus, whose forward applies its own), 15's still radii
+    (empty without) and 16's top-mean powers (None without)."""
+
+    top_scale: Tensor | None
+    still_radius: list[float]
+    top_mean: Tensor | None
+    device: str = "cpu"
+
+    @classmethod
+    def of(
+        cls, contract: Mapping[str, Any], classes: Sequence[str], consensus: bool, device: str = "cpu"
+    ) -> DecodingKeys:
+        def per_class(key: str, neutral: float) -> list[float]:
+            values = contract.get(key, {})
+            return [float(values.get(c, neutral)) for c in classes] if values else []
+
+        scale, power = per_class("top_scale", 1.0), per_class("top_mean_power", 0.0)
+        return cls(
+            torch.tensor(scale, device=device) if scale and not consensus else None,
+            per_class("still_radius_m", 0.0),
+            torch.tensor(power, device=device) if power else None,
+            device,
+        )
+
+    def still(self, x: Mapping[str, np.ndarray]) -> Tensor | None:
+        """Which agents of network inputs ``x`` are held at their prior (``dgan.still_agents``); None without radii."""
+        if not self.still_radius:
+            return None
+        held = dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], self.still_radius)
+        return torch.from_numpy(held).to(self.device)

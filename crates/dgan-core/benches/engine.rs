@@ -131,15 +131,7 @@ fn bench_decode(c: &mut Criterion) {
         let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, 0.0], i as f64 * 0.1)).collect();
         let out = NetworkOutputs { class_logits: cl.view(), anchor_logits: al.view(), offsets: off.view() };
         let calibration = Calibration { temperature: 1.3, speed_exponent: 0.5, class_temperature: 2.0 };
-        let params = DecodeParams {
-            anchors: &anchors,
-            prior: Some(prior.view()),
-            calibration,
-            dt_s: 0.5,
-            top_scale: &[],
-            still: &[],
-            top_mean: &[],
-        };
+        let params = DecodeParams::new(&anchors, Some(prior.view()), calibration, 0.5);
         let id = if threads == 1 { format!("{n}") } else { format!("{n}/{threads}_threads") };
         g.bench_function(id, |b| b.iter(|| decode_on(out, params, &poses, 60, threads)));
     }
@@ -233,13 +225,9 @@ fn bench_hdmap(c: &mut Criterion) {
     let top_scale = contract.top_scales().expect("the contract's top-mode scale");
     let top_mean = contract.top_mean_powers().expect("the contract's top-mean power");
     let params = DecodeParams {
-        anchors,
-        prior: Some(pre.prior.view()),
-        calibration: contract.calibration(),
-        dt_s: spec.dt_s,
         top_scale: &top_scale,
-        still: &[],
         top_mean: &top_mean,
+        ..DecodeParams::new(anchors, Some(pre.prior.view()), contract.calibration(), spec.dt_s)
     };
     g.bench_function("decode", |b| b.iter(|| decode(out, params, &pre.poses, anchors.total())));
     g.finish();

@@ -228,6 +228,14 @@ pub struct DecodeParams<'a> {
     pub top_mean: &'a [f64],
 }
 
+impl<'a> DecodeParams<'a> {
+    /// Decoding by the anchors, prior, calibration and step alone: no top-mode scale, no agent held and no mean top
+    /// mode (contracts 1 to 13); a later contract's keys are set over it (`DecodeParams { top_scale, ..new(..) }`).
+    pub fn new(anchors: &'a Anchors, prior: Option<ArrayView3<'a, f32>>, calibration: Calibration, dt_s: f64) -> Self {
+        Self { anchors, prior, calibration, dt_s, top_scale: &[], still: &[], top_mean: &[] }
+    }
+}
+
 /// The largest power of contract 16's `top_mean_power` (beyond it the mean is the most probable mode to rounding).
 pub const MAX_TOP_MEAN_POWER: f64 = 64.0;
 
@@ -565,15 +573,7 @@ mod tests {
             anchor_logits: anchor_logits.view(),
             offsets: offsets.view(),
         };
-        let params = DecodeParams {
-            anchors,
-            prior: prior.map(|p| p.view()),
-            calibration: Calibration::single(temperature),
-            dt_s: 0.5,
-            top_scale: &[],
-            still: &[],
-            top_mean: &[],
-        };
+        let params = DecodeParams::new(anchors, prior.map(|p| p.view()), Calibration::single(temperature), 0.5);
         decode(out, params, &[pose], modes)
     }
 
@@ -617,15 +617,7 @@ mod tests {
         };
         let poses = [AgentPose::new([0.0, 0.0], 0.0); 2];
         let calibration = Calibration { temperature: 0.5, speed_exponent: 0.5, class_temperature: 2.0 };
-        let params = DecodeParams {
-            anchors: &anchors,
-            prior: Some(prior.view()),
-            calibration,
-            dt_s: 0.5,
-            top_scale: &[],
-            still: &[],
-            top_mean: &[],
-        };
+        let params = DecodeParams::new(&anchors, Some(prior.view()), calibration, 0.5);
         let d = decode(out, params, &poses, 3).unwrap();
         // p(c) = softmax(ln 2 / 2, 0) = (√2, 1) / (1 + √2) for both agents.
         let pv = 2f64.sqrt() / (1.0 + 2f64.sqrt());
@@ -660,15 +652,7 @@ mod tests {
 
     /// Decoding at temperature 1 with a prior, no top-mode scale and no agent held.
     fn plain_params<'a>(anchors: &'a Anchors, prior: &'a Array3<f32>) -> DecodeParams<'a> {
-        DecodeParams {
-            anchors,
-            prior: Some(prior.view()),
-            calibration: Calibration::single(1.0),
-            dt_s: 0.5,
-            top_scale: &[],
-            still: &[],
-            top_mean: &[],
-        }
+        DecodeParams::new(anchors, Some(prior.view()), Calibration::single(1.0), 0.5)
     }
 
     #[test]
@@ -823,15 +807,7 @@ mod tests {
         let prior = Array3::from_shape_fn((n, 2, 2), |(i, t, d)| (t + 1) as f32 * wave(i, d + 9));
         let poses: Vec<AgentPose> = (0..n).map(|i| AgentPose::new([i as f64, -(i as f64)], i as f64 * 0.1)).collect();
         let calibration = Calibration { temperature: 0.8, speed_exponent: 0.3, class_temperature: 1.5 };
-        let params = DecodeParams {
-            anchors: &anchors,
-            prior: Some(prior.view()),
-            calibration,
-            dt_s: 0.5,
-            top_scale: &[],
-            still: &[],
-            top_mean: &[],
-        };
+        let params = DecodeParams::new(&anchors, Some(prior.view()), calibration, 0.5);
         let out = NetworkOutputs {
             class_logits: class_logits.view(),
             anchor_logits: anchor_logits.view(),
@@ -923,15 +899,7 @@ mod tests {
             anchor_logits: anchor_logits.view(),
             offsets: offsets.view(),
         };
-        let params = DecodeParams {
-            anchors: &anchors,
-            prior: None,
-            calibration: Calibration::single(1.0),
-            dt_s: 0.4,
-            top_scale: &[],
-            still: &[],
-            top_mean: &[],
-        };
+        let params = DecodeParams::new(&anchors, None, Calibration::single(1.0), 0.4);
         let all = decode(out, params, &poses, k).unwrap();
         for i in 0..n {
             let (p, a) = (all.probabilities.row(i), all.mode_anchors.row(i));

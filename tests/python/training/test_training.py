@@ -21,7 +21,15 @@ from training.build import build_model, input_spec
 from training.config import Config
 from training.data.batches import INPUTS, forward_inputs
 from training.export import export_model, load_checkpoint
-from training.losses import Calibration, anchor_pool, class_weights, closest_anchor, decode_torch, dgan_loss
+from training.losses import (
+    Calibration,
+    DecodingKeys,
+    anchor_pool,
+    class_weights,
+    closest_anchor,
+    decode_torch,
+    dgan_loss,
+)
 from training.modules.dgan import DGAN, ConsensusEnsemble
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -177,14 +185,8 @@ def assert_parity(
     their map."""
     cal = temperature if isinstance(temperature, Calibration) else Calibration(temperature)
     predictor = dgan.Predictor(onnx_path)
-    still_radius = predictor.contract.get("still_radius_m", {})  # contract 15: held most probable modes
-    radii = [float(still_radius.get(c, 0.0)) for c in spec.classes] if still_radius else []
-    # Contract 14's top-mode scale of a single network (a consensus applies its own in its forward).
-    top = predictor.contract.get("top_scale", {})
-    single = top and not isinstance(model, ConsensusEnsemble)
-    scale = torch.tensor([float(top.get(c, 1.0)) for c in spec.classes]) if single else None
-    powers = predictor.contract.get("top_mean_power", {})  # contract 16: the most probable mode as a mean
-    power = torch.tensor([float(powers.get(c, 0.0)) for c in spec.classes]) if powers else None
+    # Contracts 14 to 16: top-mode scale (a consensus applies its own in its forward), still radius, mean top mode.
+    keys = DecodingKeys.of(predictor.contract, spec.classes, isinstance(model, ConsensusEnsemble))
     frames = real_frames(spec)
     if spec.map is not None and spec.map.optional:
         frames += [frame.without_map() for frame in frames]
@@ -201,9 +203,8 @@ def assert_parity(
             prior = torch.from_numpy(x["prior"])
             a, c = torch.from_numpy(anchors), torch.from_numpy(class_of).long()
             t = cal.anchor_temperatures(prior, spec.dt_s)
-            held = torch.from_numpy(dgan.still_agents(x["trajectory"], x["trajectory_mask"], x["state"], radii))
             traj, prob = decode_torch(
-                cl, al, off, a, c, prior, t, cal.class_temperature, held if radii else None, scale, power
+                cl, al, off, a, c, prior, t, cal.class_temperature, keys.still(x), keys.top_scale, keys.top_mean
             )
         n, k = traj.shape[:2]
         flat = traj.numpy().astype(np.float64).reshape(n, -1, 2)
