@@ -127,7 +127,7 @@ def torch_pipeline(name: str, device: str = "cpu") -> Callable[[dict[str, np.nda
         from training.data.batches import INPUTS
         from training.export import load_checkpoint
         from training.losses import DecodingKeys, decode_torch
-        from training.modules.dgan import ConsensusEnsemble
+        from training.modules.consensus import ConsensusEnsemble
     except ImportError:
         return None
     torch.set_num_threads(1)

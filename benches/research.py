@@ -584,7 +584,8 @@ def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
         import torch
 
         from training.export import load_checkpoint
-        from training.modules.dgan import DGAN, ConsensusEnsemble
+        from training.modules.consensus import ConsensusEnsemble
+        from training.modules.dgan import DGAN
     except ImportError:
         return None
     torch.set_num_threads(1)

@@ -31,7 +31,7 @@ from dgan.contract import STATE_FEATURES
 from training.calibrate import calibrate_checkpoint
 from training.export import SLIM_KEYS, Checkpoint, export_checkpoint, load_checkpoint
 from training.losses import Calibration
-from training.modules.dgan import ConsensusEnsemble
+from training.modules.consensus import ConsensusEnsemble
 
 #: The residual scales tried for a class's most probable mode (:func:`fit_top_scale`); 1 is the network as trained.
 TOP_SCALES = (0.0, 0.25, 0.5, 0.75, 1.0)

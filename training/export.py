@@ -18,7 +18,8 @@ from dgan.contract import KEPT_OUTPUT, PADDED_INPUTS, PREPROCESS_VERSION, RASTER
 from dgan.contract import OUTPUTS as CONTRACT_OUTPUTS
 from training.config import Config
 from training.losses import Calibration
-from training.modules.dgan import DGAN, ConsensusEnsemble
+from training.modules.consensus import ConsensusEnsemble
+from training.modules.dgan import DGAN
 
 OUTPUTS = list(CONTRACT_OUTPUTS)
 #: What a bundled checkpoint keeps of a run's ``best.pt`` (export and the parity test need no optimizer state).
@@ -70,8 +71,17 @@ def checkpoint_of(ckpt: dict[str, Any], path: Path) -> Checkpoint:
         ensemble = ConsensusEnsemble(
             [m[0] for m in members], tables, len(first[1].classes), ckpt.get("top_scale")
         ).eval()
-        return Checkpoint(ensemble, *first[1:], calibration)
+        return Checkpoint(ensemble, kept_side_by_side(first[1], len(members)), *first[2:], calibration)
     return Checkpoint(*network_of(ckpt), calibration)
+
+
+def kept_side_by_side(spec: dgan.InputSpec, members: int) -> dgan.InputSpec:
+    """The spec of ``members`` networks of ``spec`` in one consensus: where they keep their map's features (contract
+    13), the kept rows hold every member's channels side by side (:meth:`ConsensusEnsemble.forward`)."""
+    m = spec.map
+    if m is None or m.scene is None or not m.scene.tile_px:
+        return spec
+    return replace(spec, map=replace(m, scene=replace(m.scene, channels=m.scene.channels * members)))
 
 
 def network_of(ckpt: dict[str, Any]) -> tuple[DGAN, dgan.InputSpec, np.ndarray, np.ndarray, Config]:

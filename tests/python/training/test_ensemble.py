@@ -28,7 +28,8 @@ from training.ensemble import (
 )
 from training.export import export_model, load_checkpoint, store_half
 from training.losses import Calibration
-from training.modules.dgan import DGAN, ConsensusEnsemble
+from training.modules.consensus import ConsensusEnsemble
+from training.modules.dgan import DGAN
 
 ROOT = Path(__file__).resolve().parents[3]
 

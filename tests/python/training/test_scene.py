@@ -242,3 +242,55 @@ def test_a_kept_features_model_exports_and_predicts_as_its_network(tmp_path: Pat
     assert predictor.last_timings["parts"] > 0.0
     np.testing.assert_allclose(b.trajectories, a.trajectories, atol=1e-5)
     assert np.isfinite(predictor.predict(frame.without_map()).trajectories).all()
+
+
+def test_a_consensus_of_kept_features_members_keeps_their_features_side_by_side(tmp_path: Path) -> None:
+    """A consensus (``training.ensemble``) of members that keep their map's features: the kept rows hold every
+    member's channels side by side, each member reads its own, and the exported file gives the consensus of the
+    members' own outputs, each on its own features."""
+    from training.export import kept_side_by_side
+    from training.modules.consensus import ConsensusEnsemble
+    from training.modules.dgan import DGAN
+
+    cfg = Config.load(CONFIG, KEPT)
+    spec = input_spec(cfg)
+    members: list[DGAN] = []
+    for seed in (0, 1):
+        torch.manual_seed(seed)
+        members.append(build_model(cfg, spec, 8).eval())
+    anchors = np.cumsum(np.random.default_rng(0).normal(0.4, 0.2, (8, spec.t_f, 2)), axis=1).astype(np.float32)
+    table = torch.from_numpy(anchors)
+    consensus = ConsensusEnsemble(members, [table, table], 1).eval()
+    both = kept_side_by_side(spec, 2)
+    assert both.map is not None
+    assert both.map.scene is not None
+    assert spec.map is not None
+    assert spec.map.scene is not None
+    assert both.map.scene.channels == 2 * spec.map.scene.channels
+    path = export_model(consensus, both, anchors, np.zeros(8, np.int64), tmp_path / "m.onnx", "kept consensus")
+    frame = dgan.demo.scene_for(spec).frame
+    x = dgan.preprocess(frame, dgan.Predictor(path).spec)
+    with torch.no_grad():
+        rows = [m.tile_rows(torch.from_numpy(x["map"])).numpy() for m in members]
+    c = spec.map.scene.channels
+    assert x["map_rows"].shape == (0, 2 * c)  # nothing kept yet: every tile is computed
+    patches = [dgan.read_kept(r, x["map_index"], x["map_weight"], (8, 8)) for r in rows]
+    names = [n for n in (*dgan.contract.PADDED_INPUTS, *dgan.contract.KEPT_INPUTS) if n in x]
+    feed = {n: x[n] for n in names} | {"map_patches": np.concatenate(patches, axis=1)}
+    import onnxruntime as ort
+
+    got = ort.InferenceSession(str(path)).run(None, feed)
+    with torch.no_grad():
+        base = {n: torch.from_numpy(feed[n]) for n in names if n != "map_patches"}
+        outs = [
+            m.forward_padded(**base, map_patches=torch.from_numpy(p)) for m, p in zip(members, patches, strict=True)
+        ]
+        assert all(len(o) == 4 for o in outs)
+        want = consensus.combine([(o[0], o[1], o[2]) for o in outs])
+    assert got[3].shape == (len(rows[0]), 2 * c)
+    np.testing.assert_allclose(got[3], np.concatenate(rows, axis=1), atol=1e-4)
+    for g, w in zip(got[:3], want, strict=True):
+        np.testing.assert_allclose(g, w.numpy(), atol=1e-4)
+    first = dgan.Predictor(path)
+    a, b = first.predict(frame), first.predict(frame)  # the second reads the tiles the first kept
+    np.testing.assert_allclose(b.trajectories, a.trajectories, atol=1e-5)

@@ -30,7 +30,8 @@ from training.losses import (
     decode_torch,
     dgan_loss,
 )
-from training.modules.dgan import DGAN, ConsensusEnsemble
+from training.modules.consensus import ConsensusEnsemble
+from training.modules.dgan import DGAN
 
 ROOT = Path(__file__).resolve().parents[3]
 CHECKPOINTS = ROOT / "training" / "checkpoints"
