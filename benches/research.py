@@ -603,7 +603,7 @@ def pipeline(name: str) -> Callable[[dgan.Frame], tuple[Arr, Arr]] | None:
         x = preprocess(frame, spec)
         with torch.no_grad():
             if kept:  # the tiles' features, then each agent's reading of them (contract 13)
-                assert isinstance(model, DGAN)
+                assert isinstance(model, DGAN | ConsensusEnsemble)
                 rows = model.tile_rows(torch.from_numpy(x["map"])).numpy()
                 x["map_patches"] = read_rows(np.concatenate([x["map_rows"], rows]), x, spec.map)
                 x["map"] = x["map"][:0]

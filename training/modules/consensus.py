@@ -96,3 +96,7 @@ class ConsensusEnsemble(nn.Module):
             outs.append(getattr(m, method)(*inputs, **kw))
         kept = [o[3] for o in outs if len(o) > 3]
         return self.combine([(o[0], o[1], o[2]) for o in outs]) + ((torch.cat(kept, dim=1),) if kept else ())
+
+    def tile_rows(self, tiles: Tensor) -> Tensor:
+        """The kept features of the map's ``tiles`` (contract 13): every member's rows, side by side by channel."""
+        return torch.cat([m.tile_rows(tiles) for m in self.members], dim=1)  # type: ignore[operator]

@@ -289,6 +289,8 @@ def test_a_consensus_of_kept_features_members_keeps_their_features_side_by_side(
         want = consensus.combine([(o[0], o[1], o[2]) for o in outs])
     assert got[3].shape == (len(rows[0]), 2 * c)
     np.testing.assert_allclose(got[3], np.concatenate(rows, axis=1), atol=1e-4)
+    with torch.no_grad():
+        np.testing.assert_allclose(consensus.tile_rows(torch.from_numpy(x["map"])).numpy(), got[3], atol=1e-4)
     for g, w in zip(got[:3], want, strict=True):
         np.testing.assert_allclose(g, w.numpy(), atol=1e-4)
     first = dgan.Predictor(path)

@@ -222,7 +222,7 @@ def kept_inputs(model: torch.nn.Module, spec: dgan.InputSpec, x: dict[str, np.nd
         return x
     assert spec.map is not None
     assert spec.map.scene is not None
-    assert isinstance(model, DGAN)
+    assert isinstance(model, DGAN | ConsensusEnsemble)
     with torch.no_grad():
         rows = model.tile_rows(torch.from_numpy(x["map"])).numpy()
     grid = spec.map.scene_grid
