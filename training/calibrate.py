@@ -21,7 +21,7 @@ T_i = exp(a + b · H_i), H_i the entropy of the agent's anchor distribution at T
 checkpoint's ``anchor_entropy_temperature``), contract temperature 1: a distilled student's reliability is S-shaped
 (spread distributions' top modes overconfident, peaked ones' underconfident), which one temperature cannot mend.
 ``"entropy_class"``: these (a, b) and contract 9's T_c fitted together (T_c lends other classes' anchors probability,
-which a multi-class best of K uses). The last three are for single networks.
+which a multi-class best of K uses). The last three are folded into the network (a consensus's first member).
 """
 
 from __future__ import annotations
@@ -43,14 +43,12 @@ from training.modules.dgan import DGAN, entropy_tempered
 
 #: ``train.calibration``: what is fitted (:func:`fit_calibration`).
 CALIBRATIONS = ("temperature", "speed_class", "per_class", "entropy", "entropy_class")
-#: The kinds folded into the network's anchor logits (a consensus of several networks cannot carry them), as a model
-#: card names them.
+#: The kinds folded into the network's anchor logits (a consensus's: its first member's), as a model card names them.
 _ENTROPY = "a temperature set by each agent's anchor entropy"
 FOLDED = {"per_class": "one temperature per class", "entropy": _ENTROPY}
 FOLDED["entropy_class"] = "a class temperature and " + _ENTROPY
 #: The class temperatures ``"speed_class"``'s search starts from (log-spaced, 1/e to e³).
 CLASS_TEMPERATURE_STARTS = np.exp(np.linspace(-1.0, 3.0, 9))
-
 #: The temperatures tried, log-spaced.
 GRID = np.exp(np.linspace(np.log(0.05), np.log(20.0), 121))
 
@@ -361,13 +359,11 @@ def validation_logits(
     from training.export import load_checkpoint
 
     model, spec, anchors, class_of, cfg, _ = load_checkpoint(path)
-    if isinstance(model, DGAN):  # fitted on the network's own logits, not on an earlier fit's folded ones
-        model.set_anchor_logit_scale(None)
-        model.set_entropy_temperature(None)
-    elif cfg.train.calibration in FOLDED:
-        raise ValueError(
-            f"{path}: train.calibration = {cfg.train.calibration!r} is for single networks, not a consensus"
-        )
+    # Fitted on the network's own logits, not an earlier fit's folded ones (a consensus's are its first member's).
+    first = model if isinstance(model, DGAN) else model.members[0]
+    assert isinstance(first, DGAN)
+    first.set_anchor_logit_scale(None)
+    first.set_entropy_temperature(None)
     if data_root is not None:
         cfg = replace(cfg, data=replace(cfg.data, root=str(data_root)))
     val = split_windows(calibration_config(cfg), spec, "val", progress)
@@ -396,5 +392,9 @@ def calibrate_checkpoint(
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
         parts.append(fold_modes)
     found = replace(fit_calibration(kind, BestModes.joined(parts), class_of), folds=len(parts))
-    update_checkpoint(path, **found.checkpoint_keys())
+    keys, ckpt = found.checkpoint_keys(), torch.load(path, weights_only=False)
+    if "members" in ckpt:  # a consensus's folded terms are its first member's, whose anchor logits it keeps
+        ckpt["members"][0].update({k: keys.pop(k) for k in ("anchor_logit_scale", "anchor_entropy_temperature")})
+        keys["members"] = ckpt["members"]
+    update_checkpoint(path, **keys)
     return found

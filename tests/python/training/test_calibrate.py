@@ -270,16 +270,37 @@ def test_the_calibration_split_names_the_validation_windows_of_the_fit() -> None
         calibration_config(Config.from_dict({"train": {"calibration_split": "every"}}))
 
 
-def test_a_per_class_temperature_is_refused_for_a_consensus_before_any_fit(tmp_path: Path) -> None:
-    import shutil
+@pytest.mark.slow
+def test_a_consensus_folds_its_calibration_into_its_first_member(tmp_path: Path) -> None:
+    """A folded kind (``"entropy"``) fitted for a consensus goes into its first member, whose anchor logits the
+    consensus keeps: the other members and every top mode stay as they were, the contract's temperature is 1, and the
+    exported file decodes as PyTorch does."""
+    from test_training import assert_parity
 
     from training.checkpoint import update_checkpoint
+    from training.ensemble import ensemble_checkpoint
+    from training.export import export_model, load_checkpoint
 
-    path = tmp_path / "eth.pt"
-    shutil.copy(ROOT / "training" / "checkpoints" / "eth.pt", path)
-    members = torch.load(path, weights_only=False)["members"]
-    for m in members:
-        m["config"]["train"]["calibration"] = "per_class"
-    update_checkpoint(path, members=members)
-    with pytest.raises(ValueError, match="per_class' is for single networks, not a consensus"):
-        calibrate_checkpoint(path, tmp_path / "no data here")
+    runs = []
+    for seed in (0, 1):
+        run = tmp_path / f"apollo{seed}"
+        run.mkdir()
+        _apollo_checkpoint(run / "best.pt", "", 3, seed)
+        runs.append(run)
+    path = ensemble_checkpoint(runs, tmp_path / "consensus.pt")
+    ckpt = torch.load(path, weights_only=False)
+    for holder in [ckpt, *ckpt["members"]]:
+        if "config" in holder:
+            holder["config"]["train"]["calibration"] = "entropy"
+    update_checkpoint(path, members=ckpt["members"])
+    found = calibrate_checkpoint(path)
+    assert found.entropy_temperature is not None
+    kept = torch.load(path, weights_only=False)
+    assert kept["members"][0]["anchor_entropy_temperature"] == list(found.entropy_temperature)
+    assert kept["members"][1].get("anchor_entropy_temperature") is None
+    assert kept.get("anchor_entropy_temperature") is None
+    assert kept["temperature"] == 1.0
+    model, spec, anchors, class_of, _, cal = load_checkpoint(path)
+    path_onnx = export_model(model, spec, anchors, class_of, tmp_path / "m.onnx", "entropy consensus", temperature=cal)
+    assert_parity(model, spec, anchors, class_of, path_onnx, cal)
+    assert calibrate_checkpoint(path).entropy_temperature == found.entropy_temperature  # fitted on its own logits
