@@ -150,10 +150,12 @@ class TemperatureFit:
     entropy_temperature: tuple[float, float] | None = None
 
     def checkpoint_keys(self) -> dict[str, Any]:
-        """What a checkpoint stores of this fit: the engine's calibration at full precision and the folded terms
-        (None where this kind has none, so that a refit of another kind clears an earlier one's)."""
+        """What a checkpoint stores of this fit: the engine's calibration at full precision and :meth:`folded_keys`."""
+        return {**self.calibration.keys(complete=True), **self.folded_keys()}
+
+    def folded_keys(self) -> dict[str, Any]:
+        """The terms folded into the network, None where this kind has none (a refit of another kind clears them)."""
         return {
-            **self.calibration.keys(complete=True),
             "anchor_logit_scale": None if self.anchor_logit_scale is None else list(self.anchor_logit_scale),
             "anchor_entropy_temperature": None if self.entropy_temperature is None else list(self.entropy_temperature),
         }
@@ -375,14 +377,13 @@ def validation_logits(
 def calibrate_checkpoint(
     path: Path, data_root: Path | None = None, progress: bool = False, folds: Sequence[Path] = ()
 ) -> TemperatureFit:
-    """Fits the calibration (``train.calibration``) of the checkpoint at ``path`` (one run's or an ensemble's,
-    ``training.ensemble``) on its configuration's validation split (under ``data_root`` if given) and stores it
-    there.
+    """Fits and stores the calibration (``train.calibration``) of the checkpoint at ``path`` (a run's, or an ensemble's,
+    whose first member keeps the folded terms) on its configuration's validation split (under ``data_root`` if given).
 
     ``folds``: checkpoints of the same configuration trained with other validation splits (cross-fitting,
     ``data.val_recordings``); their predictions on their own validation splits join the fit, which then sees every
     fold's validation data instead of one split's."""
-    from training.checkpoint import update_checkpoint
+    from training.checkpoint import save_atomic
 
     modes, class_of, kind = validation_logits(path, data_root, progress)
     parts = [modes]
@@ -392,9 +393,8 @@ def calibrate_checkpoint(
             raise ValueError(f"{fold}: its anchors' classes differ from {path}'s; folds must share a configuration")
         parts.append(fold_modes)
     found = replace(fit_calibration(kind, BestModes.joined(parts), class_of), folds=len(parts))
-    keys, ckpt = found.checkpoint_keys(), torch.load(path, weights_only=False)
-    if "members" in ckpt:  # a consensus's folded terms are its first member's, whose anchor logits it keeps
-        ckpt["members"][0].update({k: keys.pop(k) for k in ("anchor_logit_scale", "anchor_entropy_temperature")})
-        keys["members"] = ckpt["members"]
-    update_checkpoint(path, **keys)
+    ckpt = torch.load(path, weights_only=False)
+    ckpt.update(found.calibration.keys(complete=True))
+    (ckpt["members"][0] if "members" in ckpt else ckpt).update(found.folded_keys())
+    save_atomic(ckpt, path)
     return found

@@ -88,11 +88,9 @@ class ConsensusEnsemble(nn.Module):
         if patches is None and len(inputs) > PATCHES_AT:
             raise ValueError("a consensus takes map_patches by name")
         outs = []
+        c = 0 if patches is None else patches.shape[1] // len(self.members)  # each member's channels
         for i, m in enumerate(self.members):
-            kw = named
-            if patches is not None:
-                c = patches.shape[1] // len(self.members)
-                kw = {**named, "map_patches": patches[:, i * c : (i + 1) * c]}
+            kw = named if patches is None else {**named, "map_patches": patches[:, i * c : (i + 1) * c]}
             outs.append(getattr(m, method)(*inputs, **kw))
         kept = [o[3] for o in outs if len(o) > 3]
         return self.combine([(o[0], o[1], o[2]) for o in outs]) + ((torch.cat(kept, dim=1),) if kept else ())

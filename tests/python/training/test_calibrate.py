@@ -217,6 +217,17 @@ def _apollo_checkpoint(path: Path, val_recordings: str, kc: int, seed: int, targ
     return path
 
 
+def _apollo_runs(tmp_path: Path, seeds: tuple[int, ...]) -> list[Path]:
+    """Untrained ApolloScape networks with random anchors (``test_calibrate``'s) saved as training runs."""
+    runs = []
+    for seed in seeds:
+        run = tmp_path / f"apollo{seed}"
+        run.mkdir()
+        _apollo_checkpoint(run / "best.pt", "", 3, seed)
+        runs.append(run)
+    return runs
+
+
 @pytest.mark.slow
 def test_a_cross_fitted_temperature_pools_every_folds_validation_split(tmp_path: Path) -> None:
     main = _apollo_checkpoint(tmp_path / "main.pt", "", 4, 0)
@@ -281,13 +292,7 @@ def test_a_consensus_folds_its_calibration_into_its_first_member(tmp_path: Path)
     from training.ensemble import ensemble_checkpoint
     from training.export import export_model, load_checkpoint
 
-    runs = []
-    for seed in (0, 1):
-        run = tmp_path / f"apollo{seed}"
-        run.mkdir()
-        _apollo_checkpoint(run / "best.pt", "", 3, seed)
-        runs.append(run)
-    path = ensemble_checkpoint(runs, tmp_path / "consensus.pt")
+    path = ensemble_checkpoint(_apollo_runs(tmp_path, (0, 1)), tmp_path / "consensus.pt")
     ckpt = torch.load(path, weights_only=False)
     for holder in [ckpt, *ckpt["members"]]:
         if "config" in holder:

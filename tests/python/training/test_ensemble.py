@@ -12,7 +12,7 @@ import onnx
 import pytest
 import torch
 from onnx import TensorProto, helper, numpy_helper
-from test_calibrate import _apollo_checkpoint
+from test_calibrate import _apollo_runs
 from test_training import assert_parity, randomised_batch_norm
 
 import dgan
@@ -112,17 +112,6 @@ def test_scaled_errors_run_from_the_prior_to_the_top_mode() -> None:
     e = scaled_errors(top, prior, truth, (0.0, 0.5, 1.0, 1.5))
     # s = 0 is the prior, s = 1 the top mode, s = 0.5 halfway (on the truth), s = 1.5 beyond the top mode.
     np.testing.assert_allclose(e, [[2.0, 0.0, 2.0, 4.0]], atol=1e-12)
-
-
-def _apollo_runs(tmp_path: Path, seeds: tuple[int, ...]) -> list[Path]:
-    """Untrained ApolloScape networks with random anchors (``test_calibrate``'s) saved as training runs."""
-    runs = []
-    for seed in seeds:
-        run = tmp_path / f"apollo{seed}"
-        run.mkdir()
-        _apollo_checkpoint(run / "best.pt", "", 3, seed)
-        runs.append(run)
-    return runs
 
 
 @pytest.mark.slow
