@@ -87,6 +87,8 @@ class ConsensusEnsemble(nn.Module):
         patches = named.get("map_patches")
         if patches is None and len(inputs) > PATCHES_AT:
             raise ValueError("a consensus takes map_patches by name")
+        if patches is not None and patches.shape[1] % len(self.members):
+            raise ValueError(f"map_patches' {patches.shape[1]} channels do not split over {len(self.members)} members")
         outs = []
         c = 0 if patches is None else patches.shape[1] // len(self.members)  # each member's channels
         for i, m in enumerate(self.members):

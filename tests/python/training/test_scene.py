@@ -296,3 +296,8 @@ def test_a_consensus_of_kept_features_members_keeps_their_features_side_by_side(
     first = dgan.Predictor(path)
     a, b = first.predict(frame), first.predict(frame)  # the second reads the tiles the first kept
     np.testing.assert_allclose(b.trajectories, a.trajectories, atol=1e-5)
+    odd = {k: torch.from_numpy(np.ascontiguousarray(v[:, :-1] if k == "map_patches" else v)) for k, v in feed.items()}
+    with pytest.raises(ValueError, match="channels do not split over 2 members"):
+        consensus.forward_padded(**odd)
+    with pytest.raises(ValueError, match="a consensus takes map_patches by name"):
+        consensus.forward_padded(*[None] * 11)
