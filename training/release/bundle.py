@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -66,6 +67,49 @@ def with_scale(path: Path, scale: list[float] | None) -> None:
     save_atomic(ckpt, path)
 
 
+#: The checkpoint keys of the engine's decoding that :func:`bundle` sets (one value per class): contract 14's
+#: ``top_scale`` (of one network; a consensus's is fitted), 15's ``still_radius``, 16's ``top_mean_power``.
+DECODING_KEYS = ("top_scale", "still_radius", "top_mean_power")
+
+
+def check_decoding(name: str, decoding: dict[str, list[float]], consensus: bool) -> None:
+    """Raises a ValueError, before anything is written, for a key of ``decoding`` (:func:`bundle`) outside
+    :data:`DECODING_KEYS` or a top-mode scale given for a consensus (whose scale :func:`bundle` fits)."""
+    unknown = sorted(set(decoding) - set(DECODING_KEYS))
+    if unknown:
+        raise ValueError(f"{name}: decoding keys must be among {', '.join(DECODING_KEYS)}, got {', '.join(unknown)}")
+    if consensus and "top_scale" in decoding:
+        raise ValueError(f"{name}: a consensus's top-mode scale is fitted on validation when it is bundled, not given")
+
+
+def decoding_lines(classes: Sequence[str], decoding: dict[str, list[float]]) -> str:
+    """A model card's lines for its ``decoding`` (:func:`bundle`), each class named with its value."""
+
+    def per_class(key: str, unit: str = "", skip: float = 0.0) -> str:
+        values = [f"{c} {v:g}{unit}" for c, v in zip(classes, decoding[key], strict=True) if v != skip]
+        return ", ".join(values) or "none"
+
+    lines = []
+    if "top_scale" in decoding:
+        lines.append(
+            "- **Top-mode scale** (contract 14, `training.ensemble.fit_top_scale`, chosen on validation): the most "
+            "probable mode keeps this share of its refinement over the kinematic prior: "
+            f"{per_class('top_scale', skip=1.0)}."
+        )
+    if "still_radius" in decoding:
+        lines.append(
+            "- **Still history** (contract 15, `training.still`, chosen on validation): an agent whose every observed "
+            "step lies within r of its last position has its most probable mode at the kinematic prior: "
+            f"{per_class('still_radius', ' m')}."
+        )
+    if "top_mean_power" in decoding:
+        lines.append(
+            "- **Mean top mode** (contract 16, `training.top_mean`, chosen on validation by the engine): the most "
+            f"probable mode is the mean of the agent's modes weighted by p^β: β for {per_class('top_mean_power')}."
+        )
+    return "".join(line + "\n" for line in lines)
+
+
 def check_folds(cfg: dict[str, Any], folds: list[list[Path]]) -> None:
     """The fold runs must hold out exactly the validation splits the configuration declares, each once."""
     held = sorted(
@@ -89,7 +133,12 @@ def test_metrics(predictor: dgan.Predictor, dataset: str, data_root: Path, fold:
 
 
 def bundle(
-    runs: list[Path], name: str, data_root: Path, folds: list[list[Path]] | None = None, top_scale: bool = False
+    runs: list[Path],
+    name: str,
+    data_root: Path,
+    folds: list[list[Path]] | None = None,
+    top_scale: bool = False,
+    decoding: dict[str, list[float]] | None = None,
 ) -> dict[str, Any]:
     """Bundles a run (or several runs of one configuration as their consensus, ``training.ensemble``, with the
     weights kept as float16 and the temperature fitted on validation anew): checkpoint, ONNX model and card.
@@ -97,11 +146,14 @@ def bundle(
     ``folds``: for a configuration with ``train.calibration_folds``, the runs of each of its folds (seeds, built into
     a model as ``runs`` are); their predictions on their validation splits join the temperature's fit.
     ``top_scale``: one run is kept as a consensus of one (one network's cost) with a top-mode scale fitted on
-    validation, as a consensus of several always is."""
+    validation, as a consensus of several always is.
+    ``decoding``: the engine's decoding the model carries beyond its network (keys of :data:`DECODING_KEYS`, one
+    value per class), chosen on validation once it was trained; stored before export and named on its card."""
     run = runs[0]
     cfg = json.loads((run / "config.json").read_text())["config"]
     dataset = cfg["data"].get("dataset", "ethucy")
     check_folds(cfg, folds or [])
+    check_decoding(name, decoding or {}, consensus=len(runs) > 1 or top_scale)
     MODELS.mkdir(parents=True, exist_ok=True)
     consensus = len(runs) > 1 or top_scale
     model_checkpoint(runs, CHECKPOINTS / f"{name}.pt", consensus)
@@ -117,6 +169,10 @@ def bundle(
         for fold_ckpt in fold_ckpts:  # the folds stand in for the model: the same top-mode scales
             with_scale(fold_ckpt, scale)
         print(f"{name}: {calibrate_checkpoint(CHECKPOINTS / f'{name}.pt', data_root, folds=fold_ckpts)}", flush=True)
+    if decoding:
+        from training.checkpoint import update_checkpoint
+
+        update_checkpoint(CHECKPOINTS / f"{name}.pt", **decoding)
     if dataset == "ethucy":
         description = (
             f"DGAN trained leave-one-scene-out on ETH/UCY, test scene {cfg['data']['scene']}; "
@@ -135,6 +191,8 @@ def bundle(
     text = card(name, run, metrics, cfg) if dataset == "ethucy" else multiclass_card(name, run, metrics, cfg)
     if consensus:
         text = text.replace("- **Test metrics**", ensemble_line(runs, predictor, cfg, scale) + "- **Test metrics**", 1)
+    if decoding:
+        text = text.replace("- **Test metrics**", decoding_lines(predictor.classes, decoding) + "- **Test metrics**", 1)
     (MODELS / f"{name}.md").write_text(text)
     (run / "metrics.json").write_text(json.dumps(metrics, indent=2))
     return metrics

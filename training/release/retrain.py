@@ -34,7 +34,7 @@ def train_multiclass(root: Path) -> None:
         ]
         if ds in DISTILLED:
             members, folds = _distilled(ds, toml, root, members, list(zip(held, folds, strict=True)))
-        bundle(members, ds, root, folds, top_scale=ds in TOP_SCALED)
+        bundle(members, ds, root, folds, top_scale=ds in TOP_SCALED, decoding=DECODING.get(ds))
         for cls in multiclass.DATASETS[ds].classes:  # the per-class baselines
             runs = _seed_runs(toml, root, seeds, f"{ds}-{cls}", "--set", f"data.target_class={cls}")
             path = model_checkpoint(runs, multiclass.BASELINES / f"{ds}-{cls}.pt")
@@ -138,6 +138,22 @@ def _seed_runs(toml: Path, root: Path, seeds: tuple[int, ...], tag: str, *args: 
 ENSEMBLE_SEEDS = {"hdmap": (0,), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1, 2)}
 
 
+#: The engine's decoding each bundled model carries beyond its network (``training.release.bundle.DECODING_KEYS``, one
+#: value per class in the model's class order), each chosen on validation once the model was trained
+#: (docs/results.md): `sdd`'s vehicles keep 0.75 of their top mode's refinement (contract 14; runs/RULES-2026-12-06o);
+#: `eth`, `univ` and `hdmap`'s cyclists and pedestrians hold a still history at the prior (contract 15,
+#: ``training.still`` and then the engine on validation; runs/RULES-2026-12-06n and r); `sdd`, `apolloscape` and
+#: `hdmap`'s pedestrians take the mean of their modes weighted by p^β as the top mode (contract 16,
+#: ``training.top_mean``; runs/RULES-2026-12-06p and q). A retrained model carries the same.
+DECODING = {
+    "eth": {"still_radius": [0.05]},
+    "univ": {"still_radius": [0.05]},
+    "sdd": {"top_scale": [0.75, 1.0, 1.0], "top_mean_power": [2.0, 8.0, 4.0]},
+    "apolloscape": {"top_mean_power": [0.0, 4.0, 2.0]},
+    "hdmap": {"still_radius": [0.0, 0.02, 0.02], "top_mean_power": [0.0, 0.0, 2.0]},
+}
+
+
 #: The classes whose agents read the bundled HD-map model's map once it is trained (``model.map_classes``, with one
 #: temperature per class): its vehicles are better without it on validation (hdmap.toml).
 HDMAP_MAP_CLASSES = "cyclist,pedestrian"
@@ -153,7 +169,7 @@ def train_hdmap(root: Path) -> None:
         config: _seed_runs(ROOT / "training" / "configs" / f"{config}.toml", root, ENSEMBLE_SEEDS["hdmap"], config)
         for config in ("hdmap", "hdmap_nomap")
     }
-    bundle(runs["hdmap"], "hdmap", root)
+    bundle(runs["hdmap"], "hdmap", root, decoding=DECODING["hdmap"])
     regate("hdmap", HDMAP_MAP_CLASSES, root)
     if len(runs["hdmap_nomap"]) > 1:
         ensemble_checkpoint(runs["hdmap_nomap"], hdmap.NOMAP, half=True)
@@ -199,6 +215,6 @@ def train_ethucy(root: Path) -> None:
             runs = _student(
                 runs, TEACHERS / f"{s}.pt", toml, root, f"ethucy_{s}_student", *SCENE_STUDENT_ARGS.get(s, ())
             )
-        bundle(runs, s, root)
+        bundle(runs, s, root, decoding=DECODING.get(s))
         redenoise(s, ETHUCY_DENOISE_GATE_M)
         restate(s, root)

@@ -10,7 +10,9 @@ import torch
 
 import dgan
 from training.config import Config
+from training.release.bundle import DECODING_KEYS, check_decoding, decoding_lines
 from training.release.retrain import (
+    DECODING,
     DISTILLED,
     DISTILLED_SCENES,
     KEPT_SEED,
@@ -59,3 +61,33 @@ def test_hotels_student_is_wider_and_folds_an_entropy_temperature() -> None:
     _, b = kept["anchor_entropy_temperature"]
     assert b > 0  # spread distributions flattened, peaked ones sharpened
     assert kept.get("anchor_logit_scale") is None
+
+
+@pytest.mark.parametrize("name", dgan.models.list())
+def test_retraining_declares_the_bundled_models_decoding(name: str) -> None:
+    """What the engine's decoding adds to a bundled network (chosen on validation once it was trained) is what a
+    retrained model gets (``training.release.retrain.DECODING``); a consensus's top-mode scale is fitted anew."""
+    ckpt = torch.load(CHECKPOINTS / f"{name}.pt", weights_only=False)
+    for key in DECODING_KEYS:
+        if key == "top_scale" and "members" in ckpt:
+            continue
+        assert ckpt.get(key) == DECODING.get(name, {}).get(key), f"{name}: {key}"
+
+
+def test_a_cards_decoding_lines_name_each_class_with_its_value() -> None:
+    classes = dgan.Predictor("hdmap").classes  # vehicle, cyclist, pedestrian
+    text = decoding_lines(classes, {"top_scale": [0.75, 1.0, 1.0], "still_radius": [0.0, 0.02, 0.05]})
+    lines = text.splitlines()
+    assert len(lines) == 2
+    assert text.endswith("\n")
+    assert lines[0].startswith("- **Top-mode scale** (contract 14")
+    assert lines[0].endswith(": vehicle 0.75.")
+    assert lines[1].endswith(": cyclist 0.02 m, pedestrian 0.05 m.")
+
+
+def test_bundling_refuses_unknown_decoding_and_a_consensus_given_a_top_mode_scale() -> None:
+    with pytest.raises(ValueError, match="must be among top_scale, still_radius, top_mean_power, got temperature"):
+        check_decoding("sdd", {"temperature": [1.0]}, consensus=False)
+    with pytest.raises(ValueError, match="eth: a consensus's top-mode scale is fitted"):
+        check_decoding("eth", {"top_scale": [0.5]}, consensus=True)
+    check_decoding("sdd", DECODING["sdd"], consensus=False)
