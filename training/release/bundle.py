@@ -153,9 +153,9 @@ def bundle(
     cfg = json.loads((run / "config.json").read_text())["config"]
     dataset = cfg["data"].get("dataset", "ethucy")
     check_folds(cfg, folds or [])
-    check_decoding(name, decoding or {}, consensus=len(runs) > 1 or top_scale)
-    MODELS.mkdir(parents=True, exist_ok=True)
     consensus = len(runs) > 1 or top_scale
+    check_decoding(name, decoding or {}, consensus)
+    MODELS.mkdir(parents=True, exist_ok=True)
     model_checkpoint(runs, CHECKPOINTS / f"{name}.pt", consensus)
     scale = None
     if consensus:
