@@ -85,6 +85,11 @@ class DataConfig:
     # Whether that copy holds the futures too: every agent whose whole window (history and future) stays within
     # augment_hold_m of one point is held there throughout, as a tracker holding a static object's box holds it on.
     augment_hold_future: bool = False
+    # Faster copies of the training windows (function matching: a student distilled on them learns its teacher's
+    # outputs for faster agents too): one copy per comma-separated factor s > 1, every recording resampled onto steps s
+    # times as long (training.data.datasets.resampled) and read on the model's grid, so that every agent moves s times
+    # as fast over the same map; "" = none. Validation and test stay as recorded.
+    augment_speed: str = ""
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,8 @@ def cache_path(found: Located, spec: dgan.InputSpec, cache_dir: Path, scene_px: 
             version += f"-noise{part.noise[0]:g}-drop{part.noise[1]:g}"
         if part.hold > 0:
             version += f"-hold{part.hold:g}" + ("-future" if part.hold_future else "")
+        if part.speed != 1.0:
+            version += f"-speed{part.speed:g}"
     if scene_px > 0 and spec.map is not None and spec.map.scene is not None:
         version += f"-scene{scene_px}"
     files_key = [(f.name, f.stat().st_size) for f in found.files]

@@ -196,7 +196,16 @@ def locate(part: WindowSet, root: Path, dt_s: float, with_map: bool) -> Located:
         return Located(part, files, DATASETS["ethucy"], lambda: pedestrian_recordings(part.dataset, root, dt_s))
     files = source_files(part.dataset, root, part.split, part.fold)
     info = DATASETS[part.dataset]
+    if part.speed != 1.0:
+        return Located(part, files, info, lambda: sped_up(part, root, info.dt_s, with_map))
     return Located(part, files, info, lambda: recordings(part.dataset, root, part.split, part.fold, with_map))
+
+
+def sped_up(part: WindowSet, root: Path, dt_s: float, with_map: bool) -> list[Recording]:
+    """``part``'s recordings resampled onto steps ``part.speed`` times as long (:func:`resampled`) and read on the
+    ``dt_s`` grid: every agent ``part.speed`` times as fast over the same map (``data.augment_speed``)."""
+    recs = recordings(part.dataset, root, part.split, part.fold, with_map)
+    return [replace(resampled(r, dt_s, dt_s * part.speed), name=f"{r.name}:x{part.speed:g}") for r in recs]
 
 
 #: Sources whose pedestrians can join the ETH/UCY training windows (``data.extra_pedestrians``).

@@ -72,8 +72,8 @@ class WindowSet:
     """One part of a split as the window cache keys it: ``split`` of ``dataset`` (``fold``: the held-out ETH/UCY
     scene, or ApolloScape's validation recordings) with windows ending every ``stride`` steps, its observed histories
     corrupted as a tracker would with ``noise = (sigma_m, drop)`` or, with ``hold`` (metres), its still agents held
-    where they are (:func:`training.data.augment.held_still`); or, with ``pedestrians``, the training pedestrians of
-    the source ``dataset`` for an ETH/UCY model."""
+    where they are (:func:`training.data.augment.held_still`), or with ``speed`` its agents sped up; or, with
+    ``pedestrians``, the training pedestrians of the source ``dataset`` for an ETH/UCY model."""
 
     dataset: str
     split: str
@@ -84,6 +84,9 @@ class WindowSet:
     hold: float = 0.0
     #: With ``hold``: the whole window (history and future) of each agent that stays within ``hold`` metres held.
     hold_future: bool = False
+    #: Each recording resampled onto steps ``speed`` times as long and read on the dataset's grid: every agent
+    #: ``speed`` times as fast (``data.augment_speed``).
+    speed: float = 1.0
 
 
 @dataclass(frozen=True)

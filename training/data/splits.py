@@ -72,7 +72,8 @@ def window_set(part: WindowSet, root: Path, spec: dgan.InputSpec, cache_dir: Pat
 
 def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
     """The parts of ``split`` that ``d`` asks for: the dataset's own windows; for training, then one noisy copy per
-    level of ``data.augment_noise``, a held copy with ``data.augment_hold_m`` and the pedestrians of each
+    level of ``data.augment_noise``, a held copy with ``data.augment_hold_m``, a faster copy per factor of
+    ``data.augment_speed`` and the pedestrians of each
     ``data.extra_pedestrians`` source; then the split of each ``data.extra_sources`` dataset."""
     fold = {"ethucy": d.scene, "apolloscape": d.val_recordings}.get(d.dataset, "")
     if d.val_recordings and d.dataset != "apolloscape":
@@ -91,8 +92,9 @@ def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
         raise ValueError("data.augment_hold_future needs a held copy (data.augment_hold_m > 0)")
     held = replace(own, hold=d.augment_hold_m, hold_future=d.augment_hold_future)
     noisy += [held] if d.augment_hold_m > 0 else []
+    fast = [replace(own, speed=s) for s in augment_speeds(d.augment_speed)]
     extra = [WindowSet(s, "train", stride=d.extra_stride, pedestrians=True) for s in sources]
-    return [own, *noisy, *extra, *joint]
+    return [own, *noisy, *fast, *extra, *joint]
 
 
 def extra_sources(names: str, dataset: str, stride: int = 1) -> list[tuple[str, int]]:
@@ -137,6 +139,17 @@ def augment_sigmas(declared: str) -> list[float]:
     if any(not (0.0 < x <= 5.0) for x in sigmas):
         raise ValueError(f"data.augment_noise must hold noise levels in (0, 5] metres, got {declared!r}")
     return sigmas
+
+
+def augment_speeds(declared: str) -> list[float]:
+    """The speed-up factors of ``data.augment_speed`` (comma-separated, each in (1, 4]; "" = none)."""
+    try:
+        factors = [float(x) for x in declared.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"data.augment_speed must be comma-separated factors, got {declared!r}") from None
+    if any(not (1.0 < x <= 4.0) for x in factors) or len(set(factors)) < len(factors):
+        raise ValueError(f"data.augment_speed must hold distinct factors in (1, 4], got {declared!r}")
+    return factors
 
 
 def pedestrian_sources(names: str) -> list[str]:

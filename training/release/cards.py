@@ -93,6 +93,11 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             f"Trained also on a held copy of its windows: each agent that stays within {hold:g} m of one point held "
             f"there over {whole}, as a tracker holding a static object's box."
         )
+    if speeds := [x.strip() for x in str(d.get("augment_speed", "")).split(",") if x.strip()]:
+        parts.append(
+            f"Trained also on faster copies of its windows (every agent {' and '.join(speeds)} times as fast over the "
+            "same map, `data.augment_speed`), on which its teacher taught it too."
+        )
     if t.get("map_dropout", 0.0) > 0 and d.get("use_map", True) and cfg["model"].get("use_map", True):
         parts.append(
             f"Trained with map dropout ({t['map_dropout']:g} of the crops blanked), so it also runs without a map "

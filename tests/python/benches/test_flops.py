@@ -52,7 +52,7 @@ def test_matmul_conv_lstm_and_elementwise_are_counted_exactly(tmp_path: Path) ->
 
 #: Bundled models that are still the consensus of several networks (issue 26: one network each, at most 4 MFLOP an
 #: agent); strict, so the mark must go when they are distilled.
-CONSENSUS = {"eth", "zara2"}
+CONSENSUS = {"zara2"}
 
 
 @pytest.mark.parametrize(

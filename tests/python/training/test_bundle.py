@@ -13,6 +13,7 @@ pytest.importorskip("torch")
 from training.release.bundle import check_folds
 from training.release.cards import (
     classification_words,
+    contract_line,
     denoise_words,
     distill_words,
     extra_data_line,
@@ -36,6 +37,13 @@ def test_extra_pedestrians_are_named_with_their_licence() -> None:
     assert "anchors" not in line
     assert "fitted on ETH/UCY's windows alone" in extra_data_line(cfg(extra_pedestrians="sdd", extra_in_anchors=False))
     assert "CC BY-NC-SA 3.0" in extra_licence_line(cfg(extra_pedestrians="sdd"))
+
+
+def test_faster_copies_are_named() -> None:
+    plain = {"data": {"prior": "none"}, "train": {}, "model": {}}
+    assert "faster copies" not in contract_line(plain, {})
+    fast = {"data": {"prior": "none", "augment_speed": "1.5,2"}, "train": {}, "model": {}}
+    assert "every agent 1.5 and 2 times as fast over the same map" in contract_line(fast, {})
 
 
 def test_the_classification_target_is_named() -> None:
@@ -211,7 +219,7 @@ def test_map_classes_refit_a_temperature_per_class_and_export_the_bundled_hdmap_
 
     root = shared_data("waymo_motion_samples")
     shutil.copy(bundle.CHECKPOINTS / "hdmap.pt", tmp_path / "hdmap.pt")
-    shutil.copy(bundle.CHECKPOINTS / "eth.pt", tmp_path / "eth.pt")
+    shutil.copy(bundle.CHECKPOINTS / "zara2.pt", tmp_path / "zara2.pt")
     monkeypatch.setattr(bundle, "CHECKPOINTS", tmp_path)
     monkeypatch.setattr(bundle, "MODELS", tmp_path)
     path = bundle.regate("hdmap", "cyclist,pedestrian", root)
@@ -228,7 +236,7 @@ def test_map_classes_refit_a_temperature_per_class_and_export_the_bundled_hdmap_
     spec = dgan.Predictor(path).spec
     assert spec.map is not None
     assert spec.map.classes == ("cyclist", "pedestrian")  # contract 11: the engine draws their crops alone
-    before = (tmp_path / "eth.pt").read_bytes()
+    before = (tmp_path / "zara2.pt").read_bytes()
     with pytest.raises(ValueError, match="consensus"):
-        bundle.regate("eth", "pedestrian", root)
-    assert (tmp_path / "eth.pt").read_bytes() == before  # refused before anything is written
+        bundle.regate("zara2", "pedestrian", root)
+    assert (tmp_path / "zara2.pt").read_bytes() == before  # refused before anything is written

@@ -458,24 +458,31 @@ def replace_info(info: Any) -> Any:
     return replace(info, labels=labels, label_class=labels, scored=(True,) * 3, min_targets=1)
 
 
-@pytest.mark.slow
-def test_a_noisy_copy_s_agents_are_flagged_noisy(tmp_path: Path) -> None:
-    """``data.augment_noise``'s copies carry ``noisy`` (``train.distill_noisy``), through concatenation into the
-    batch; the dataset's own windows and the validation split do not."""
+def zara1_data(cache: Path, augment_noise: str = "", augment_speed: str = "") -> Any:
+    """The zara1 fold's data section, windows every 40 steps cached under ``cache``, with the copies asked for."""
     from training.config import DataConfig
-    from training.data.arrays import concat_windows
-    from training.data.batches import prepared_batch
-    from training.data.splits import set_windows, window_sets
 
-    d = DataConfig(
+    return DataConfig(
         root=str(shared_data("eth_ucy")),
         dataset="ethucy",
         scene="zara1",
         window_stride=40,
-        cache_dir=str(tmp_path),
+        cache_dir=str(cache),
         extra_pedestrians="",
-        augment_noise="0.3",
+        augment_noise=augment_noise,
+        augment_speed=augment_speed,
     )
+
+
+@pytest.mark.slow
+def test_a_noisy_copy_s_agents_are_flagged_noisy(tmp_path: Path) -> None:
+    """``data.augment_noise``'s copies carry ``noisy`` (``train.distill_noisy``), through concatenation into the
+    batch; the dataset's own windows and the validation split do not."""
+    from training.data.arrays import concat_windows
+    from training.data.batches import prepared_batch
+    from training.data.splits import set_windows, window_sets
+
+    d = zara1_data(tmp_path, augment_noise="0.3")
     spec = dgan.Predictor("zara1").spec
     own, copy = set_windows(d, window_sets(d, "train"), spec, False)
     assert own.noisy is None
@@ -491,3 +498,42 @@ def test_a_noisy_copy_s_agents_are_flagged_noisy(tmp_path: Path) -> None:
     # The copy is the same windows, agents and targets, with other observed histories.
     np.testing.assert_array_equal(copy.target, own.target)
     assert not np.allclose(copy.trajectory, own.trajectory)
+
+
+def test_speed_factors_are_parsed_and_checked() -> None:
+    from training.data.splits import augment_speeds
+
+    assert augment_speeds("") == []
+    assert augment_speeds(" 1.5, 2 ") == [1.5, 2.0]
+    for bad in ("1", "0.5", "5", "2,2", "fast"):
+        with pytest.raises(ValueError, match=r"data\.augment_speed"):
+            augment_speeds(bad)
+
+
+@pytest.mark.slow
+def test_a_faster_copy_moves_its_agents_faster_over_the_same_map(tmp_path: Path) -> None:
+    """``data.augment_speed``'s copy is the training split resampled onto longer steps: at its step k each agent is
+    where it was at step 2k, on the same scene map; the teacher teaches on it (not flagged noisy), and validation has no
+    copy."""
+    from training.data.datasets import sped_up
+    from training.data.recording import WindowSet
+    from training.data.splits import set_windows, window_sets
+
+    root = shared_data("eth_ucy")
+    d = zara1_data(tmp_path, augment_speed="2")
+    assert [p.speed for p in window_sets(d, "train")] == [1.0, 2.0]
+    assert [p.speed for p in window_sets(d, "val")] == [1.0]
+    rec = recordings("ethucy", root, "train", "zara1")[0]
+    fast = sped_up(WindowSet("ethucy", "train", "zara1", speed=2.0), root, 0.4, True)[0]
+    assert fast.map is rec.map
+    assert fast.name.endswith(":x2")
+    at = {(int(s), int(a)): xy for s, a, xy in zip(rec.step, rec.agent, rec.xy, strict=True)}
+    for s, a, xy in zip(fast.step[:500], fast.agent[:500], fast.xy[:500], strict=True):
+        np.testing.assert_allclose(xy, at[2 * int(s), int(a)])
+    spec = dgan.Predictor("zara1").spec
+    own, copy = set_windows(d, window_sets(d, "train"), spec, False)
+    assert copy.noisy is None
+    assert copy.num_windows > 0
+    assert copy.map is not None
+    assert own.map is not None
+    assert copy.map.shape[1:] == own.map.shape[1:]
