@@ -88,7 +88,7 @@ class DataConfig:
     # Faster copies of the training windows (function matching: a student distilled on them learns its teacher's
     # outputs for faster agents too): one copy per comma-separated factor s > 1, every recording resampled onto steps s
     # times as long (training.data.datasets.resampled) and read on the model's grid, so that every agent moves s times
-    # as fast over the same map; "" = none. Validation and test stay as recorded.
+    # as fast over the same map; "" = none; ETH/UCY only. Validation and test stay as recorded.
     augment_speed: str = ""
 
 

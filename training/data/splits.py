@@ -93,6 +93,8 @@ def window_sets(d: DataConfig, split: str) -> list[WindowSet]:
     held = replace(own, hold=d.augment_hold_m, hold_future=d.augment_hold_future)
     noisy += [held] if d.augment_hold_m > 0 else []
     fast = [replace(own, speed=s) for s in augment_speeds(d.augment_speed)]
+    if fast and d.dataset != "ethucy":  # resampling drops headings and the steps a window may end at
+        raise ValueError(f"data.augment_speed is for the ETH/UCY models, not {d.dataset!r}")
     extra = [WindowSet(s, "train", stride=d.extra_stride, pedestrians=True) for s in sources]
     return [own, *noisy, *fast, *extra, *joint]
 

@@ -508,6 +508,11 @@ def test_speed_factors_are_parsed_and_checked() -> None:
     for bad in ("1", "0.5", "5", "2,2", "fast"):
         with pytest.raises(ValueError, match=r"data\.augment_speed"):
             augment_speeds(bad)
+    from training.config import DataConfig
+    from training.data.splits import window_sets
+
+    with pytest.raises(ValueError, match=r"data\.augment_speed is for the ETH/UCY models, not 'hdmap'"):
+        window_sets(DataConfig(dataset="hdmap", augment_speed="2"), "train")
 
 
 @pytest.mark.slow
