@@ -134,10 +134,7 @@ def extra_sources(names: str, dataset: str, stride: int = 1) -> list[tuple[str, 
 
 def augment_sigmas(declared: str) -> list[float]:
     """The noise levels of ``data.augment_noise`` (comma-separated metres; "" = none)."""
-    try:
-        sigmas = [float(x) for x in declared.split(",") if x.strip()]
-    except ValueError:
-        raise ValueError(f"data.augment_noise must be comma-separated metres, got {declared!r}") from None
+    sigmas = comma_floats(declared, "data.augment_noise", "metres")
     if any(not (0.0 < x <= 5.0) for x in sigmas):
         raise ValueError(f"data.augment_noise must hold noise levels in (0, 5] metres, got {declared!r}")
     return sigmas
@@ -145,13 +142,18 @@ def augment_sigmas(declared: str) -> list[float]:
 
 def augment_speeds(declared: str) -> list[float]:
     """The speed-up factors of ``data.augment_speed`` (comma-separated, each in (1, 4]; "" = none)."""
-    try:
-        factors = [float(x) for x in declared.split(",") if x.strip()]
-    except ValueError:
-        raise ValueError(f"data.augment_speed must be comma-separated factors, got {declared!r}") from None
+    factors = comma_floats(declared, "data.augment_speed", "factors")
     if any(not (1.0 < x <= 4.0) for x in factors) or len(set(factors)) < len(factors):
         raise ValueError(f"data.augment_speed must hold distinct factors in (1, 4], got {declared!r}")
     return factors
+
+
+def comma_floats(declared: str, key: str, unit: str) -> list[float]:
+    """The numbers of the setting ``key`` (comma-separated ``unit``; "" = none); a ValueError naming it otherwise."""
+    try:
+        return [float(x) for x in declared.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"{key} must be comma-separated {unit}, got {declared!r}") from None
 
 
 def pedestrian_sources(names: str) -> list[str]:

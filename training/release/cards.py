@@ -11,7 +11,7 @@ from typing import Any
 import dgan
 from training.build import class_priors
 from training.calibrate import FOLDED
-from training.data.splits import pedestrian_sources
+from training.data.splits import augment_speeds, pedestrian_sources
 from training.modules.dgan import ModelConfig
 
 
@@ -93,10 +93,10 @@ def contract_line(cfg: dict[str, Any], metrics: dict[str, Any]) -> str:
             f"Trained also on a held copy of its windows: each agent that stays within {hold:g} m of one point held "
             f"there over {whole}, as a tracker holding a static object's box."
         )
-    if speeds := [x.strip() for x in str(d.get("augment_speed", "")).split(",") if x.strip()]:
+    if speeds := augment_speeds(str(d.get("augment_speed", ""))):
         parts.append(
-            f"Trained also on faster copies of its windows (every agent {' and '.join(speeds)} times as fast over the "
-            "same map, `data.augment_speed`), on which its teacher taught it too."
+            f"Trained also on faster copies of its windows (every agent {' and '.join(f'{x:g}' for x in speeds)} "
+            "times as fast over the same map, `data.augment_speed`), on which its teacher taught it too."
         )
     if t.get("map_dropout", 0.0) > 0 and d.get("use_map", True) and cfg["model"].get("use_map", True):
         parts.append(

@@ -501,16 +501,14 @@ def test_a_noisy_copy_s_agents_are_flagged_noisy(tmp_path: Path) -> None:
 
 
 def test_speed_factors_are_parsed_and_checked() -> None:
-    from training.data.splits import augment_speeds
+    from training.config import DataConfig
+    from training.data.splits import augment_speeds, window_sets
 
     assert augment_speeds("") == []
     assert augment_speeds(" 1.5, 2 ") == [1.5, 2.0]
     for bad in ("1", "0.5", "5", "2,2", "fast"):
         with pytest.raises(ValueError, match=r"data\.augment_speed"):
             augment_speeds(bad)
-    from training.config import DataConfig
-    from training.data.splits import window_sets
-
     with pytest.raises(ValueError, match=r"data\.augment_speed is for the ETH/UCY models, not 'hdmap'"):
         window_sets(DataConfig(dataset="hdmap", augment_speed="2"), "train")
 
