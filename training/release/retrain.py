@@ -142,11 +142,15 @@ ENSEMBLE_SEEDS = {"hdmap": (0,), "ethucy": (0, 1, 2, 3, 4), "apolloscape": (0, 1
 #: value per class in the model's class order), each chosen on validation once the model was trained
 #: (docs/results.md): `sdd`'s vehicles keep 0.75 of their top mode's refinement (contract 14; runs/RULES-2026-12-06o);
 #: `univ` and `hdmap`'s cyclists and pedestrians hold a still history at the prior (contract 15,
-#: ``training.still`` and then the engine on validation; runs/RULES-2026-12-06n and r); `sdd`, `apolloscape` and
+#: ``training.still`` and then the engine on validation; runs/RULES-2026-12-06n and r), `eth` and `zara2` too, their
+#: best radius taken for issue 25's still agent though under ``training.still``'s 2% bar and guarded by the engine on
+#: validation (runs/RULES-2026-12-07d; docs/results.md); `sdd`, `apolloscape` and
 #: `hdmap`'s pedestrians take the mean of their modes weighted by p^β as the top mode (contract 16,
 #: ``training.top_mean``; runs/RULES-2026-12-06p and q). A retrained model carries the same.
 DECODING = {
     "univ": {"still_radius": [0.05]},
+    "eth": {"still_radius": [0.05]},
+    "zara2": {"still_radius": [0.05]},
     "sdd": {"top_scale": [0.75, 1.0, 1.0], "top_mean_power": [2.0, 8.0, 4.0]},
     "apolloscape": {"top_mean_power": [0.0, 4.0, 2.0]},
     "hdmap": {"still_radius": [0.0, 0.02, 0.02], "top_mean_power": [0.0, 0.0, 2.0]},
