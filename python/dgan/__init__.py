@@ -15,6 +15,7 @@ from dgan.frame import Frame
 from dgan.maps import RasterMap, VectorMap
 from dgan.prediction import Prediction
 from dgan.predictor import Predictor, available_execution_providers
+from dgan.records import sample_track
 from dgan.scenes import scene_map
 from dgan.spec import (
     ClassPrior,
@@ -63,6 +64,7 @@ __all__ = [
     "plot",
     "preprocess",
     "read_kept",
+    "sample_track",
     "scene_map",
     "scene_raster",
     "scenes",

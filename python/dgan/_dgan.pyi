@@ -27,6 +27,7 @@ __all__ = [
     "kinematic_prior",
     "preprocess",
     "read_kept",
+    "sample_track",
     "scene_raster",
     "seal_model",
     "still_agents",
@@ -177,6 +178,13 @@ def frame_from_rows(
     duplicates: str = "error",
     upsample: bool = False,
 ) -> tuple[Frame, float | None, bool]: ...
+def sample_track(
+    times: npt.NDArray[np.float64],
+    xy: npt.NDArray[np.float64],
+    at: npt.NDArray[np.float64],
+    dt: float,
+    max_gap: float,
+) -> npt.NDArray[np.float64]: ...
 def preprocess(frame: Frame, spec_json: str, threads: int | None = None) -> dict[str, Any]: ...
 def validate_spec(json: str) -> str: ...
 def kinematic_prior(

@@ -213,30 +213,27 @@ PEDESTRIAN_SOURCES = ("sdd",)
 
 
 def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
-    """``rec`` (steps ``dt_from_s`` apart) on a grid of steps ``dt_to_s`` apart: each agent's position at a new step
-    is interpolated linearly between its rows at the two old steps around it, and the new step is left out where the
-    agent lacks either of them (no interpolation across gaps). Sizes are carried from the earlier of the two rows;
-    headings are not (a model at the new rate takes them from the motion)."""
+    """``rec`` (steps ``dt_from_s`` apart) on a grid of steps ``dt_to_s`` apart, each agent's track sampled by the
+    engine as a frame samples it (``dgan.sample_track``, with no gap wider than one old step bridged): at a new step
+    its position is interpolated linearly between its rows at the two old steps around it, and the step is left out
+    where it lacks either of them. Sizes are carried from the earlier of the two rows; headings are not (a model at
+    the new rate takes them from the motion)."""
     ratio = dt_to_s / dt_from_s
     steps, agents, xys, labels = [], [], [], []
     sizes: dict[str, list[Any]] = {k: [] for k in ("length", "width") if getattr(rec, k) is not None}
     for agent in np.unique(rec.agent):
         sel = np.flatnonzero(rec.agent == agent)
-        old, xy = rec.step[sel], rec.xy[sel]
+        old = rec.step[sel]
         new = np.arange(np.ceil(old[0] / ratio - 1e-9), np.floor(old[-1] / ratio + 1e-9) + 1).astype(np.int64)
-        t = new * ratio
-        lo = np.clip(np.searchsorted(old, np.floor(t + 1e-9), side="right") - 1, 0, len(old) - 1)
-        hi = np.clip(lo + 1, 0, len(old) - 1)
-        frac = t - old[lo]
-        exact = np.abs(frac) < 1e-9
-        ok = exact | ((old[hi] - old[lo] == 1) & (frac > 0) & (frac < 1))
-        w = np.where(exact, 0.0, frac)[:, None]
+        xy = dgan.sample_track(old * dt_from_s, rec.xy[sel], new * dt_to_s, dt=dt_to_s, max_gap=dt_from_s)
+        ok = np.isfinite(xy[:, 0])
         steps.append(new[ok])
         agents.append(np.full(int(ok.sum()), agent))
-        xys.append(((1 - w) * xy[lo] + w * xy[hi])[ok])
+        xys.append(xy[ok])
         labels.append(np.full(int(ok.sum()), rec.label[sel[0]]))
+        earlier = np.clip(np.searchsorted(old, np.floor(new[ok] * ratio + 1e-9), side="right") - 1, 0, len(old) - 1)
         for k, v in sizes.items():
-            v.append(getattr(rec, k)[sel][lo][ok])
+            v.append(getattr(rec, k)[sel][earlier])
     if not steps:
         return replace(rec, heading=None, length=None, width=None, now_steps=None)
     return Recording.sorted(

@@ -164,6 +164,45 @@ fn sample(track: &[Detection], t: f64, base: &TimeBase) -> Option<[f64; 2]> {
     ])
 }
 
+/// One track's positions at the times `at_s`, as a frame's grid samples them: a detection within `dt_s` ·
+/// [`TIME_TOLERANCE`] of a time is taken as it is, a time between two detections at most `max_gap_s` apart is
+/// interpolated linearly, any other is `None` (no gap wider than `max_gap_s` is bridged, nothing outside the track
+/// extrapolated). Training resamples whole recordings onto another rate with it, so its tracks are the ones a frame
+/// of [`frame_at`] would hold. `times_s` must increase strictly; times and positions must be finite.
+pub fn sample_track(
+    times_s: &[f64],
+    positions: &[[f64; 2]],
+    at_s: &[f64],
+    dt_s: f64,
+    max_gap_s: f64,
+) -> Result<Vec<Option<[f64; 2]>>> {
+    let base = TimeBase::with_max_gap(1, dt_s, max_gap_s)?;
+    if times_s.len() != positions.len() {
+        return Err(DganError::InvalidFrame(format!(
+            "a track needs one position per time, got {} times and {} positions",
+            times_s.len(),
+            positions.len()
+        )));
+    }
+    if let Some(i) = times_s.iter().position(|t| !t.is_finite()) {
+        return Err(DganError::InvalidFrame(format!("the track's time {i} is not finite: {}", times_s[i])));
+    }
+    if let Some(i) = positions.iter().position(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return Err(DganError::InvalidFrame(format!("the track's position {i} is not finite: {:?}", positions[i])));
+    }
+    if let Some(w) = times_s.windows(2).find(|w| w[0] >= w[1]) {
+        return Err(DganError::InvalidFrame(format!(
+            "a track's times must increase strictly; got {} then {}",
+            w[0], w[1]
+        )));
+    }
+    if let Some(t) = at_s.iter().find(|t| !t.is_finite()) {
+        return Err(DganError::InvalidFrame(format!("the times to sample at must be finite, got {t}")));
+    }
+    let track: Vec<Detection> = times_s.iter().zip(positions).map(|(&t, p)| Detection::at(t, p[0], p[1])).collect();
+    Ok(at_s.iter().map(|&t| sample(&track, t, &base)).collect())
+}
+
 /// The median spacing of the detections within the window of every agent, if any agent has two.
 fn median_spacing(tracks: &[(i64, &[Detection])]) -> Option<f64> {
     let mut gaps: Vec<f64> =
@@ -501,6 +540,55 @@ mod tests {
             assert!((f.positions()[[0, k, 0]] - 2.0 * t).abs() < 1e-9);
             assert!(f.mask()[[0, k]]);
         }
+    }
+
+    #[test]
+    fn a_track_is_sampled_as_a_frame_samples_it() {
+        let times = [0.0, 0.5, 1.0, 2.0];
+        let xy = [[0.0, 0.0], [1.0, 2.0], [2.0, 4.0], [4.0, 8.0]];
+        let at = [0.0, 0.25, 1.0, 1.5, 2.0, 2.5, -0.1];
+        let got = sample_track(&times, &xy, &at, 0.25, 0.5).unwrap();
+        assert_eq!(got[0], Some([0.0, 0.0]));
+        assert_eq!(got[1], Some([0.5, 1.0]));
+        assert_eq!(got[2], Some([2.0, 4.0]));
+        assert_eq!(got[3], None); // between 1.0 and 2.0: a gap of 1 s, wider than 0.5
+        assert_eq!(got[4], Some([4.0, 8.0]));
+        assert_eq!(&got[5..], &[None, None]); // nothing extrapolated
+                                              // The same positions as a frame of the same grid holds, its gap (step 1.25) left out too.
+        let times = [0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 1.75];
+        let xy: Vec<[f64; 2]> = times.iter().map(|&t| [3.0 * t, 1.0 - t * t]).collect();
+        let track: Vec<Detection> = times.iter().zip(&xy).map(|(&t, p)| Detection::at(t, p[0], p[1])).collect();
+        let base = TimeBase::new(8, 0.25).unwrap();
+        let f = frame_at(&[(1, &track)], 1.75, &base, AgentClass::Pedestrian).unwrap();
+        let grid: Vec<f64> = (0..8).map(|k| f64::from(k) * 0.25).collect();
+        let samples = sample_track(&times, &xy, &grid, 0.25, base.max_gap_s).unwrap();
+        for (k, p) in samples.iter().enumerate() {
+            assert_eq!(p.is_some(), f.mask()[[0, k]]);
+            if let Some(p) = p {
+                assert_eq!([f.positions()[[0, k, 0]], f.positions()[[0, k, 1]]], *p);
+            }
+        }
+        assert!(samples[5].is_none());
+    }
+
+    #[test]
+    fn a_bad_track_is_refused() {
+        let xy = [[0.0, 0.0], [1.0, 1.0]];
+        for (times, at) in [
+            (vec![1.0, 0.0], vec![0.5]),
+            (vec![0.0, 0.0], vec![0.5]),
+            (vec![0.0, f64::NAN], vec![0.5]),
+            (vec![0.0, 1.0], vec![f64::INFINITY]),
+            (vec![0.0], vec![0.5]),
+        ] {
+            let err = sample_track(&times, &xy, &at, 0.5, 1.0).unwrap_err();
+            assert!(matches!(err, DganError::InvalidFrame(_)), "{err}");
+        }
+        let err = sample_track(&[0.0, 1.0], &[[0.0, f64::NAN], [1.0, 1.0]], &[0.5], 0.5, 1.0).unwrap_err();
+        assert!(matches!(err, DganError::InvalidFrame(_)), "{err}");
+        assert!(matches!(sample_track(&[0.0, 1.0], &xy, &[0.5], 0.0, 1.0), Err(DganError::TimeBase(_))));
+        assert!(matches!(sample_track(&[0.0, 1.0], &xy, &[0.5], 0.5, -1.0), Err(DganError::TimeBase(_))));
+        assert_eq!(sample_track(&[], &[], &[0.5], 0.5, 1.0).unwrap(), vec![None]);
     }
 
     #[test]

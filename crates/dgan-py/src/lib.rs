@@ -34,6 +34,7 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<predictor::PyPrediction>()?;
     m.add_class::<history::PyTracker>()?;
     m.add_function(wrap_pyfunction!(history::frame_from_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(history::sample_track, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::preprocess, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::validate_spec, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::kinematic_prior, m)?)?;

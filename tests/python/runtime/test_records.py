@@ -136,3 +136,44 @@ def test_the_tracker_keeps_the_integer_1_and_the_string_1_apart(zara1: dgan.Pred
     frame = tracker.frame()
     assert frame.agent_ids.tolist() == [1, "1"]
     assert frame.mask.all()
+
+
+def test_a_track_is_sampled_as_a_frame_of_records_samples_it() -> None:
+    """``dgan.sample_track`` gives the positions ``Frame.from_records`` puts on its grid (one implementation, the
+    engine's), and NaN where the frame masks a step: across a gap wider than ``max_gap`` and outside the track."""
+    times = np.array([0.0, 0.4, 0.8, 1.2, 2.4, 2.8])  # 1.2 s without a row before 2.4
+    xy = np.stack([1.3 * times, 0.2 * times**2], axis=1)
+    grid = np.round(np.arange(0.0, 2.8 + 1e-9, 0.4), 9)
+    got = dgan.sample_track(times, xy, grid, dt=0.4)
+    rows = {"agent_id": np.zeros(len(times)), "time": times, "x": xy[:, 0], "y": xy[:, 1]}
+    frame = dgan.Frame.from_records(rows, t_obs=len(grid), dt=0.4)
+    seen = frame.mask[0]
+    np.testing.assert_array_equal(np.isfinite(got[:, 0]), seen)
+    np.testing.assert_allclose(got[seen], frame.positions[0][seen], atol=1e-12)
+    assert not seen[4:6].any()  # 1.6 and 2.0 s lie in the gap
+    half = dgan.sample_track(times, xy, [0.2, 3.0, -0.1], dt=0.4)
+    np.testing.assert_allclose(half[0], (xy[0] + xy[1]) / 2)
+    assert np.isnan(half[1:]).all()  # nothing extrapolated
+    wide = dgan.sample_track(times, xy, [2.0], dt=0.4, max_gap=1.2)
+    np.testing.assert_allclose(wide[0], xy[3] + (2.0 - 1.2) / 1.2 * (xy[4] - xy[3]))
+
+
+@pytest.mark.parametrize(
+    ("times", "xy", "at", "dt", "error", "match"),
+    [
+        ([0.4, 0.0], [[0, 0], [1, 1]], [0.2], 0.4, exc.InvalidFrameError, "increase strictly"),
+        ([0.0, 0.0], [[0, 0], [1, 1]], [0.2], 0.4, exc.InvalidFrameError, "increase strictly"),
+        ([0.0, np.nan], [[0, 0], [1, 1]], [0.2], 0.4, exc.InvalidFrameError, "time 1 is not finite"),
+        ([0.0, 0.4], [[0, 0], [1, np.inf]], [0.2], 0.4, exc.InvalidFrameError, "position 1 is not finite"),
+        ([0.0, 0.4], [[0, 0], [1, 1]], [np.nan], 0.4, exc.InvalidFrameError, "must be finite"),
+        ([0.0, 0.4, 0.8], [[0, 0], [1, 1]], [0.2], 0.4, exc.InvalidFrameError, "one position per time"),
+        ([0.0, 0.4], [[0, 0, 0], [1, 1, 1]], [0.2], 0.4, exc.InvalidFrameError, r"shape \(N, 2\)"),
+        ([0.0, 0.4], [[0, 0], [1, 1]], [0.2], 0.0, exc.TimeBaseError, "positive"),
+        ([0.0, 0.4], [[0, 0], [1, 1]], [0.2], np.nan, exc.TimeBaseError, "positive"),
+    ],
+)
+def test_a_bad_track_is_refused_with_a_typed_error(
+    times: list[float], xy: list[list[float]], at: list[float], dt: float, error: type[Exception], match: str
+) -> None:
+    with pytest.raises(error, match=match):
+        dgan.sample_track(times, xy, at, dt=dt)
