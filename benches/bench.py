@@ -30,7 +30,8 @@ Then one `predict` on 1 and 2 threads (also as multiples of the run's single-thr
 two side-by-side matmul loops set for evenly split work on this machine), the
 throughput of one `Predictor` shared by 1 and 2 Python threads, and of `predict_batch` against a loop of `predict`
 (on one thread, and with ``threads=2`` against the loop on one and on two threads).
-The machine's load average is printed before and after: run it on a quiet machine. This is a benchmark, not a test;
+The machine's load average is printed before and after, and the share of CPU time the hypervisor stole during the
+run (`benches/machine.py`; flagged over 2%): run it on a quiet machine. This is a benchmark, not a test;
 no figure here is asserted anywhere.
 """
 
@@ -57,6 +58,7 @@ sys.path.insert(0, str(ROOT))
 import dgan  # noqa: E402
 from benches import research  # noqa: E402
 from benches.flops import graph_flops, sgemm_gflops, two_core_slowdown  # noqa: E402
+from benches.machine import machine_report  # noqa: E402
 from dgan.contract import KEPT_INPUTS, KEPT_OUTPUT  # noqa: E402
 from dgan.demo import scene_for  # noqa: E402
 
@@ -536,32 +538,31 @@ def main() -> None:
         "CUDA, at --agents (e.g. 256 1024 4096)",
     )
     a = ap.parse_args()
+    with machine_report():
+        run(a)
+
+
+def run(a: argparse.Namespace) -> None:
+    """The tables ``a`` asks for (:func:`main`'s options)."""
     if a.cuda:
-        print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
         if not a.phases:
             cuda_table(a.models, a.agents, a.repeat, a.cuda)
         phase_table(a.models, a.agents, sorted({1, 2, 4, 8, os.cpu_count() or 1}), a.repeat, a.cuda, "cuda")
-        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
         return
     if a.flops:
         flops_table(a.models, a.agents)
         return
     if a.phases:
-        print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
         phase_table(a.models, a.agents, [1, 2], a.repeat, None, "cpu")
-        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
         return
-    print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())}; {os.cpu_count()} cores")
     print(f"single-thread sgemm (numpy float32, 1024²): {sgemm_gflops():.1f} GFLOP/s")
     matmul_ms = 2 * 512**3 / sgemm_gflops(512, 15) / 1e6
     print(f"single-thread 512³ float32 matmul: {matmul_ms:.2f} ms")
     if a.session_options:
         session_options_table(a.models, a.agents, a.repeat)
-        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
         return
     if a.latency:
         latency_table(a.models, a.repeat, matmul_ms)
-        print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
         return
     print(
         "\n| model | N | E | predict ms | preprocess ms | bare ORT ms | torch ms | torch pipeline ms | vs torch "
@@ -582,7 +583,6 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name in a.models:
         batch_throughput(name, 64, max(3, a.repeat // 5))
-    print(f"\nload average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 
 if __name__ == "__main__":
