@@ -53,5 +53,6 @@ def machine_report(stat: Path = PROC_STAT) -> Iterator[None]:
     share = stolen_share(start, cpu_times(stat))
     print(f"\nload average after: {load()}")
     if share is not None:
-        flag = " (over 2%: not a quiet machine; compare ratios within a row only)" if share > NOISY_STEAL else ""
+        flag = f" (over {NOISY_STEAL:.0%}: not a quiet machine; compare ratios within a row only)"
+        flag = flag if share > NOISY_STEAL else ""
         print(f"CPU time stolen by the hypervisor during the run: {100 * share:.1f}%{flag}")

@@ -281,10 +281,10 @@ def sample_track(
     """One agent's positions ``xy (N, 2)`` at ``times (N,)`` seconds, sampled at the times ``at (M,)`` as a frame of
     :meth:`dgan.Frame.from_records` on a grid ``dt`` seconds apart samples them (the engine's
     ``dgan_core::sample_track``): a row within ``dt``·10⁻⁶ s of a time is taken as it is, a time between two rows at
-    most ``max_gap`` seconds apart (default 1.5 · ``dt``) is interpolated linearly, and any other time is NaN (no wider
-    gap bridged, nothing extrapolated). Returns ``(M, 2)`` float64. ``times`` must increase strictly; times, positions
-    and ``at`` must be finite (:class:`dgan.exceptions.InvalidFrameError`); ``dt`` must be positive and ``max_gap``
-    non-negative (:class:`dgan.exceptions.TimeBaseError`).
+    most ``max_gap`` seconds apart (by default a frame's, 1.5 · ``dt``) is interpolated linearly, and any other time
+    is NaN (no wider gap bridged, nothing extrapolated). Returns ``(M, 2)`` float64. ``times`` must increase strictly;
+    times, positions and ``at`` must be finite (:class:`dgan.exceptions.InvalidFrameError`); ``dt`` must be positive
+    and ``max_gap`` non-negative (:class:`dgan.exceptions.TimeBaseError`).
 
     >>> import dgan
     >>> dgan.sample_track([0.0, 1.0], [[0.0, 0.0], [2.0, 4.0]], [0.5, 2.0], dt=0.5, max_gap=1.0).tolist()
@@ -294,4 +294,4 @@ def sample_track(
     p = np.ascontiguousarray(xy, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 2:
         raise InvalidFrameError(f"xy must have shape (N, 2), got {p.shape}")
-    return _dgan.sample_track(t, p, a, float(dt), 1.5 * float(dt) if max_gap is None else float(max_gap))
+    return _dgan.sample_track(t, p, a, float(dt), None if max_gap is None else float(max_gap))

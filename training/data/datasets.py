@@ -231,9 +231,10 @@ def resampled(rec: Recording, dt_from_s: float, dt_to_s: float) -> Recording:
         agents.append(np.full(int(ok.sum()), agent))
         xys.append(xy[ok])
         labels.append(np.full(int(ok.sum()), rec.label[sel[0]]))
-        earlier = np.clip(np.searchsorted(old, np.floor(new[ok] * ratio + 1e-9), side="right") - 1, 0, len(old) - 1)
-        for k, v in sizes.items():
-            v.append(getattr(rec, k)[sel][earlier])
+        if sizes:
+            earlier = np.clip(np.searchsorted(old, np.floor(new[ok] * ratio + 1e-9), side="right") - 1, 0, len(old) - 1)
+            for k, v in sizes.items():
+                v.append(getattr(rec, k)[sel][earlier])
     if not steps:
         return replace(rec, heading=None, length=None, width=None, now_steps=None)
     return Recording.sorted(

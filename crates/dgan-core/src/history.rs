@@ -164,19 +164,17 @@ fn sample(track: &[Detection], t: f64, base: &TimeBase) -> Option<[f64; 2]> {
     ])
 }
 
-/// One track's positions at the times `at_s`, as a frame's grid samples them: a detection within `dt_s` ·
-/// [`TIME_TOLERANCE`] of a time is taken as it is, a time between two detections at most `max_gap_s` apart is
-/// interpolated linearly, any other is `None` (no gap wider than `max_gap_s` is bridged, nothing outside the track
-/// extrapolated). Training resamples whole recordings onto another rate with it, so its tracks are the ones a frame
-/// of [`frame_at`] would hold. `times_s` must increase strictly; times and positions must be finite.
+/// One track's positions at the times `at_s`, as a frame on `base` samples them: a detection within `base.dt_s` ·
+/// [`TIME_TOLERANCE`] of a time is taken as it is, a time between two detections at most `base.max_gap_s` apart is
+/// interpolated linearly, any other is `None` (no wider gap is bridged, nothing outside the track extrapolated).
+/// Training resamples whole recordings onto another rate with it, so its tracks are the ones a frame of [`frame_at`]
+/// would hold. `times_s` must increase strictly; times and positions must be finite.
 pub fn sample_track(
     times_s: &[f64],
     positions: &[[f64; 2]],
     at_s: &[f64],
-    dt_s: f64,
-    max_gap_s: f64,
+    base: &TimeBase,
 ) -> Result<Vec<Option<[f64; 2]>>> {
-    let base = TimeBase::with_max_gap(1, dt_s, max_gap_s)?;
     if times_s.len() != positions.len() {
         return Err(DganError::InvalidFrame(format!(
             "a track needs one position per time, got {} times and {} positions",
@@ -200,7 +198,7 @@ pub fn sample_track(
         return Err(DganError::InvalidFrame(format!("the times to sample at must be finite, got {t}")));
     }
     let track: Vec<Detection> = times_s.iter().zip(positions).map(|(&t, p)| Detection::at(t, p[0], p[1])).collect();
-    Ok(at_s.iter().map(|&t| sample(&track, t, &base)).collect())
+    Ok(at_s.iter().map(|&t| sample(&track, t, base)).collect())
 }
 
 /// The median spacing of the detections within the window of every agent, if any agent has two.
@@ -547,21 +545,22 @@ mod tests {
         let times = [0.0, 0.5, 1.0, 2.0];
         let xy = [[0.0, 0.0], [1.0, 2.0], [2.0, 4.0], [4.0, 8.0]];
         let at = [0.0, 0.25, 1.0, 1.5, 2.0, 2.5, -0.1];
-        let got = sample_track(&times, &xy, &at, 0.25, 0.5).unwrap();
+        let got = sample_track(&times, &xy, &at, &TimeBase::with_max_gap(1, 0.25, 0.5).unwrap()).unwrap();
         assert_eq!(got[0], Some([0.0, 0.0]));
         assert_eq!(got[1], Some([0.5, 1.0]));
         assert_eq!(got[2], Some([2.0, 4.0]));
         assert_eq!(got[3], None); // between 1.0 and 2.0: a gap of 1 s, wider than 0.5
         assert_eq!(got[4], Some([4.0, 8.0]));
         assert_eq!(&got[5..], &[None, None]); // nothing extrapolated
-                                              // The same positions as a frame of the same grid holds, its gap (step 1.25) left out too.
+
+        // The same positions as a frame of the same grid holds, its gap (step 1.25) left out too.
         let times = [0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 1.75];
         let xy: Vec<[f64; 2]> = times.iter().map(|&t| [3.0 * t, 1.0 - t * t]).collect();
         let track: Vec<Detection> = times.iter().zip(&xy).map(|(&t, p)| Detection::at(t, p[0], p[1])).collect();
         let base = TimeBase::new(8, 0.25).unwrap();
         let f = frame_at(&[(1, &track)], 1.75, &base, AgentClass::Pedestrian).unwrap();
         let grid: Vec<f64> = (0..8).map(|k| f64::from(k) * 0.25).collect();
-        let samples = sample_track(&times, &xy, &grid, 0.25, base.max_gap_s).unwrap();
+        let samples = sample_track(&times, &xy, &grid, &base).unwrap();
         for (k, p) in samples.iter().enumerate() {
             assert_eq!(p.is_some(), f.mask()[[0, k]]);
             if let Some(p) = p {
@@ -574,6 +573,7 @@ mod tests {
     #[test]
     fn a_bad_track_is_refused() {
         let xy = [[0.0, 0.0], [1.0, 1.0]];
+        let base = TimeBase::with_max_gap(1, 0.5, 1.0).unwrap();
         for (times, at) in [
             (vec![1.0, 0.0], vec![0.5]),
             (vec![0.0, 0.0], vec![0.5]),
@@ -581,14 +581,12 @@ mod tests {
             (vec![0.0, 1.0], vec![f64::INFINITY]),
             (vec![0.0], vec![0.5]),
         ] {
-            let err = sample_track(&times, &xy, &at, 0.5, 1.0).unwrap_err();
+            let err = sample_track(&times, &xy, &at, &base).unwrap_err();
             assert!(matches!(err, DganError::InvalidFrame(_)), "{err}");
         }
-        let err = sample_track(&[0.0, 1.0], &[[0.0, f64::NAN], [1.0, 1.0]], &[0.5], 0.5, 1.0).unwrap_err();
+        let err = sample_track(&[0.0, 1.0], &[[0.0, f64::NAN], [1.0, 1.0]], &[0.5], &base).unwrap_err();
         assert!(matches!(err, DganError::InvalidFrame(_)), "{err}");
-        assert!(matches!(sample_track(&[0.0, 1.0], &xy, &[0.5], 0.0, 1.0), Err(DganError::TimeBase(_))));
-        assert!(matches!(sample_track(&[0.0, 1.0], &xy, &[0.5], 0.5, -1.0), Err(DganError::TimeBase(_))));
-        assert_eq!(sample_track(&[], &[], &[0.5], 0.5, 1.0).unwrap(), vec![None]);
+        assert_eq!(sample_track(&[], &[], &[0.5], &base).unwrap(), vec![None]);
     }
 
     #[test]

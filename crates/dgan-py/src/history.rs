@@ -143,23 +143,26 @@ pub fn frame_from_rows<'py>(
 }
 
 /// One track's positions `xy (N, 2)` at `times (N,)` seconds sampled at `at (M,)` seconds on a grid `dt` apart
-/// (`dgan_core::sample_track`: gaps wider than `max_gap` not bridged); `(M, 2)` float64, NaN where nothing is sampled.
+/// (`dgan_core::sample_track`: gaps wider than `max_gap`, by default the grid's, not bridged); `(M, 2)` float64, NaN
+/// where nothing is sampled.
 #[pyfunction]
+#[pyo3(signature = (times, xy, at, dt, max_gap=None))]
 pub fn sample_track<'py>(
     py: Python<'py>,
     times: PyReadonlyArray1<'py, f64>,
     xy: PyReadonlyArray2<'py, f64>,
     at: PyReadonlyArray1<'py, f64>,
     dt: f64,
-    max_gap: f64,
+    max_gap: Option<f64>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let base = time_base(1, dt, max_gap)?;
     let xy = xy.as_array();
     if xy.ncols() != 2 {
         return Err(invalid_frame(format!("xy must have shape (N, 2), got {:?}", xy.shape())));
     }
     let positions: Vec<[f64; 2]> = xy.rows().into_iter().map(|r| [r[0], r[1]]).collect();
     let (times, at) = (times.as_array().to_vec(), at.as_array().to_vec());
-    let sampled = py.detach(|| dgan_core::sample_track(&times, &positions, &at, dt, max_gap)).py()?;
+    let sampled = py.detach(|| dgan_core::sample_track(&times, &positions, &at, &base)).py()?;
     let mut out = Array2::<f64>::from_elem((sampled.len(), 2), f64::NAN);
     for (mut row, p) in out.rows_mut().into_iter().zip(&sampled) {
         if let Some(p) = p {

@@ -177,3 +177,8 @@ def test_a_bad_track_is_refused_with_a_typed_error(
 ) -> None:
     with pytest.raises(error, match=match):
         dgan.sample_track(times, xy, at, dt=dt)
+
+
+def test_a_negative_gap_is_a_time_base_error() -> None:
+    with pytest.raises(exc.TimeBaseError, match="max_gap must be a non-negative"):
+        dgan.sample_track([0.0, 0.4], [[0, 0], [1, 1]], [0.2], dt=0.4, max_gap=-1.0)
