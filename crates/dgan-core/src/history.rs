@@ -611,6 +611,7 @@ mod tests {
         assert!(matches!(frame_at(&[(b, &tb)], 0.4, &base, AgentClass::Pedestrian), Err(DganError::TimeBase(_))));
         assert!(TimeBase::new(4, 0.0).is_err());
         assert!(TimeBase::new(0, 0.4).is_err());
+        assert!(matches!(TimeBase::with_max_gap(4, 0.4, -1.0), Err(DganError::TimeBase(_))));
     }
 
     #[test]
