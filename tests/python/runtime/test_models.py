@@ -151,3 +151,55 @@ def test_a_perfectly_still_lone_agent_stays_put_on_its_map(name: str, klass: str
         pytest.skip("no map in the model's demo scene")
     seen = [frame.positions[i, -1] for i in range(len(frame)) if frame.mask[i, -1]]
     assert max(moved(predictor, klass, at, frame.map) for at in seen) <= 0.05
+
+
+#: A georeferenced origin (UTM-like metres): the whole scene, agents and map, moved this far from its own coordinates.
+FAR = np.array([512345.678, 4123456.789])
+
+
+def grid_pitch_m(spec: dgan.InputSpec) -> float | None:
+    """The pitch of the grid fixed in the world on which a model's map inputs are computed (docs/model-contract.md):
+    a kept-features model's feature pitch (``stride`` pixels; its tiles' halo makes their features independent of
+    where a tile ends), a tiled map's tile side (128 pixels of half the crop's: the tiles are drawn clipped to their
+    own bounds); None for a crop drawn per agent, in the agent's own frame."""
+    m = spec.map
+    if m is None or (m.scene is None and m.render != "tiles"):
+        return None
+    return m.scene.stride * m.resolution_m if m.scene is not None else 128 * m.resolution_m / 2
+
+
+def moved_scene(frame: dgan.Frame, shift: npt.NDArray[np.float64]) -> dgan.Frame:
+    """``frame`` and its map, every world coordinate moved by ``shift``."""
+    world_map: dgan.RasterMap | dgan.VectorMap | None = None
+    if isinstance(frame.map, dgan.VectorMap):
+        world_map = dgan.VectorMap([(kind, points + shift) for kind, points in frame.map.elements()])
+    elif isinstance(frame.map, dgan.RasterMap):
+        back = np.array([[1.0, 0.0, -shift[0]], [0.0, 1.0, -shift[1]], [0.0, 0.0, 1.0]])
+        world_map = dgan.RasterMap(frame.map.image, frame.map.world_to_pixel @ back)
+    return dgan.Frame(
+        frame.positions + shift,
+        mask=frame.mask,
+        classes=frame.classes,
+        ids=frame.ids,
+        headings=frame.headings,
+        velocities=frame.velocities,
+        lengths=frame.lengths,
+        widths=frame.widths,
+        map=world_map,
+        dt=frame.dt,
+    )
+
+
+@pytest.mark.parametrize("name", dgan.models.list())
+def test_a_scene_far_from_the_origin_is_predicted_as_near_it(name: str) -> None:
+    """Georeferenced coordinates (millions of metres) lose nothing: every bundled model predicts its demo scene, map
+    included, moved 4,000 km away as it predicts it where it is. A model whose map is read on a grid fixed in the
+    world is moved by a whole number of that grid's pitch: by anything else its inputs are the map drawn at another
+    phase of the grid (docs/model-contract.md, *The map's grid and the world's origin*)."""
+    predictor = dgan.Predictor(name)
+    frame = dgan.demo.scene_for(predictor.spec).frame
+    pitch = grid_pitch_m(predictor.spec)
+    shift = FAR if pitch is None else np.round(FAR / pitch) * pitch
+    here, far = predictor.predict(frame), dgan.Predictor(name).predict(moved_scene(frame, shift))
+    np.testing.assert_allclose(far.trajectories - shift, here.trajectories, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(far.probabilities, here.probabilities, rtol=0, atol=1e-5)
