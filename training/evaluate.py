@@ -3,6 +3,7 @@ constant-velocity baseline on the very same windows and agents.
 
     python -m training.evaluate MODEL.onnx --dataset ethucy --scene zara1 [--data-root ../shared/data]
     python -m training.evaluate MODEL.onnx --dataset sdd
+    python -m training.evaluate MODEL.onnx --dataset sdd --split val --origin 500 300   # under another origin
 
 Windows are built exactly as for training (``training.data.windows.iter_windows``); the targets are the agents of a
 scored label present at all T_obs + T_f steps, standing ones too. Errors are in the dataset's unit (metres; pixels for
@@ -26,6 +27,7 @@ import torch
 import dgan
 from training import metrics
 from training.data.datasets import DATASETS, recordings
+from training.data.recording import moved
 from training.data.windows import iter_windows, noisy_window
 from training.losses import Calibration
 
@@ -56,15 +58,20 @@ def scored_windows(
     fold: str = "",
     with_map: bool = True,
     noise: tuple[float, float] = (0.0, 0.0),
+    origin: tuple[float, float] = (0.0, 0.0),
 ) -> Iterator[Scored]:
     """Every window of a split, built as for training (``iter_windows``), with its targets' truth and constant
     velocity; ``with_map=False`` (or a spec without a map) gives frames without their map. ``noise = (sigma_m,
     drop)`` corrupts the observed histories as a tracker would (:func:`training.data.augment.tracker_noise`, seeded per
-    split): the model and constant velocity both see the noisy history, the truth stays as recorded."""
+    split): the model and constant velocity both see the noisy history, the truth stays as recorded. ``origin``: every
+    recording and its map moved by that many metres (:func:`training.data.recording.moved`), as if their coordinates
+    had another origin."""
     info = DATASETS[dataset]
     use_map = with_map and spec.map is not None
     rng = np.random.default_rng(0)
     for rec in recordings(dataset, root, split, fold, with_map=use_map):
+        if origin != (0.0, 0.0):
+            rec = moved(rec, origin)
         for w in iter_windows(rec, info, spec.t_obs, spec.t_f):
             moving = w.moving()
             if noise != (0.0, 0.0):
@@ -133,11 +140,13 @@ def evaluate(
     with_map: bool = True,
     split: str = "test",
     noise: tuple[float, float] = (0.0, 0.0),
+    origin: tuple[float, float] = (0.0, 0.0),
 ) -> dict[str, Any]:
     """Per-agent metrics of the model and of constant velocity on a split (``"test"``; ``"val"`` for model
     selection), averaged overall (flat keys), per
     class (``by_class``) and per label (``by_label``), with window and agent counts. ``with_map=False`` runs a map
-    model on frames without their map (a model whose map is not optional then raises ``MapRequiredError``)."""
+    model on frames without their map (a model whose map is not optional then raises ``MapRequiredError``);
+    ``noise`` and ``origin`` as :func:`scored_windows`."""
     info = DATASETS[dataset]
     spec = predictor.spec
     if (spec.t_obs, spec.t_f) != (info.t_obs, info.t_f) or abs(spec.dt_s - info.dt_s) > 1e-9:
@@ -151,7 +160,7 @@ def evaluate(
     windows = 0
     model_classes = list(predictor.classes)
     use_map = with_map and spec.map is not None
-    for sw in scored_windows(spec, dataset, data_root, split, fold, with_map, noise):
+    for sw in scored_windows(spec, dataset, data_root, split, fold, with_map, noise, origin):
         windows += 1
         pred = predictor.predict(sw.frame)
         sub = rows_of(pred, sw.target, sw.unit)
@@ -275,10 +284,19 @@ def main() -> None:
     ap.add_argument("--data-root", default="../shared/data")
     ap.add_argument("--json", type=Path, help="also write the metrics here")
     ap.add_argument("--split", default="test", choices=["val", "test"], help="val: for choosing models and settings")
+    ap.add_argument(
+        "--origin",
+        nargs=2,
+        type=float,
+        default=(0.0, 0.0),
+        metavar=("X", "Y"),
+        help="move every recording and its map by X, Y metres (the same data under another origin)",
+    )
     a = ap.parse_args()
     if a.dataset == "ethucy" and not a.scene:
         ap.error("--scene is required for ethucy")
-    res = evaluate(dgan.Predictor(a.model), a.dataset, Path(a.data_root).expanduser(), a.scene, split=a.split)
+    root, origin = Path(a.data_root).expanduser(), (a.origin[0], a.origin[1])
+    res = evaluate(dgan.Predictor(a.model), a.dataset, root, a.scene, split=a.split, origin=origin)
     if a.json:
         a.json.write_text(json.dumps(res, indent=2))
     print(json.dumps({k: v for k, v in res.items() if k != "calibration"}, indent=2))

@@ -5,7 +5,7 @@ whose time base, protocol and labels are its :class:`DatasetInfo`; and what a tr
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +65,22 @@ class Recording:
             if v is not None:
                 setattr(rec, k, v[order])
         return rec
+
+
+def moved(rec: Recording, shift_m: npt.ArrayLike) -> Recording:
+    """``rec`` with every world coordinate, its rows' and its map's, moved by ``shift_m`` (2,) metres: the same
+    recording under another origin (``training.evaluate --origin``; docs/model-contract.md, *The map's grid and the
+    world's origin*)."""
+    shift = np.asarray(shift_m, dtype=np.float64)
+    if shift.shape != (2,) or not np.isfinite(shift).all():
+        raise ValueError(f"the shift must be two finite metres, got {shift_m!r}")
+    world_map: dgan.RasterMap | dgan.VectorMap | None = rec.map
+    if isinstance(rec.map, dgan.VectorMap):
+        world_map = dgan.VectorMap([(kind, points + shift) for kind, points in rec.map.elements()])
+    elif isinstance(rec.map, dgan.RasterMap):  # pixel = H (world − shift)
+        back = np.array([[1.0, 0.0, -shift[0]], [0.0, 1.0, -shift[1]], [0.0, 0.0, 1.0]])
+        world_map = dgan.RasterMap(rec.map.image, rec.map.world_to_pixel @ back)
+    return replace(rec, xy=rec.xy + shift, map=world_map)
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,7 @@ recordings and on the real shared data."""
 from __future__ import annotations
 
 import pickle
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -540,3 +541,40 @@ def test_a_faster_copy_moves_its_agents_faster_over_the_same_map(tmp_path: Path)
     assert copy.map is not None
     assert own.map is not None
     assert copy.map.shape[1:] == own.map.shape[1:]
+
+
+def test_a_recording_moved_to_another_origin_keeps_its_map_under_its_agents() -> None:
+    from training.data.recording import moved
+
+    shift = np.array([512345.678, 4123456.789])
+    rec = toy([(0, 0, 0), (1, 0, 0)])
+    lines = dgan.VectorMap([("lane_centerline", [[0.0, 0.0], [40.0, 4.0]])])
+    far = moved(replace(rec, map=lines), shift)
+    np.testing.assert_array_equal(far.xy, rec.xy + shift)
+    assert isinstance(far.map, dgan.VectorMap)
+    ((kind, points),) = far.map.elements()
+    assert kind == "lane_centerline"
+    np.testing.assert_array_equal(points, np.array([[0.0, 0.0], [40.0, 4.0]]) + shift)
+    h = np.array([[2.0, 0.1, 5.0], [-0.1, 2.0, 7.0], [1e-4, 0.0, 1.0]])  # a projective world → pixel map
+    image = dgan.RasterMap(np.zeros((4, 4, 3), np.uint8), h)
+    far = moved(replace(rec, map=image), shift)
+    assert isinstance(far.map, dgan.RasterMap)
+    here = h @ np.c_[rec.xy, np.ones(len(rec.xy))].T
+    there = far.map.world_to_pixel @ np.c_[far.xy, np.ones(len(far.xy))].T
+    np.testing.assert_allclose(there[:2] / there[2], here[:2] / here[2], rtol=0, atol=1e-6)
+    assert moved(rec, shift).map is None
+    with pytest.raises(ValueError, match="two finite metres"):
+        moved(rec, [1.0, np.nan])
+
+
+@pytest.mark.slow
+def test_a_model_without_a_map_is_evaluated_alike_under_any_origin() -> None:
+    """``training.evaluate``'s ``origin``: ApolloScape's validation recordings moved 4,000 km score as they are."""
+    from training.evaluate import evaluate
+
+    root, predictor = shared_data("apolloscape_trajectory"), dgan.Predictor("apolloscape")
+    here = evaluate(predictor, "apolloscape", root, split="val")
+    far = evaluate(predictor, "apolloscape", root, split="val", origin=(512345.678, 4123456.789))
+    assert far["agents"] == here["agents"] > 1000
+    for key in ("ade", "fde", "min_ade20", "cv_ade", "cv_fde"):
+        assert far[key] == pytest.approx(here[key], abs=1e-6), key
