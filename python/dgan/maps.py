@@ -16,6 +16,14 @@ from dgan.contract import MAP_ELEMENT_KINDS
 from dgan.exceptions import InvalidMapError
 
 
+def _shift_m(shift_m: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """``shift_m`` as a finite ``(2,)`` vector of metres, or :class:`InvalidMapError`."""
+    shift: npt.NDArray[np.float64] = checked_array("shift_m", shift_m, np.float64, InvalidMapError, required=True)
+    if shift.shape != (2,) or not np.isfinite(shift).all():
+        raise InvalidMapError(f"shift_m must be two finite metres (x, y), got {shift.tolist()}")
+    return shift
+
+
 class RasterMap:
     """An RGB image of the scene and its 3×3 homography from world metres to pixels.
 
@@ -63,6 +71,18 @@ class RasterMap:
         assert h is not None
         return h
 
+    def moved(self, shift_m: npt.ArrayLike) -> RasterMap:
+        """The same image with every world coordinate moved by ``shift_m`` ``(x, y)`` metres: what lay at world point
+        ``p`` lies at ``p + shift_m`` (the same scene under another origin). The new map keeps no features.
+
+        Raises:
+            InvalidMapError: ``shift_m`` is not two finite numbers.
+        """
+        dx, dy = _shift_m(shift_m)
+        return RasterMap(
+            self.image, self.world_to_pixel @ np.array([[1.0, 0.0, -dx], [0.0, 1.0, -dy], [0.0, 0.0, 1.0]])
+        )
+
     @property
     def features_kept(self) -> int:
         """How many tiles of scene models' features are kept with this map (contract 13: computed once per map and
@@ -104,6 +124,16 @@ class VectorMap:
     def elements(self) -> list[tuple[str, npt.NDArray[np.float64]]]:
         """The elements, in drawing order."""
         return self._map.elements()
+
+    def moved(self, shift_m: npt.ArrayLike) -> VectorMap:
+        """The same elements with every point moved by ``shift_m`` ``(x, y)`` metres (the same scene under another
+        origin). The new map keeps no tiles or features.
+
+        Raises:
+            InvalidMapError: ``shift_m`` is not two finite numbers.
+        """
+        shift = _shift_m(shift_m)
+        return VectorMap([(kind, points + shift) for kind, points in self.elements()])
 
     def to_json(self, path: str | os.PathLike[str]) -> None:
         """Writes the map as dgan's vector-map JSON (``{"format": "dgan.vector_map", "version": 1, "elements":

@@ -74,13 +74,7 @@ def moved(rec: Recording, shift_m: npt.ArrayLike) -> Recording:
     shift = np.asarray(shift_m, dtype=np.float64)
     if shift.shape != (2,) or not np.isfinite(shift).all():
         raise ValueError(f"the shift must be two finite metres, got {shift_m!r}")
-    world_map: dgan.RasterMap | dgan.VectorMap | None = rec.map
-    if isinstance(rec.map, dgan.VectorMap):
-        world_map = dgan.VectorMap([(kind, points + shift) for kind, points in rec.map.elements()])
-    elif isinstance(rec.map, dgan.RasterMap):  # pixel = H (world − shift)
-        back = np.array([[1.0, 0.0, -shift[0]], [0.0, 1.0, -shift[1]], [0.0, 0.0, 1.0]])
-        world_map = dgan.RasterMap(rec.map.image, rec.map.world_to_pixel @ back)
-    return replace(rec, xy=rec.xy + shift, map=world_map)
+    return replace(rec, xy=rec.xy + shift, map=None if rec.map is None else rec.map.moved(shift))
 
 
 @dataclass(frozen=True)

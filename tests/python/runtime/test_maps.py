@@ -35,6 +35,28 @@ def test_raster_map_errors(tmp_path: Path) -> None:
         dgan.RasterMap.from_file(bad, np.eye(3))
 
 
+def test_maps_moved_to_another_origin_keep_their_content_under_the_moved_points() -> None:
+    shift = np.array([512345.678, 4123456.789])
+    lines = dgan.VectorMap([("lane_centerline", [[0.0, 0.0], [40.0, 4.0]]), ("crosswalk", [[0, 0], [1, 0], [1, 1]])])
+    far = lines.moved(shift)
+    assert [k for k, _ in far.elements()] == [k for k, _ in lines.elements()]
+    for (_, there), (_, here) in zip(far.elements(), lines.elements(), strict=True):
+        np.testing.assert_array_equal(there, here + shift)
+    h = np.array([[2.0, 0.1, 5.0], [-0.1, 2.0, 7.0], [1e-4, 0.0, 1.0]])  # a projective world → pixel map
+    image = dgan.RasterMap(np.arange(48, dtype=np.uint8).reshape(4, 4, 3), h)
+    moved = image.moved(shift)
+    np.testing.assert_array_equal(moved.image, image.image)
+    points = np.array([[0.0, 0.0], [1.5, -2.0], [30.0, 12.0]])
+    here = h @ np.c_[points, np.ones(3)].T
+    there = moved.world_to_pixel @ np.c_[points + shift, np.ones(3)].T
+    np.testing.assert_allclose(there[:2] / there[2], here[:2] / here[2], rtol=0, atol=1e-6)
+    for bad in ([1.0, np.nan], [1.0, 2.0, 3.0], [[1.0, 2.0]], "east"):
+        with pytest.raises(exc.InvalidMapError, match="shift_m"):
+            lines.moved(bad)
+        with pytest.raises(exc.InvalidMapError, match="shift_m"):
+            image.moved(bad)
+
+
 def test_vector_map_kinds_and_errors() -> None:
     m = dgan.VectorMap([("lane_centerline", [[0, 0], [1, 0]]), ("crosswalk", [[0, 0], [1, 0], [1, 1]])])
     assert len(m) == 2

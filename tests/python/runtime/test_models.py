@@ -170,12 +170,6 @@ def grid_pitch_m(spec: dgan.InputSpec) -> float | None:
 
 def moved_scene(frame: dgan.Frame, shift: npt.NDArray[np.float64]) -> dgan.Frame:
     """``frame`` and its map, every world coordinate moved by ``shift``."""
-    world_map: dgan.RasterMap | dgan.VectorMap | None = None
-    if isinstance(frame.map, dgan.VectorMap):
-        world_map = dgan.VectorMap([(kind, points + shift) for kind, points in frame.map.elements()])
-    elif isinstance(frame.map, dgan.RasterMap):
-        back = np.array([[1.0, 0.0, -shift[0]], [0.0, 1.0, -shift[1]], [0.0, 0.0, 1.0]])
-        world_map = dgan.RasterMap(frame.map.image, frame.map.world_to_pixel @ back)
     return dgan.Frame(
         frame.positions + shift,
         mask=frame.mask,
@@ -185,7 +179,7 @@ def moved_scene(frame: dgan.Frame, shift: npt.NDArray[np.float64]) -> dgan.Frame
         velocities=frame.velocities,
         lengths=frame.lengths,
         widths=frame.widths,
-        map=world_map,
+        map=None if frame.map is None else frame.map.moved(shift),
         dt=frame.dt,
     )
 

@@ -543,26 +543,16 @@ def test_a_faster_copy_moves_its_agents_faster_over_the_same_map(tmp_path: Path)
     assert copy.map.shape[1:] == own.map.shape[1:]
 
 
-def test_a_recording_moved_to_another_origin_keeps_its_map_under_its_agents() -> None:
+def test_a_recording_moved_to_another_origin_moves_its_map_with_it() -> None:
     from training.data.recording import moved
 
     shift = np.array([512345.678, 4123456.789])
-    rec = toy([(0, 0, 0), (1, 0, 0)])
-    lines = dgan.VectorMap([("lane_centerline", [[0.0, 0.0], [40.0, 4.0]])])
-    far = moved(replace(rec, map=lines), shift)
+    rec = replace(toy([(0, 0, 0), (1, 0, 0)]), map=dgan.VectorMap([("lane_centerline", [[0.0, 0.0], [40.0, 4.0]])]))
+    far = moved(rec, shift)
     np.testing.assert_array_equal(far.xy, rec.xy + shift)
     assert isinstance(far.map, dgan.VectorMap)
-    ((kind, points),) = far.map.elements()
-    assert kind == "lane_centerline"
-    np.testing.assert_array_equal(points, np.array([[0.0, 0.0], [40.0, 4.0]]) + shift)
-    h = np.array([[2.0, 0.1, 5.0], [-0.1, 2.0, 7.0], [1e-4, 0.0, 1.0]])  # a projective world → pixel map
-    image = dgan.RasterMap(np.zeros((4, 4, 3), np.uint8), h)
-    far = moved(replace(rec, map=image), shift)
-    assert isinstance(far.map, dgan.RasterMap)
-    here = h @ np.c_[rec.xy, np.ones(len(rec.xy))].T
-    there = far.map.world_to_pixel @ np.c_[far.xy, np.ones(len(far.xy))].T
-    np.testing.assert_allclose(there[:2] / there[2], here[:2] / here[2], rtol=0, atol=1e-6)
-    assert moved(rec, shift).map is None
+    np.testing.assert_array_equal(far.map.elements()[0][1], np.array([[0.0, 0.0], [40.0, 4.0]]) + shift)
+    assert moved(replace(rec, map=None), shift).map is None
     with pytest.raises(ValueError, match="two finite metres"):
         moved(rec, [1.0, np.nan])
 
