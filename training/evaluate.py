@@ -143,12 +143,10 @@ def evaluate(
     origin: tuple[float, float] = (0.0, 0.0),
 ) -> dict[str, Any]:
     """Per-agent metrics of the model and of constant velocity on a split (``"test"``; ``"val"`` for model
-    selection), averaged overall (flat keys), per
-    class (``by_class``) and per label (``by_label``), with window and agent counts. ``with_map=False`` runs a map
-    model on frames without their map (a model whose map is not optional then raises ``MapRequiredError``);
-    ``noise`` and ``origin`` as :func:`scored_windows`."""
-    info = DATASETS[dataset]
-    spec = predictor.spec
+    selection), averaged overall (flat keys), per class (``by_class``) and per label (``by_label``), with window and
+    agent counts. ``with_map=False`` runs a map model on frames without their map (a model whose map is not optional
+    then raises ``MapRequiredError``); ``noise`` and ``origin`` as :func:`scored_windows`."""
+    info, spec = DATASETS[dataset], predictor.spec
     if (spec.t_obs, spec.t_f) != (info.t_obs, info.t_f) or abs(spec.dt_s - info.dt_s) > 1e-9:
         raise ValueError(
             f"the model's time base (dt {spec.dt_s} s, {spec.t_obs} + {spec.t_f} steps) is not {dataset}'s "
