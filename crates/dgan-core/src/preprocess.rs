@@ -433,31 +433,8 @@ fn build(
     let states = traffic_states_with(frame, spec.dt_s, spec.heading);
     let poses: Vec<AgentPose> = states.iter().map(TrafficState::pose).collect();
 
-    let mut trajectory = Array3::<f32>::zeros((n, spec.t_obs, 2));
-    let mut trajectory_mask = Array2::<f32>::zeros((n, spec.t_obs));
-    let (pos, mask) = (frame.positions(), frame.mask());
-    for (i, pose) in poses.iter().enumerate() {
-        for t in 0..spec.t_obs {
-            if mask[[i, t]] {
-                let l = pose.to_local([pos[[i, t, 0]], pos[[i, t, 1]]]);
-                trajectory[[i, t, 0]] = l[0] as f32;
-                trajectory[[i, t, 1]] = l[1] as f32;
-                trajectory_mask[[i, t]] = 1.0;
-            }
-        }
-    }
-
-    let mut state = Array2::<f32>::zeros((n, spec.state_dim()));
-    for (i, (s, pose)) in states.iter().zip(&poses).enumerate() {
-        let v = pose.vector_to_local(s.velocity);
-        let (mc, ms) = if s.speed > 0.0 { (v[0] / s.speed, v[1] / s.speed) } else { (1.0, 0.0) };
-        let row = [s.speed, s.acceleration, s.yaw_rate, mc, ms, s.length, s.width];
-        debug_assert_eq!(row.len(), STATE_FEATURES.len());
-        for (k, v) in row.iter().enumerate() {
-            state[[i, k]] = *v as f32;
-        }
-        state[[i, STATE_FEATURES.len() + class_idx[i]]] = 1.0;
-    }
+    let (trajectory, trajectory_mask) = trajectory_rows(frame, &poses, spec.t_obs);
+    let state = state_rows(&states, &poses, &class_idx, spec.state_dim());
 
     let centres: Vec<[f64; 2]> = states.iter().map(|s| s.position).collect();
     let radii: Vec<f64> =
@@ -465,43 +442,11 @@ fn build(
     let edges = attention_zone_edges_on(&centres, &radii, limits.max_edges, shared)?;
 
     let graph = Senders::of(n, &edges);
-    let degree = graph.degree();
-    let bytes = Limits::input_bytes(spec, n, degree);
-    if bytes > limits.max_input_bytes {
-        return Err(DganError::SceneTooLarge(format!(
-            "the network's inputs for {n} agents (up to {degree} senders each{}) take {}, above the limit of {} \
-             (max_input_bytes of the Predictor); predict fewer agents at once",
-            spec.map.as_ref().map_or(String::new(), |m| format!(", map crops of {}×{} px", m.height_px, m.width_px)),
-            human_bytes(bytes),
-            human_bytes(limits.max_input_bytes)
-        )));
-    }
+    check_input_bytes(spec, limits, n, graph.degree())?;
     let (edge_index, edge_features) = edge_rows(graph, &states, &poses, shared)?;
 
     let prior = prior_rows(spec, &trajectory, &trajectory_mask, &state, shared)?;
-    let (map, map_present) = match (&spec.map, frame.map()) {
-        (None, _) => (None, None),
-        // A scene model's rasters are drawn below, once the inputs hold the states (NetworkInputs::draw_scene).
-        (Some(m), present) if m.scene.is_some() && (present.is_some() || m.optional || n == 0) => {
-            let flag = if present.is_some() { 1.0 } else { 0.0 };
-            (None, m.optional.then(|| Array1::from_elem(n, flag)))
-        }
-        (Some(m), Some(_)) => {
-            let drawn = crops.then(|| rasterize_on(frame, &states, m, threads)).transpose()?;
-            (drawn, m.optional.then(|| Array1::ones(n)))
-        }
-        (Some(m), None) if m.optional || n == 0 => {
-            (Some(Array4::zeros((n, 3, m.height_px, m.width_px))), m.optional.then(|| Array1::zeros(n)))
-        }
-        (Some(_), None) => {
-            return Err(DganError::MapRequired(
-                "this model's map branch needs a map and the frame has none: pass the scene's map in the frame \
-                 (map=dgan.VectorMap(...), dgan.RasterMap(...) or dgan.scene_map(name)), or use a model trained \
-                 with optional maps (contract 2, map.optional = true), which serves frames without one"
-                    .into(),
-            ))
-        }
-    };
+    let (map, map_present) = map_rows(frame, &states, spec.map.as_ref(), threads, crops)?;
     let neighbors = match spec.graph {
         GraphLayout::EdgeList => None,
         GraphLayout::Padded => Some(Neighbors::from_edges_on(n, &edge_index, &edge_features, shared)?),
@@ -531,6 +476,97 @@ fn build(
     }
     let later = spec.map.is_some() && pre.inputs.map.is_none();
     Ok((pre, later))
+}
+
+/// Each agent's observed positions in its own frame (`(N, T_obs, 2)`, zeros where unobserved) and their mask.
+fn trajectory_rows(frame: &Frame, poses: &[AgentPose], t_obs: usize) -> (Array3<f32>, Array2<f32>) {
+    let n = poses.len();
+    let mut trajectory = Array3::<f32>::zeros((n, t_obs, 2));
+    let mut trajectory_mask = Array2::<f32>::zeros((n, t_obs));
+    let (pos, mask) = (frame.positions(), frame.mask());
+    for (i, pose) in poses.iter().enumerate() {
+        for t in 0..t_obs {
+            if mask[[i, t]] {
+                let l = pose.to_local([pos[[i, t, 0]], pos[[i, t, 1]]]);
+                trajectory[[i, t, 0]] = l[0] as f32;
+                trajectory[[i, t, 1]] = l[1] as f32;
+                trajectory_mask[[i, t]] = 1.0;
+            }
+        }
+    }
+    (trajectory, trajectory_mask)
+}
+
+/// Each agent's traffic-state row ([`STATE_FEATURES`], its motion's direction in its own frame) and its class's
+/// one-hot column (`class_idx`), `(N, state_dim)`.
+fn state_rows(states: &[TrafficState], poses: &[AgentPose], class_idx: &[usize], state_dim: usize) -> Array2<f32> {
+    let mut state = Array2::<f32>::zeros((states.len(), state_dim));
+    for (i, (s, pose)) in states.iter().zip(poses).enumerate() {
+        let v = pose.vector_to_local(s.velocity);
+        let (mc, ms) = if s.speed > 0.0 { (v[0] / s.speed, v[1] / s.speed) } else { (1.0, 0.0) };
+        let row = [s.speed, s.acceleration, s.yaw_rate, mc, ms, s.length, s.width];
+        debug_assert_eq!(row.len(), STATE_FEATURES.len());
+        for (k, v) in row.iter().enumerate() {
+            state[[i, k]] = *v as f32;
+        }
+        state[[i, STATE_FEATURES.len() + class_idx[i]]] = 1.0;
+    }
+    state
+}
+
+/// Refuses a frame whose network inputs (`n` agents, up to `degree` senders each) would exceed the Predictor's
+/// `max_input_bytes`, before any of them is allocated.
+fn check_input_bytes(spec: &InputSpec, limits: &Limits, n: usize, degree: usize) -> Result<()> {
+    let bytes = Limits::input_bytes(spec, n, degree);
+    if bytes > limits.max_input_bytes {
+        return Err(DganError::SceneTooLarge(format!(
+            "the network's inputs for {n} agents (up to {degree} senders each{}) take {}, above the limit of {} \
+             (max_input_bytes of the Predictor); predict fewer agents at once",
+            spec.map.as_ref().map_or(String::new(), |m| format!(", map crops of {}×{} px", m.height_px, m.width_px)),
+            human_bytes(bytes),
+            human_bytes(limits.max_input_bytes)
+        )));
+    }
+    Ok(())
+}
+
+/// A crop model's map crops `(N, 3, H, W)` and `map_present` flags `(N,)`, each if the model takes it.
+type MapRows = (Option<Array4<f32>>, Option<Array1<f32>>);
+
+/// The map crops (drawn on up to `threads` threads when `crops`; all-zero for an optional map the frame lacks) and
+/// the `map_present` flags of a crop model; a scene model's flags only (its rasters are drawn later,
+/// [`NetworkInputs::draw_scene`]); nothing without a map branch. A required map the frame lacks is refused.
+fn map_rows(
+    frame: &Frame,
+    states: &[TrafficState],
+    spec: Option<&MapSpec>,
+    threads: usize,
+    crops: bool,
+) -> Result<MapRows> {
+    let n = frame.len();
+    Ok(match (spec, frame.map()) {
+        (None, _) => (None, None),
+        // A scene model's rasters are drawn once the inputs hold the states (NetworkInputs::draw_scene).
+        (Some(m), present) if m.scene.is_some() && (present.is_some() || m.optional || n == 0) => {
+            let flag = if present.is_some() { 1.0 } else { 0.0 };
+            (None, m.optional.then(|| Array1::from_elem(n, flag)))
+        }
+        (Some(m), Some(_)) => {
+            let drawn = crops.then(|| rasterize_on(frame, states, m, threads)).transpose()?;
+            (drawn, m.optional.then(|| Array1::ones(n)))
+        }
+        (Some(m), None) if m.optional || n == 0 => {
+            (Some(Array4::zeros((n, 3, m.height_px, m.width_px))), m.optional.then(|| Array1::zeros(n)))
+        }
+        (Some(_), None) => {
+            return Err(DganError::MapRequired(
+                "this model's map branch needs a map and the frame has none: pass the scene's map in the frame \
+                 (map=dgan.VectorMap(...), dgan.RasterMap(...) or dgan.scene_map(name)), or use a model trained \
+                 with optional maps (contract 2, map.optional = true), which serves frames without one"
+                    .into(),
+            ))
+        }
+    })
 }
 
 impl NetworkInputs {
