@@ -279,6 +279,85 @@ pub struct Predictor {
     last_times: Mutex<Option<PhaseTimes>>,
 }
 
+/// Refuses a session count or thread count out of bounds, before the model is read.
+fn check_options(options: &PredictorOptions) -> Result<()> {
+    if !(1..=MAX_SESSIONS).contains(&options.sessions) {
+        return Err(DganError::InvalidSpec(format!(
+            "sessions must be in 1..={MAX_SESSIONS}, got {}",
+            options.sessions
+        )));
+    }
+    let cores = max_intra_threads();
+    if !(1..=cores).contains(&options.intra_threads) {
+        return Err(DganError::InvalidSpec(format!(
+            "threads must be in 1..={cores} (this machine's cores), got {}",
+            options.intra_threads
+        )));
+    }
+    Ok(())
+}
+
+/// The contract's JSON in the model's metadata, or an error that tells metadata that cannot be read (ONNX Runtime gives
+/// no value for metadata that is not valid UTF-8) from none; `bytes` are the file's, `path` names it.
+fn contract_json(session: &Session, bytes: &[u8], path: &Path) -> Result<String> {
+    session
+        .metadata()
+        .map_err(|e| DganError::Contract(format!("cannot read metadata: {e}")))?
+        .custom(METADATA_KEY)
+        .filter(|s| !s.is_empty())
+        .ok_or_else(|| {
+            let key = format!("\"{METADATA_KEY}\"");
+            // As ONNX's protobuf stores a metadata entry's key: field 1, length, the key, then field 2 (value).
+            let mut entry = vec![0x0a, METADATA_KEY.len() as u8];
+            entry.extend_from_slice(METADATA_KEY.as_bytes());
+            entry.push(0x12);
+            let present = bytes.windows(entry.len()).any(|w| w == entry.as_slice());
+            DganError::Contract(if present {
+                format!(
+                    "{}: its {key} metadata cannot be read (not valid UTF-8, or damaged); export the model again",
+                    path.display()
+                )
+            } else {
+                format!(
+                    "{} has no {key} metadata; export it with dgan's exporter (docs/model-contract.md)",
+                    path.display()
+                )
+            })
+        })
+}
+
+/// Refuses a graph whose inputs or outputs are not the contract's: an input it does not name, one it lacks, an
+/// output missing, or any of another type or shape.
+fn check_graph(session: &Session, contract: &ModelContract) -> Result<()> {
+    let expected = contract.expected_inputs();
+    for input in session.inputs() {
+        let Some(want) = expected.iter().find(|w| w.name == input.name()) else {
+            let names: Vec<_> = expected.iter().map(|w| w.name).collect();
+            return Err(DganError::Contract(format!(
+                "unexpected input {:?}; the contract's inputs are {names:?}",
+                input.name()
+            )));
+        };
+        let (dtype, shape) = dtype_of(input.dtype());
+        check_tensor("input", want, dtype, &shape)?;
+    }
+    for want in &expected {
+        if !session.inputs().iter().any(|i| i.name() == want.name) {
+            return Err(DganError::Contract(format!("missing input {:?}", want.name)));
+        }
+    }
+    for want in contract.expected_outputs()? {
+        let out = session
+            .outputs()
+            .iter()
+            .find(|o| o.name() == want.name)
+            .ok_or_else(|| DganError::Contract(format!("missing output {:?}", want.name)))?;
+        let (dtype, shape) = dtype_of(out.dtype());
+        check_tensor("output", &want, dtype, &shape)?;
+    }
+    Ok(())
+}
+
 fn dtype_of(t: &ValueType) -> (Option<DType>, Vec<i64>) {
     match t {
         ValueType::Tensor { ty, shape, .. } => {
@@ -373,49 +452,12 @@ impl Predictor {
         if !path.is_file() {
             return Err(DganError::ModelNotFound(path));
         }
-        if !(1..=MAX_SESSIONS).contains(&options.sessions) {
-            return Err(DganError::InvalidSpec(format!(
-                "sessions must be in 1..={MAX_SESSIONS}, got {}",
-                options.sessions
-            )));
-        }
-        let cores = max_intra_threads();
-        if !(1..=cores).contains(&options.intra_threads) {
-            return Err(DganError::InvalidSpec(format!(
-                "threads must be in 1..={cores} (this machine's cores), got {}",
-                options.intra_threads
-            )));
-        }
+        check_options(options)?;
         // Before ONNX Runtime sees a byte of it; the sessions are built from these very bytes.
         let (bytes, digest) = crate::integrity::read_verified(&path)?;
         init_onnxruntime(options.onnxruntime_library.as_deref())?;
         let session = open_session(&path, &bytes, options)?;
-        let json = session
-            .metadata()
-            .map_err(|e| DganError::Contract(format!("cannot read metadata: {e}")))?
-            .custom(METADATA_KEY)
-            .filter(|s| !s.is_empty())
-            .ok_or_else(|| {
-                // ONNX Runtime gives no value for metadata that is not valid UTF-8: tell that apart from none.
-                let key = format!("\"{METADATA_KEY}\"");
-                // As ONNX's protobuf stores a metadata entry's key: field 1, length, the key, then field 2 (value).
-                let mut entry = vec![0x0a, METADATA_KEY.len() as u8];
-                entry.extend_from_slice(METADATA_KEY.as_bytes());
-                entry.push(0x12);
-                let present = bytes.windows(entry.len()).any(|w| w == entry.as_slice());
-                DganError::Contract(if present {
-                    format!(
-                        "{}: its {key} metadata cannot be read (not valid UTF-8, or damaged); export the model again",
-                        path.display()
-                    )
-                } else {
-                    format!(
-                        "{} has no {key} metadata; export it with dgan's exporter (docs/model-contract.md)",
-                        path.display()
-                    )
-                })
-            })?;
-        let contract = ModelContract::from_json(&json)?;
+        let contract = ModelContract::from_json(&contract_json(&session, &bytes, &path)?)?;
         if contract.weights_sha256 != digest {
             return Err(DganError::ModelLoad {
                 path: path.clone(),
@@ -427,32 +469,7 @@ impl Predictor {
         let still_radius = contract.still_radii()?;
         let top_mean = contract.top_mean_powers()?;
 
-        let expected = contract.expected_inputs();
-        for input in session.inputs() {
-            let Some(want) = expected.iter().find(|w| w.name == input.name()) else {
-                let names: Vec<_> = expected.iter().map(|w| w.name).collect();
-                return Err(DganError::Contract(format!(
-                    "unexpected input {:?}; the contract's inputs are {names:?}",
-                    input.name()
-                )));
-            };
-            let (dtype, shape) = dtype_of(input.dtype());
-            check_tensor("input", want, dtype, &shape)?;
-        }
-        for want in &expected {
-            if !session.inputs().iter().any(|i| i.name() == want.name) {
-                return Err(DganError::Contract(format!("missing input {:?}", want.name)));
-            }
-        }
-        for want in contract.expected_outputs()? {
-            let out = session
-                .outputs()
-                .iter()
-                .find(|o| o.name() == want.name)
-                .ok_or_else(|| DganError::Contract(format!("missing output {:?}", want.name)))?;
-            let (dtype, shape) = dtype_of(out.dtype());
-            check_tensor("output", &want, dtype, &shape)?;
-        }
+        check_graph(&session, &contract)?;
         let mut sessions = vec![Mutex::new(session)];
         for _ in 1..options.sessions {
             sessions.push(Mutex::new(open_session(&path, &bytes, options)?));
