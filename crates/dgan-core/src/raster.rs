@@ -114,9 +114,6 @@ fn rasterize_rows_into(
         })
         .collect::<Result<_>>()?;
     let (h, w) = (spec.height_px, spec.width_px);
-    let agents: RTree<GeomWithData<[f64; 2], usize>> =
-        RTree::bulk_load(states.iter().enumerate().map(|(i, s)| GeomWithData::new(s.position, i)).collect());
-    let max_half_diag = states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max);
     // Every crop writes all of its 3 × h × w values (`Canvas::write_chw`): what the buffer held is overwritten.
     let len = rows.len() * 3 * h * w;
     buffer.truncate(len);
@@ -125,27 +122,81 @@ fn rasterize_rows_into(
         .map_err(|e| DganError::InvalidSpec(format!("raster buffer: {e}")))?;
     let flat = out.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("raster buffer is not contiguous".into()))?;
     let threads = threads_in_flight(threads).min(rows.len() / 8).max(1);
-    // Every agent whose box can reach into world bounds `v`.
-    let boxes_near = |v: [f64; 4]| -> Vec<&TrafficState> {
-        let d = max_half_diag;
-        let near = AABB::from_corners([v[0] - d, v[1] - d], [v[2] + d, v[3] + d]);
-        agents.locate_in_envelope(&near).map(|o| &states[o.data]).collect()
-    };
-    // From tiles, the boxes are drawn once on the tiles the crops read instead of once on each crop.
-    let overlay = match frame.map() {
-        Some(SceneMap::Vector(m)) if spec.render == MapRender::Tiles && spec.draw_agents => {
-            let views: Vec<[f64; 4]> = mine.iter().flatten().map(|s| world_bounds(spec, &s.pose())).collect();
-            Some(Overlay::new(m, spec, &views, boxes_near, threads)?)
+    let crops = Crops::new(frame, states, spec, &mine, threads)?;
+    // Scoped threads that end with the call, rather than a pool whose idle workers keep spinning on the cores that
+    // ONNX Runtime runs on next (on two cores that cost as much as the parallel drawing saved).
+    let per = 3 * h * w;
+    if threads == 1 {
+        for (crop, s) in flat.chunks_mut(per).zip(&mine) {
+            crops.draw(crop, *s)?;
         }
-        _ => None,
-    };
-    let draw = |crop: &mut [f32], s: &Option<&TrafficState>| -> Result<()> {
-        let Some(s) = *s else {
+    } else {
+        // Jobs of a few crops, taken by each thread as it finishes one: crops of a map's busy part cost many times
+        // blank ones, and contiguous shares left them on one thread (a tiled zara1 frame of 4,096 agents: 86 ms of
+        // crops on one thread, 83 on two, 32 on sixteen).
+        let jobs: Vec<_> = flat.chunks_mut(per * CROPS_PER_JOB).zip(mine.chunks(CROPS_PER_JOB)).collect();
+        let one = |(part, agents): (&mut [f32], &[Option<&TrafficState>])| {
+            part.chunks_mut(per).zip(agents).try_for_each(|(crop, s)| crops.draw(crop, *s))
+        };
+        share_jobs(jobs, threads, one, || DganError::InvalidSpec("a rasterising thread panicked".into()))?;
+    }
+    Ok(out)
+}
+
+/// What one call's crops are drawn from: the frame's map, its agents' boxes (found through an R-tree) and, for a
+/// vector map drawn from tiles with the agents' boxes, the tiles the crops read with the boxes drawn on
+/// ([`Overlay`]).
+struct Crops<'a> {
+    frame: &'a Frame,
+    states: &'a [TrafficState],
+    spec: &'a MapSpec,
+    agents: RTree<GeomWithData<[f64; 2], usize>>,
+    /// Half the largest box diagonal: how far beyond its centre an agent's box can reach.
+    max_half_diag: f64,
+    overlay: Option<Overlay>,
+}
+
+impl<'a> Crops<'a> {
+    /// The drawer of `frame`'s crops of the agents `mine` (None: a crop left blank), its overlay built on up to
+    /// `threads` threads.
+    fn new(
+        frame: &'a Frame,
+        states: &'a [TrafficState],
+        spec: &'a MapSpec,
+        mine: &[Option<&TrafficState>],
+        threads: usize,
+    ) -> Result<Self> {
+        let agents =
+            RTree::bulk_load(states.iter().enumerate().map(|(i, s)| GeomWithData::new(s.position, i)).collect());
+        let max_half_diag = states.iter().map(|s| s.length.hypot(s.width) / 2.0).fold(0.0, f64::max);
+        let mut crops = Self { frame, states, spec, agents, max_half_diag, overlay: None };
+        // From tiles, the boxes are drawn once on the tiles the crops read instead of once on each crop.
+        if let Some(SceneMap::Vector(m)) = frame.map() {
+            if spec.render == MapRender::Tiles && spec.draw_agents {
+                let views: Vec<[f64; 4]> = mine.iter().flatten().map(|s| world_bounds(spec, &s.pose())).collect();
+                crops.overlay = Some(Overlay::new(m, spec, &views, |v| crops.boxes_near(v), threads)?);
+            }
+        }
+        Ok(crops)
+    }
+
+    /// Every agent whose box can reach into world bounds `v`.
+    fn boxes_near(&self, v: [f64; 4]) -> Vec<&'a TrafficState> {
+        let d = self.max_half_diag;
+        let near = AABB::from_corners([v[0] - d, v[1] - d], [v[2] + d, v[3] + d]);
+        let states = self.states;
+        self.agents.locate_in_envelope(&near).map(|o| &states[o.data]).collect()
+    }
+
+    /// The crop of agent `s` (blank for None), written into `crop` as `3 × h × w` values.
+    fn draw(&self, crop: &mut [f32], s: Option<&TrafficState>) -> Result<()> {
+        let Some(s) = s else {
             crop.fill(0.0);
             return Ok(());
         };
+        let spec = self.spec;
         // From tiles, straight into the crop: the boxes, if drawn, are on the overlay's tiles already.
-        match (frame.map(), &overlay) {
+        match (self.frame.map(), &self.overlay) {
             (Some(SceneMap::Vector(m)), Some(o)) => {
                 o.resample_chw(m, spec, &s.pose(), crop);
                 return Ok(());
@@ -156,38 +207,21 @@ fn rasterize_rows_into(
             }
             _ => {}
         }
-        let mut canvas = Canvas::new(spec, s.pose())
-            .ok_or_else(|| DganError::InvalidSpec(format!("cannot allocate a {w}×{h} crop")))?;
+        let mut canvas = Canvas::new(spec, s.pose()).ok_or_else(|| {
+            DganError::InvalidSpec(format!("cannot allocate a {}×{} crop", spec.width_px, spec.height_px))
+        })?;
         let view = canvas.view;
-        match frame.map() {
+        match self.frame.map() {
             Some(SceneMap::Vector(m)) => canvas.draw_vector(m),
             Some(SceneMap::Raster(m)) => canvas.draw_raster(m),
             None => {}
         }
         if spec.draw_agents {
-            canvas.draw_boxes(boxes_near(view).into_iter());
+            canvas.draw_boxes(self.boxes_near(view).into_iter());
         }
         canvas.write_chw(crop);
         Ok(())
-    };
-    // Scoped threads that end with the call, rather than a pool whose idle workers keep spinning on the cores that
-    // ONNX Runtime runs on next (on two cores that cost as much as the parallel drawing saved).
-    let per = 3 * h * w;
-    if threads == 1 {
-        for (crop, s) in flat.chunks_mut(per).zip(&mine) {
-            draw(crop, s)?;
-        }
-    } else {
-        // Jobs of a few crops, taken by each thread as it finishes one: crops of a map's busy part cost many times
-        // blank ones, and contiguous shares left them on one thread (a tiled zara1 frame of 4,096 agents: 86 ms of
-        // crops on one thread, 83 on two, 32 on sixteen).
-        let jobs: Vec<_> = flat.chunks_mut(per * CROPS_PER_JOB).zip(mine.chunks(CROPS_PER_JOB)).collect();
-        let one = |(crops, part): (&mut [f32], &[Option<&TrafficState>])| {
-            crops.chunks_mut(per).zip(part).try_for_each(|(crop, s)| draw(crop, s))
-        };
-        share_jobs(jobs, threads, one, || DganError::InvalidSpec("a rasterising thread panicked".into()))?;
     }
-    Ok(out)
 }
 
 #[cfg(test)]
