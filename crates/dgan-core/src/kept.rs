@@ -322,12 +322,44 @@ pub fn kept_inputs(
         let reads = KeptReads { rows, channels: scene.channels, grid, kept: vec![blank], new: vec![], index, weight };
         return Ok((reads, Array4::zeros((0, 3, side, side))));
     };
-    // The tiles in order of first use, each agent-corner's (tile, row in it).
+    let weights = weight.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("weights are not contiguous".into()))?;
+    let (order, local) = corner_reads(states, crop, scene, points, weights);
+    let (kept, new, block) = kept_then_new(&order, map, model, rows * scene.channels);
+    if new.len() > MAX_NEW_TILES {
+        return Err(DganError::SceneTooLarge(format!(
+            "the agents read {} tiles of the map not yet computed, above {MAX_NEW_TILES} in one call; predict fewer \
+             agents at once, or agents closer together",
+            new.len()
+        )));
+    }
+    for (slot, &(tile, row)) in index.iter_mut().zip(&local) {
+        *slot = (block[tile] * rows) as i64 + row;
+    }
+    let mut rasters = Array4::<f32>::zeros((new.len(), 3, side, side));
+    for (k, tile) in new.iter().enumerate() {
+        rasters.index_axis_mut(Axis(0), k).assign(&tile_raster(frame, crop, scene, tile.at)?);
+    }
+    Ok((KeptReads { rows, channels: scene.channels, grid, kept, new, index, weight }, rasters))
+}
+
+/// The tiles an agent's corners fall in (in order of first use) and each corner's (tile's place there, row).
+type CornerReads = (Vec<(i64, i64)>, Vec<(usize, i64)>);
+
+/// Every agent's four feature corners per block centre of its crop: the tiles they fall in, in order of first use,
+/// each corner's (tile's place in that order, row in the tile), and their bilinear weights written into `weights`
+/// (`N · points · 4`).
+fn corner_reads(
+    states: &[TrafficState],
+    crop: &MapSpec,
+    scene: SceneSpec,
+    points: usize,
+    weights: &mut [f32],
+) -> CornerReads {
+    let t = scene.tile_features() as i64;
     let mut tiles: HashMap<(i64, i64), usize> = HashMap::new();
     let mut order: Vec<(i64, i64)> = vec![];
-    let mut local: Vec<(usize, i64)> = Vec::with_capacity(n * points * 4);
+    let mut local: Vec<(usize, i64)> = Vec::with_capacity(states.len() * points * 4);
     let mut last: Option<((i64, i64), usize)> = None;
-    let weights = weight.as_slice_mut().ok_or_else(|| DganError::InvalidSpec("weights are not contiguous".into()))?;
     let mut tile_of = |at: (i64, i64)| -> usize {
         // Neighbouring block centres mostly share a tile: the last one found is tried first.
         match last {
@@ -362,12 +394,20 @@ pub fn kept_inputs(
             }
         }
     }
-    // Kept tiles first, then the ones to compute.
+    (order, local)
+}
+
+/// The tiles of `order` split into those whose features `map` keeps for predictor `model` (of `len` values) and those
+/// to compute, and each tile's block in the table (the kept ones first, then the new ones, each in `order`'s order).
+fn kept_then_new(
+    order: &[(i64, i64)],
+    map: &Arc<SceneMap>,
+    model: Option<u64>,
+    len: usize,
+) -> (Vec<Arc<[f32]>>, Vec<NewTile>, Vec<usize>) {
     let key = |at: (i64, i64)| model.map(|m| FeatureKey { model: m, i: at.0, j: at.1 });
-    let found: Vec<Option<Arc<[f32]>>> = order
-        .iter()
-        .map(|&at| key(at).and_then(|k| map.features().get(&k)).filter(|f| f.len() == rows * scene.channels))
-        .collect();
+    let found: Vec<Option<Arc<[f32]>>> =
+        order.iter().map(|&at| key(at).and_then(|k| map.features().get(&k)).filter(|f| f.len() == len)).collect();
     let (mut kept, mut new, mut block) = (vec![], vec![], vec![0usize; order.len()]);
     for (b, f) in found.iter().enumerate() {
         if let Some(f) = f {
@@ -381,21 +421,7 @@ pub fn kept_inputs(
             new.push(NewTile { at, keep: key(at).map(|k| (map.clone(), k)) });
         }
     }
-    if new.len() > MAX_NEW_TILES {
-        return Err(DganError::SceneTooLarge(format!(
-            "the agents read {} tiles of the map not yet computed, above {MAX_NEW_TILES} in one call; predict fewer \
-             agents at once, or agents closer together",
-            new.len()
-        )));
-    }
-    for (slot, &(tile, row)) in index.iter_mut().zip(&local) {
-        *slot = (block[tile] * rows) as i64 + row;
-    }
-    let mut rasters = Array4::<f32>::zeros((new.len(), 3, side, side));
-    for (k, tile) in new.iter().enumerate() {
-        rasters.index_axis_mut(Axis(0), k).assign(&tile_raster(frame, crop, scene, tile.at)?);
-    }
-    Ok((KeptReads { rows, channels: scene.channels, grid, kept, new, index, weight }, rasters))
+    (kept, new, block)
 }
 
 #[cfg(test)]
