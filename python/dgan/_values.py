@@ -95,3 +95,11 @@ def as_given(values: Any) -> npt.NDArray[Any]:
     out = np.empty(len(items), dtype=object)
     out[:] = items
     return out
+
+
+def checked_shift(name: str, value: Any, error: type[Exception]) -> npt.NDArray[np.float64]:
+    """``value`` as a finite ``(2,)`` vector of metres (a move of the world's origin), or ``error``."""
+    shift: npt.NDArray[np.float64] = checked_array(name, value, np.float64, error, required=True)
+    if shift.shape != (2,) or not np.isfinite(shift).all():
+        raise error(f"{name} must be two finite metres (x, y), got {shift.tolist()}")
+    return shift

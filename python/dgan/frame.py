@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._values import ClassLike, as_given, checked_array, typename
+from dgan._values import ClassLike, as_given, checked_array, checked_shift, typename
 from dgan.contract import CLASSES
 from dgan.exceptions import InvalidFrameError, InvalidMapError, UnknownClassError
 from dgan.maps import RasterMap, VectorMap
@@ -308,6 +308,20 @@ class Frame:
         """The same agents, histories and states without a map: how a model with an optional map is run on a scene
         whose map is unknown (a model whose map is required raises :class:`~dgan.exceptions.MapRequiredError`)."""
         return Frame._wrap(self._frame.without_map(), self._labels, None, self._source)
+
+    def moved(self, shift_m: npt.ArrayLike) -> Frame:
+        """The same scene under another origin: every position and the map (:meth:`VectorMap.moved`,
+        :meth:`RasterMap.moved`) moved by ``shift_m`` ``(x, y)`` metres; ids, classes, states and how the frame was
+        sampled are kept. A model that draws each agent's crop in its own frame predicts it as before, moved; see
+        docs/model-contract.md (*The map's grid and the world's origin*) for those that read a grid fixed in the world.
+
+        Raises:
+            InvalidFrameError: ``shift_m`` is not two finite numbers.
+        """
+        shift = checked_shift("shift_m", shift_m, InvalidFrameError)
+        (positions, *rest), classes, dt = self._state()
+        world_map = None if self._map is None else self._map.moved(shift)
+        return _unpickle_frame(((positions + shift, *rest), classes, dt), self._labels, world_map, self._source)
 
     def denoised(self, gate_m: float = DENOISE_GATE_M) -> Frame:
         """The same frame with tracker noise taken out of its histories, for tracks from a detector and tracker.

@@ -11,17 +11,9 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._values import checked_array, typename
+from dgan._values import checked_array, checked_shift, typename
 from dgan.contract import MAP_ELEMENT_KINDS
 from dgan.exceptions import InvalidMapError
-
-
-def _shift_m(shift_m: npt.ArrayLike) -> npt.NDArray[np.float64]:
-    """``shift_m`` as a finite ``(2,)`` vector of metres, or :class:`InvalidMapError`."""
-    shift: npt.NDArray[np.float64] = checked_array("shift_m", shift_m, np.float64, InvalidMapError, required=True)
-    if shift.shape != (2,) or not np.isfinite(shift).all():
-        raise InvalidMapError(f"shift_m must be two finite metres (x, y), got {shift.tolist()}")
-    return shift
 
 
 class RasterMap:
@@ -78,7 +70,7 @@ class RasterMap:
         Raises:
             InvalidMapError: ``shift_m`` is not two finite numbers.
         """
-        dx, dy = _shift_m(shift_m)
+        dx, dy = checked_shift("shift_m", shift_m, InvalidMapError)
         return RasterMap(
             self.image, self.world_to_pixel @ np.array([[1.0, 0.0, -dx], [0.0, 1.0, -dy], [0.0, 0.0, 1.0]])
         )
@@ -132,7 +124,7 @@ class VectorMap:
         Raises:
             InvalidMapError: ``shift_m`` is not two finite numbers.
         """
-        shift = _shift_m(shift_m)
+        shift = checked_shift("shift_m", shift_m, InvalidMapError)
         return VectorMap([(kind, points + shift) for kind, points in self.elements()])
 
     def to_json(self, path: str | os.PathLike[str]) -> None:

@@ -39,6 +39,30 @@ def test_select_rows_a_mask_or_none() -> None:
             f.select(bad)
 
 
+def test_moved_keeps_the_scene_under_another_origin() -> None:
+    shift = np.array([512345.678, 4123456.789])
+    mask = np.ones((2, 4), bool)
+    mask[1, 0] = False
+    lanes = dgan.VectorMap([("lane_centerline", [[0.0, 0.0], [40.0, 4.0]])])
+    f = dgan.Frame(
+        np.arange(16.0).reshape(2, 4, 2), mask=mask, classes=[0, 2], ids=["car", "ped"], lengths=[4.0, 0.6], map=lanes
+    )
+    g = f.moved(shift)
+    np.testing.assert_array_equal(g.positions[mask], f.positions[mask] + shift)
+    np.testing.assert_array_equal(g.mask, f.mask)
+    assert g.classes == f.classes
+    assert list(g.agent_ids) == list(f.agent_ids) == ["car", "ped"]
+    np.testing.assert_array_equal(g.lengths, f.lengths)
+    assert isinstance(g.map, dgan.VectorMap)
+    np.testing.assert_array_equal(g.map.elements()[0][1], lanes.elements()[0][1] + shift)
+    assert f.without_map().moved(shift).map is None
+    np.testing.assert_array_equal(f.moved([0.0, 0.0]).positions[mask], f.positions[mask])
+    bad_shifts: tuple[Any, ...] = ([1.0], [np.inf, 0.0], "north", None)
+    for bad in bad_shifts:
+        with pytest.raises(exc.InvalidFrameError, match="shift_m"):
+            f.moved(bad)
+
+
 def test_optional_values_with_nan_for_unknown() -> None:
     f = dgan.Frame(
         np.zeros((2, 4, 2)),

@@ -168,22 +168,6 @@ def grid_pitch_m(spec: dgan.InputSpec) -> float | None:
     return m.scene.stride * m.resolution_m if m.scene is not None else 128 * m.resolution_m / 2
 
 
-def moved_scene(frame: dgan.Frame, shift: npt.NDArray[np.float64]) -> dgan.Frame:
-    """``frame`` and its map, every world coordinate moved by ``shift``."""
-    return dgan.Frame(
-        frame.positions + shift,
-        mask=frame.mask,
-        classes=frame.classes,
-        ids=frame.ids,
-        headings=frame.headings,
-        velocities=frame.velocities,
-        lengths=frame.lengths,
-        widths=frame.widths,
-        map=None if frame.map is None else frame.map.moved(shift),
-        dt=frame.dt,
-    )
-
-
 @pytest.mark.parametrize("name", dgan.models.list())
 def test_a_scene_far_from_the_origin_is_predicted_as_near_it(name: str) -> None:
     """Georeferenced coordinates (millions of metres) lose nothing: every bundled model predicts its demo scene, map
@@ -194,6 +178,6 @@ def test_a_scene_far_from_the_origin_is_predicted_as_near_it(name: str) -> None:
     frame = dgan.demo.scene_for(predictor.spec).frame
     pitch = grid_pitch_m(predictor.spec)
     shift = FAR if pitch is None else np.round(FAR / pitch) * pitch
-    here, far = predictor.predict(frame), dgan.Predictor(name).predict(moved_scene(frame, shift))
+    here, far = predictor.predict(frame), dgan.Predictor(name).predict(frame.moved(shift))
     np.testing.assert_allclose(far.trajectories - shift, here.trajectories, rtol=0, atol=1e-4)
     np.testing.assert_allclose(far.probabilities, here.probabilities, rtol=0, atol=1e-5)
