@@ -726,19 +726,10 @@ impl Predictor {
         decode_on(out, params, poses, modes, threads)
     }
 
-    /// Predicts several frames: each frame is preprocessed on its own (in parallel), consecutive frames' graphs are
-    /// joined (disjoint, so nothing crosses between frames) into network calls of up to [`BATCH_AGENTS_PER_CALL`]
-    /// agents (a larger frame runs alone), and the outputs are split again. With `threads` ≥ 2 the calls are smaller
-    /// (every lane gets work) and run concurrently, one per lane ([`Predictor::lanes`]). Equal to calling
-    /// [`Predictor::predict_modes`] on each frame, up to float rounding.
-    pub fn predict_batch(&self, frames: &[Frame], modes: usize) -> Result<Vec<Prediction>> {
-        check_modes(modes)?;
-        let _in_flight = crate::raster::InFlight::enter();
-        if frames.is_empty() {
-            return Ok(vec![]);
-        }
+    /// Each frame of a batch preprocessed, in `threads` runs of consecutive frames, one thread each (each frame's crops
+    /// on that thread). The first bad frame by index, whichever thread finished first, is named in the error.
+    fn preprocess_batch(&self, frames: &[Frame]) -> Result<Vec<Preprocessed>> {
         let spec = &self.contract.input;
-        // The frames in `threads` runs, one thread each (each frame's crops on that thread).
         let per_thread = frames.len().div_ceil(self.threads.max(1));
         let runs: Vec<&[Frame]> = frames.chunks(per_thread).collect();
         let preprocess = |part: &[Frame]| -> Vec<Result<Preprocessed>> {
@@ -747,7 +738,6 @@ impl Predictor {
         // A panicked thread returns nothing: each of its frames gets the error below.
         let panicked = Vec::new;
         let done: Vec<Vec<Result<Preprocessed>>> = on_threads(runs.clone(), preprocess, panicked);
-        // The first bad frame by index, whichever thread finished first, named in its error.
         let mut pres = Vec::with_capacity(frames.len());
         for (part, results) in runs.iter().zip(done) {
             let (base, count) = (pres.len(), part.len());
@@ -759,8 +749,13 @@ impl Predictor {
                 pres.push(p.map_err(|e| e.context(&format!("frame {} of the batch", base + i)))?);
             }
         }
-        // Consecutive frames joined into calls; with lanes, calls small enough that every lane has work.
-        let total: usize = pres.iter().map(|p| p.poses.len()).sum();
+        Ok(pres)
+    }
+
+    /// Consecutive preprocessed frames joined into network calls (each with the index of its first frame); with
+    /// lanes, calls small enough that every lane has work.
+    fn batch_calls(&self, pres: Vec<Preprocessed>) -> Vec<Call> {
+        let (frames, total) = (pres.len(), pres.iter().map(|p| p.poses.len()).sum::<usize>());
         let cap = if self.lanes.len() >= 2 {
             BATCH_AGENTS_PER_CALL.min(total.div_ceil(self.lanes.len()).max(1))
         } else {
@@ -769,7 +764,7 @@ impl Predictor {
         let mut groups: Vec<Call> = vec![];
         let mut pres = pres.into_iter().peekable();
         let mut start = 0;
-        while start < frames.len() {
+        while start < frames {
             let (mut group, mut agents, mut degree) = (vec![], 0, 0);
             // A scene model's frames join only with frames of the same raster side (one (F, 3, S, S) input).
             let side = |p: &Preprocessed| p.inputs.map_grid.as_ref().and(p.inputs.map.as_ref()).map(|m| m.dim().2);
@@ -786,6 +781,21 @@ impl Predictor {
             groups.push((start, group));
             start += len;
         }
+        groups
+    }
+
+    /// Predicts several frames: each frame is preprocessed on its own (in parallel), consecutive frames' graphs are
+    /// joined (disjoint, so nothing crosses between frames) into network calls of up to [`BATCH_AGENTS_PER_CALL`]
+    /// agents (a larger frame runs alone), and the outputs are split again. With `threads` ≥ 2 the calls are smaller
+    /// (every lane gets work) and run concurrently, one per lane ([`Predictor::lanes`]). Equal to calling
+    /// [`Predictor::predict_modes`] on each frame, up to float rounding.
+    pub fn predict_batch(&self, frames: &[Frame], modes: usize) -> Result<Vec<Prediction>> {
+        check_modes(modes)?;
+        let _in_flight = crate::raster::InFlight::enter();
+        if frames.is_empty() {
+            return Ok(vec![]);
+        }
+        let groups = self.batch_calls(self.preprocess_batch(frames)?);
         let call = |(start, group): Call, pool: Pool| {
             let end = start + group.len();
             self.run_and_decode(&frames[start..end], group, modes, pool, None)
