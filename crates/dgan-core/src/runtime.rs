@@ -279,6 +279,36 @@ pub struct Predictor {
     last_times: Mutex<Option<PhaseTimes>>,
 }
 
+/// One frame's prediction: its agents' rows `rows` of a batch's decode, or, where nothing was decoded (no agent in
+/// the batch), an empty prediction of `empty = (modes, classes, T_f)`.
+fn frame_prediction(
+    frame: &Frame,
+    decoded: Option<&Decoded>,
+    rows: std::ops::Range<usize>,
+    edges: Array2<i64>,
+    (m, c, t_f): (usize, usize, usize),
+) -> Prediction {
+    let (a, b) = (rows.start, rows.end);
+    match decoded {
+        Some(d) => Prediction {
+            agent_ids: frame.ids().to_vec(),
+            trajectories: d.trajectories.slice(s![a..b, .., .., ..]).to_owned(),
+            probabilities: d.probabilities.slice(s![a..b, ..]).to_owned(),
+            class_probabilities: d.class_probabilities.slice(s![a..b, ..]).to_owned(),
+            mode_classes: d.mode_classes.slice(s![a..b, ..]).to_owned(),
+            edges,
+        },
+        None => Prediction {
+            agent_ids: vec![],
+            trajectories: Array4::zeros((0, m, t_f, 2)),
+            probabilities: Array2::zeros((0, m)),
+            class_probabilities: Array2::zeros((0, c)),
+            mode_classes: Array2::zeros((0, m)),
+            edges,
+        },
+    }
+}
+
 /// Refuses a session count or thread count out of bounds, before the model is read.
 fn check_options(options: &PredictorOptions) -> Result<()> {
     if !(1..=MAX_SESSIONS).contains(&options.sessions) {
@@ -842,7 +872,6 @@ impl Predictor {
         pool: Pool,
         times: Option<&mut PhaseTimes>,
     ) -> Result<Vec<Prediction>> {
-        let threads = pool.decode_threads(self.threads);
         let spec = &self.contract.input;
         let (c, k, t_f) = (spec.classes.len(), self.anchors.total(), spec.t_f);
         let m = modes.min(k);
@@ -861,30 +890,10 @@ impl Predictor {
             let j = join(&inputs)?;
             (j.inputs, j.agent_ptr)
         };
-        let n = poses.len();
-        let decoded = if n == 0 {
+        let decoded = if poses.is_empty() {
             None
         } else {
-            // A kept-features model's reading of the map (and the tiles it had not kept) timed with the crops.
-            let reading = Instant::now();
-            let still = self.still(&inputs)?;
-            let (inputs, patches) = self.read_kept(pool, inputs)?;
-            let read = if patches.is_some() { reading.elapsed() } else { Duration::ZERO };
-            let started = Instant::now();
-            let outputs = self.run_read(pool, inputs, patches)?;
-            let ran = started.elapsed();
-            let prior = if priors.len() == 1 {
-                priors.pop().ok_or_else(|| DganError::Inference("no prior".into()))?
-            } else {
-                let views: Vec<_> = priors.iter().map(|p| p.view()).collect();
-                ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?
-            };
-            let decoded = self.decode_outputs(&outputs, prior.view(), &still, &poses, modes, threads)?;
-            if let Some(times) = times {
-                (times.network, times.decode) = (ran, started.elapsed().saturating_sub(ran));
-                times.crops += read;
-            }
-            Some(decoded)
+            Some(self.network_and_decode(inputs, priors, &poses, modes, pool, times)?)
         };
         let decoded = match (frames, decoded) {
             // One frame: its prediction is the whole decode, moved rather than sliced and copied.
@@ -894,30 +903,51 @@ impl Predictor {
             }
             (_, decoded) => decoded,
         };
-        let mut predictions = Vec::with_capacity(frames.len());
-        for (f, (frame, edges)) in frames.iter().zip(edges).enumerate() {
-            let (a, b) = (agent_ptr[f], agent_ptr[f + 1]);
-            let p = match &decoded {
-                Some(d) => Prediction {
-                    agent_ids: frame.ids().to_vec(),
-                    trajectories: d.trajectories.slice(s![a..b, .., .., ..]).to_owned(),
-                    probabilities: d.probabilities.slice(s![a..b, ..]).to_owned(),
-                    class_probabilities: d.class_probabilities.slice(s![a..b, ..]).to_owned(),
-                    mode_classes: d.mode_classes.slice(s![a..b, ..]).to_owned(),
-                    edges,
-                },
-                None => Prediction {
-                    agent_ids: vec![],
-                    trajectories: Array4::zeros((0, m, t_f, 2)),
-                    probabilities: Array2::zeros((0, m)),
-                    class_probabilities: Array2::zeros((0, c)),
-                    mode_classes: Array2::zeros((0, m)),
-                    edges,
-                },
-            };
-            predictions.push(p);
+        let empty = (m, c, t_f);
+        Ok(frames
+            .iter()
+            .zip(edges)
+            .enumerate()
+            .map(|(f, (frame, edges))| {
+                let (a, b) = (agent_ptr[f], agent_ptr[f + 1]);
+                frame_prediction(frame, decoded.as_ref(), a..b, edges, empty)
+            })
+            .collect())
+    }
+
+    /// The network's outputs on `inputs` (a kept-features model's map read first), decoded against the frames'
+    /// `priors` for agents at `poses`; `times`, if given, gets the network's and decoding's time and the reading's
+    /// added to the crops'.
+    fn network_and_decode(
+        &self,
+        inputs: NetworkInputs,
+        mut priors: Vec<Array3<f32>>,
+        poses: &[AgentPose],
+        modes: usize,
+        pool: Pool,
+        times: Option<&mut PhaseTimes>,
+    ) -> Result<Decoded> {
+        // A kept-features model's reading of the map (and the tiles it had not kept) timed with the crops.
+        let reading = Instant::now();
+        let still = self.still(&inputs)?;
+        let (inputs, patches) = self.read_kept(pool, inputs)?;
+        let read = if patches.is_some() { reading.elapsed() } else { Duration::ZERO };
+        let started = Instant::now();
+        let outputs = self.run_read(pool, inputs, patches)?;
+        let ran = started.elapsed();
+        let prior = if priors.len() == 1 {
+            priors.pop().ok_or_else(|| DganError::Inference("no prior".into()))?
+        } else {
+            let views: Vec<_> = priors.iter().map(|p| p.view()).collect();
+            ndarray::concatenate(Axis(0), &views).map_err(|e| DganError::Inference(e.to_string()))?
+        };
+        let threads = pool.decode_threads(self.threads);
+        let decoded = self.decode_outputs(&outputs, prior.view(), &still, poses, modes, threads)?;
+        if let Some(times) = times {
+            (times.network, times.decode) = (ran, started.elapsed().saturating_sub(ran));
+            times.crops += read;
         }
-        Ok(predictions)
+        Ok(decoded)
     }
 
     /// Runs the network on preprocessed inputs; returns class logits, anchor logits and offsets.
