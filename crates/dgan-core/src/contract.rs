@@ -239,86 +239,8 @@ impl ModelContract {
                 self.contract_version
             )));
         }
-        let engine = [
-            ("raster_version", self.raster_version, crate::raster::RASTER_VERSION),
-            ("preprocess_version", self.preprocess_version, crate::preprocess::PREPROCESS_VERSION),
-        ];
-        for (key, declared, ours) in engine {
-            if declared.is_some_and(|v| v != ours) {
-                return Err(DganError::Contract(format!(
-                    "the model was exported with {key} {}, this engine's is {ours}: its inputs would differ from \
-                     those it was trained on; use the dgan release it was exported with, or re-export it",
-                    declared.unwrap_or_default()
-                )));
-            }
-        }
-        if self.contract_version < 2 {
-            let optional_map = self.input.map.as_ref().is_some_and(|m| m.optional);
-            if self.input.prior != PriorSpec::NONE || optional_map || self.temperature != 1.0 {
-                return Err(DganError::Contract(
-                    "prior, map.optional and temperature are contract-2 keys; a contract_version 1 model cannot \
-                     declare them"
-                        .into(),
-                ));
-            }
-        }
-        if self.contract_version < 3 && self.input.graph != GraphLayout::EdgeList {
-            return Err(DganError::Contract(
-                "graph = \"padded\" is a contract-3 key; versions 1 and 2 take an edge list".into(),
-            ));
-        }
-        if self.contract_version < 5 && self.input.heading != HeadingSource::Measured {
-            return Err(DganError::Contract(
-                "heading is a contract-5 key; versions 1 to 4 take measured headings".into(),
-            ));
-        }
-        let prior = &self.input.prior;
-        if self.contract_version < 6 && (prior.fit != VelocityFit::Endpoints || prior.standing_mps != 0.0) {
-            return Err(DganError::Contract(
-                "prior.fit and prior.standing_mps are contract-6 keys; versions 1 to 5 fit endpoints and never \
-                 clamp standing agents"
-                    .into(),
-            ));
-        }
-        if self.contract_version < 8 && !prior.by_class.is_empty() {
-            return Err(DganError::Contract(
-                "prior.by_class is a contract-8 key; versions 1 to 7 take one velocity estimate for every class".into(),
-            ));
-        }
-        if self.contract_version < 8 && prior.fit == VelocityFit::Adaptive {
-            return Err(DganError::Contract(
-                "prior.fit \"adaptive\" is contract 8; versions 6 and 7 fit endpoints, a line or a parabola".into(),
-            ));
-        }
-        if self.contract_version < 10 && self.input.denoise_gate_m != 0.0 {
-            return Err(DganError::Contract(
-                "denoise_gate_m is a contract-10 key; versions 1 to 9 take the histories as given".into(),
-            ));
-        }
-        if self.contract_version < 12 && self.input.map.as_ref().is_some_and(|m| m.scene.is_some()) {
-            return Err(DganError::Contract(
-                "map.scene is a contract-12 key; versions 1 to 11 take a crop per agent".into(),
-            ));
-        }
-        if self.contract_version < 13 && self.input.map.as_ref().and_then(|m| m.scene).is_some_and(|s| s.kept()) {
-            return Err(DganError::Contract(
-                "map.scene.tile_px is a contract-13 key; version 12 reads rasters of the scene per call".into(),
-            ));
-        }
-        if self.input.map.as_ref().is_some_and(|m| m.scene.is_some()) && self.input.graph != GraphLayout::Padded {
-            return Err(DganError::Contract("a scene model (map.scene) takes the padded graph layout".into()));
-        }
-        if self.contract_version < 11 && self.input.map.as_ref().is_some_and(|m| !m.classes.is_empty()) {
-            return Err(DganError::Contract(
-                "map.classes is a contract-11 key; versions 1 to 10 draw every agent's crop".into(),
-            ));
-        }
-        let render = self.input.map.as_ref().map_or(MapRender::Agent, |m| m.render);
-        if self.contract_version < 7 && render != MapRender::Agent {
-            return Err(DganError::Contract(
-                "map.render is a contract-7 key; versions 1 to 6 draw each agent's crop (\"agent\")".into(),
-            ));
-        }
+        self.check_engine_versions()?;
+        self.check_keys_of_version()?;
         match (self.contract_version >= 4, &self.weights_sha256) {
             (true, None) => {
                 return Err(DganError::Contract(
@@ -340,6 +262,97 @@ impl ModelContract {
         }
         self.input.validate().map_err(|e| DganError::Contract(e.to_string()))?;
         self.anchors().map(|_| ())
+    }
+
+    /// Refuses a model exported with another rasteriser or preprocessing than this engine's: its inputs would differ.
+    fn check_engine_versions(&self) -> Result<()> {
+        let engine = [
+            ("raster_version", self.raster_version, crate::raster::RASTER_VERSION),
+            ("preprocess_version", self.preprocess_version, crate::preprocess::PREPROCESS_VERSION),
+        ];
+        for (key, declared, ours) in engine {
+            if declared.is_some_and(|v| v != ours) {
+                return Err(DganError::Contract(format!(
+                    "the model was exported with {key} {}, this engine's is {ours}: its inputs would differ from \
+                     those it was trained on; use the dgan release it was exported with, or re-export it",
+                    declared.unwrap_or_default()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses a key declared by a model of a contract version older than the key, and a scene model without the
+    /// padded graph layout.
+    fn check_keys_of_version(&self) -> Result<()> {
+        let (input, prior) = (&self.input, &self.input.prior);
+        let map = input.map.as_ref();
+        let scene = map.and_then(|m| m.scene);
+        let render = map.map_or(MapRender::Agent, |m| m.render);
+        let keys: [(u32, bool, &str); 11] = [
+            (
+                2,
+                *prior != PriorSpec::NONE || map.is_some_and(|m| m.optional) || self.temperature != 1.0,
+                "prior, map.optional and temperature are contract-2 keys; a contract_version 1 model cannot \
+                 declare them",
+            ),
+            (
+                3,
+                input.graph != GraphLayout::EdgeList,
+                "graph = \"padded\" is a contract-3 key; versions 1 and 2 take an edge list",
+            ),
+            (
+                5,
+                input.heading != HeadingSource::Measured,
+                "heading is a contract-5 key; versions 1 to 4 take measured headings",
+            ),
+            (
+                6,
+                prior.fit != VelocityFit::Endpoints || prior.standing_mps != 0.0,
+                "prior.fit and prior.standing_mps are contract-6 keys; versions 1 to 5 fit endpoints and never clamp \
+                 standing agents",
+            ),
+            (
+                8,
+                !prior.by_class.is_empty(),
+                "prior.by_class is a contract-8 key; versions 1 to 7 take one velocity estimate for every class",
+            ),
+            (
+                8,
+                prior.fit == VelocityFit::Adaptive,
+                "prior.fit \"adaptive\" is contract 8; versions 6 and 7 fit endpoints, a line or a parabola",
+            ),
+            (
+                10,
+                input.denoise_gate_m != 0.0,
+                "denoise_gate_m is a contract-10 key; versions 1 to 9 take the histories as given",
+            ),
+            (12, scene.is_some(), "map.scene is a contract-12 key; versions 1 to 11 take a crop per agent"),
+            (
+                13,
+                scene.is_some_and(|s| s.kept()),
+                "map.scene.tile_px is a contract-13 key; version 12 reads rasters of the scene per call",
+            ),
+            (
+                11,
+                map.is_some_and(|m| !m.classes.is_empty()),
+                "map.classes is a contract-11 key; versions 1 to 10 draw every agent's crop",
+            ),
+            (
+                7,
+                render != MapRender::Agent,
+                "map.render is a contract-7 key; versions 1 to 6 draw each agent's crop (\"agent\")",
+            ),
+        ];
+        if let Some((_, _, message)) =
+            keys.iter().find(|(since, declared, _)| self.contract_version < *since && *declared)
+        {
+            return Err(DganError::Contract((*message).into()));
+        }
+        if scene.is_some() && input.graph != GraphLayout::Padded {
+            return Err(DganError::Contract("a scene model (map.scene) takes the padded graph layout".into()));
+        }
+        Ok(())
     }
 
     /// The temperatures decoding applies.
