@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._values import ClassLike
+from dgan._values import ClassLike, checked_array
 from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
 from dgan.tables import Columns, columns
 
@@ -290,8 +290,8 @@ def sample_track(
     >>> dgan.sample_track([0.0, 1.0], [[0.0, 0.0], [2.0, 4.0]], [0.5, 2.0], dt=0.5, max_gap=1.0).tolist()
     [[1.0, 2.0], [nan, nan]]
     """
-    t, a = (np.ascontiguousarray(v, dtype=np.float64).reshape(-1) for v in (times, at))
-    p = np.ascontiguousarray(xy, dtype=np.float64)
+    t, a = (checked_array(name, v, np.float64, required=True).reshape(-1) for name, v in (("times", times), ("at", at)))
+    p = checked_array("xy", xy, np.float64, required=True)
     if p.ndim != 2 or p.shape[1] != 2:
         raise InvalidFrameError(f"xy must have shape (N, 2), got {p.shape}")
     return _dgan.sample_track(t, p, a, float(dt), None if max_gap is None else float(max_gap))
