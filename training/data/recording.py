@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
+from dgan._values import checked_shift
 
 Arr = npt.NDArray[Any]
 
@@ -71,9 +72,7 @@ def moved(rec: Recording, shift_m: npt.ArrayLike) -> Recording:
     """``rec`` with every world coordinate, its rows' and its map's, moved by ``shift_m`` (2,) metres: the same
     recording under another origin (``training.evaluate --origin``; docs/model-contract.md, *The map's grid and the
     world's origin*)."""
-    shift = np.asarray(shift_m, dtype=np.float64)
-    if shift.shape != (2,) or not np.isfinite(shift).all():
-        raise ValueError(f"the shift must be two finite metres, got {shift_m!r}")
+    shift = checked_shift("shift_m", shift_m, ValueError)
     return replace(rec, xy=rec.xy + shift, map=None if rec.map is None else rec.map.moved(shift))
 
 
