@@ -6,29 +6,29 @@
   (``dgan_demo.png``; the picture needs matplotlib, ``pip install dgan[plot]``).
 - ``dgan predict MODEL SCENE [--time T] [--map MAP] [--json | --out FILE]``: predict every agent seen at time T of a
   scene file, resampled to the model's time base: the Social-GAN layout (``frame agent_id x y``, whitespace-separated,
-  one annotation every 0.4 s), a CSV with a header (``agent_id,time,x,y[,class,heading,length,width,vx,vy]``, time
-  in seconds unless ``--time-unit`` says otherwise), or a parquet / feather table with those columns.
+  one annotation every 0.4 s), a table with a header (``agent_id,time,x,y[,class,heading,length,width,vx,vy]``,
+  separated by commas, semicolons, tabs or bars; time in seconds unless ``--time-unit`` says otherwise, or ISO 8601
+  instants; other names with ``--column ARG=NAME``), or a parquet / feather table.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
+import os
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 import dgan
-from dgan.exceptions import DganError, InvalidFrameError
+from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError
 from dgan.frame import DENOISE_GATE_M
+from dgan.predictionfiles import prediction_json, write_records, write_table
 from dgan.records import DUPLICATES
-from dgan.scenefiles import read_map, read_scene, scene_files
+from dgan.scenefiles import cli_wording, column_names, latest_time, read_map, read_scene, scene_files, time_value
 
 
 def _info(args: argparse.Namespace) -> int:
@@ -95,98 +95,33 @@ def _models(args: argparse.Namespace) -> int:
     return 0
 
 
-def _prediction_json(pred: dgan.Prediction, frame: dgan.Frame, model: str, now: float) -> dict[str, Any]:
-    return {
-        "model": model,
-        "current_time": now,
-        "dt_s": pred.dt_s,
-        "times_s": pred.times_s.tolist(),
-        "classes": list(pred.classes),
-        "agents": [
-            {
-                "id": pred.agent_ids[i].item() if hasattr(pred.agent_ids[i], "item") else pred.agent_ids[i],
-                "class": frame.classes[i],
-                "class_probabilities": dict(zip(pred.classes, pred.class_probabilities[i].tolist(), strict=True)),
-                "modes": [
-                    {
-                        "probability": float(pred.probabilities[i, m]),
-                        "class": pred.classes[pred.mode_classes[i, m]],
-                        "trajectory": pred.trajectories[i, m].tolist(),
-                    }
-                    for m in range(pred.trajectories.shape[1])
-                ],
-            }
-            for i in range(len(pred))
-        ],
-    }
-
-
-def write_table(pred: dgan.Prediction, out: Path, scene: str | None = None) -> None:
-    """``--out``: the long table of :meth:`Prediction.to_records` as CSV, parquet or JSON lines, by extension; with
-    ``scene``, a first column ``scene`` holding it. Written beside ``out`` and renamed onto it (a failed write leaves
-    ``out`` as it was)."""
-    write_records({} if scene is None else {"scene": [scene]}, [pred], out)
-
-
-def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction], out: Path) -> None:
-    """The predictions' long tables one after the other (at least one), each led by the columns of ``extra`` (one
-    value per prediction, repeated on its rows)."""
-    from dgan.prediction import write_atomically
-
-    suffix = out.suffix.lower()
-    if suffix not in (".csv", ".parquet", ".jsonl", ".ndjson"):
-        raise InvalidFrameError(f"--out must end in .csv, .parquet or .jsonl, got {out.name}")
-    if suffix == ".parquet":
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        tables = []
-        for i, pr in enumerate(preds):
-            t = pr.to_arrow()
-            for j, (k, v) in enumerate(extra.items()):
-                t = t.add_column(j, k, pa.array([v[i]] * t.num_rows, type=pa.string()))
-            tables.append(t)
-        try:
-            table = pa.concat_tables(tables)
-        except pa.ArrowInvalid as e:
-            raise dgan.exceptions.OutputError(f"the scenes' tables do not join (ids of other types?): {e}") from None
-        write_atomically(out, lambda f: pq.write_table(table, f))
-        return
-    names = list(extra) + list(preds[0].to_records())
-    rows: list[tuple[Any, ...]] = []
-    for i, pr in enumerate(preds):
-        cols = {k: v.tolist() for k, v in pr.to_records().items()}
-        cols.update({k: [v[i]] * len(cols["x"]) for k, v in extra.items()})
-        rows.extend(zip(*(cols[k] for k in names), strict=True))
-
-    def write(f: Any) -> None:
-        if suffix == ".csv":
-            text = io.StringIO()
-            w = csv.writer(text)
-            w.writerow(names)
-            w.writerows(rows)
-            f.write(text.getvalue().encode())
-        else:
-            f.write("".join(json.dumps(dict(zip(names, r, strict=True))) + "\n" for r in rows).encode())
-
-    write_atomically(out, write)
-
-
-def _frame_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> tuple[dgan.Frame, float]:
+def _frame_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> tuple[dgan.Frame, float | str]:
     """The frame of a scene file at ``--time`` (its last time by default), and that time."""
-    cols, unit = read_scene(scene)
+    names = column_names(args.column)
+    cols, unit = read_scene(scene, text_columns=(names.get("cls_column", "class"),))
     time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
     scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
-    frame = dgan.Frame.from_records(
-        cols,
-        spec=p,
-        time_unit=time_unit,
-        current_time=args.time,
-        map=scene_map,
-        duplicates=args.duplicates,
-        upsample=args.upsample,
-    )
-    now = float(args.time) if args.time is not None else float(np.max(cols["time"]))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ColumnWarning)
+        try:
+            frame = dgan.Frame.from_records(
+                cols,
+                spec=p,
+                time_unit=time_unit,
+                current_time=args.time,
+                map=scene_map,
+                duplicates=args.duplicates,
+                upsample=args.upsample,
+                **names,
+            )
+        except InvalidFrameError as e:
+            raise type(e)(cli_wording(str(e))) from None
+    for w in caught:
+        if issubclass(w.category, ColumnWarning):
+            print(f"dgan: note: {cli_wording(str(w.message))}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    now = args.time if args.time is not None else latest_time(cols[names.get("time", "time")], "time")
     if args.denoise is not None:
         frame = frame.denoised(args.denoise)
         gate = p.spec.denoise_gate_m
@@ -250,7 +185,7 @@ def _predict(args: argparse.Namespace) -> int:
         write_table(pred, Path(args.out))
         print(f"wrote {len(pred)} agents × {pred.trajectories.shape[1]} modes to {args.out}", file=sys.stderr)
     if args.json:
-        json.dump(_prediction_json(pred, frame, args.model, now), sys.stdout)
+        json.dump(prediction_json(pred, frame, args.model, now), sys.stdout)
         print()
         return 0
     if args.out is not None:
@@ -265,9 +200,10 @@ def _timings_text(timings: dict[str, float]) -> str:
     return ", ".join(f"{k} {timings[k]:.1f}" for k in shown) + " ms"
 
 
-def _print_prediction(pred: dgan.Prediction, frame: dgan.Frame, p: dgan.Predictor, ms: float, now: float) -> None:
+def _print_prediction(pred: dgan.Prediction, frame: dgan.Frame, p: dgan.Predictor, ms: float, now: float | str) -> None:
+    when = now if isinstance(now, str) else format(now, "g")
     print(
-        f"{len(frame)} agents at time {now:g}, {len(pred.edges)} attention edges, predicted in {ms:.1f} ms "
+        f"{len(frame)} agents at time {when}, {len(pred.edges)} attention edges, predicted in {ms:.1f} ms "
         f"(steps of {p.spec.dt_s:g} s, horizon {p.spec.t_f * p.spec.dt_s:g} s)"
     )
     timings = p.last_timings
@@ -295,18 +231,11 @@ def _predict_parser(sub: Any) -> None:
     pred.add_argument("model")
     pred.add_argument(
         "scene",
-        help="Social-GAN txt (frame id x y), CSV with agent_id,time,x,y[,...], or parquet/feather; a directory or "
+        help="Social-GAN txt (frame id x y), CSV (or ; tab | separated) with agent_id,time,x,y[,...] (other names: "
+        "--column), or parquet/feather; a directory or "
         "a quoted glob of them predicts each (at its last time, or --time) into one --out table with a scene column",
     )
-    pred.add_argument(
-        "--time", type=float, default=None, help="current time t_obs in the file's unit (default: the last)"
-    )
-    pred.add_argument(
-        "--time-unit",
-        type=float,
-        default=None,
-        help="seconds per unit of the file's time column (default: 1 for tables; Social-GAN files 0.4 s a step)",
-    )
+    _table_options(pred)
     pred.add_argument(
         "--map", default=None, help="a bundled scene (eth hotel univ zara1 zara2), an image, or a vector map JSON"
     )
@@ -314,15 +243,6 @@ def _predict_parser(sub: Any) -> None:
     pred.add_argument("--modes", type=int, default=3, help="modes per agent (default 3)")
     pred.add_argument(
         "--provider", default="cpu", help="ONNX Runtime execution provider: cpu (default), cuda or cuda:N"
-    )
-    pred.add_argument(
-        "--duplicates",
-        choices=DUPLICATES,
-        default="error",
-        help="several rows of one agent at one time: refuse (default), keep the first or last, or their mean",
-    )
-    pred.add_argument(
-        "--upsample", action="store_true", help="interpolate data up to 2.5x sparser than the model's step"
     )
     pred.add_argument(
         "--unknown-classes",
@@ -344,6 +264,38 @@ def _predict_parser(sub: Any) -> None:
     pred.add_argument("--json", action="store_true", help="print JSON (times, classes, probabilities) to stdout")
     pred.add_argument("--out", default=None, help="write the long table of modes: .csv, .parquet or .jsonl")
     pred.set_defaults(func=_predict)
+
+
+def _table_options(pred: Any) -> None:
+    """How ``dgan predict`` reads a scene table: its columns, times and repeated or sparse rows."""
+    pred.add_argument(
+        "--time",
+        type=time_value,
+        default=None,
+        help="current time t_obs in the file's unit, or an ISO 8601 instant where its times are (default: the last)",
+    )
+    pred.add_argument(
+        "--column",
+        action="append",
+        metavar="ARG=NAME",
+        help="read the column NAME as ARG: agent_id, time, x, y, class, heading, length, width or velocity=VX,VY "
+        "(repeatable; e.g. --column agent_id=track_id --column time=timestamp)",
+    )
+    pred.add_argument(
+        "--time-unit",
+        type=float,
+        default=None,
+        help="seconds per unit of the file's time column (default: 1 for tables; Social-GAN files 0.4 s a step)",
+    )
+    pred.add_argument(
+        "--duplicates",
+        choices=DUPLICATES,
+        default="error",
+        help="several rows of one agent at one time: refuse (default), keep the first or last, or their mean",
+    )
+    pred.add_argument(
+        "--upsample", action="store_true", help="interpolate data up to 2.5x sparser than the model's step"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -381,13 +333,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except DganError as e:
         print(f"dgan: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # e.g. `dgan predict ... | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes stdout
+        return 0
     except (OSError, MemoryError) as e:  # an output that cannot be written, a file that cannot be read
         what = f"{e.strerror}: {e.filename}" if isinstance(e, OSError) and e.strerror and e.filename else repr(e)
         print(f"dgan: error: {what}", file=sys.stderr)
         return 2
-    except BrokenPipeError:  # e.g. `dgan predict ... | head`
-        sys.stderr.close()
-        return 0
     return code
 
 

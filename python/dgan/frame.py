@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan._times import TimeLike
 from dgan._values import ClassLike, as_given, checked_array, checked_shift, typename
 from dgan.contract import CLASSES
 from dgan.exceptions import InvalidFrameError, InvalidMapError, UnknownClassError
@@ -155,7 +156,7 @@ class Frame:
         dt: float | None = None,
         spec: Any = None,
         time_unit: float = 1.0,
-        current_time: float | None = None,
+        current_time: TimeLike | None = None,
         max_gap: float | None = None,
         agent_id: str = "agent_id",
         time: str = "time",
@@ -180,9 +181,11 @@ class Frame:
             t_obs, dt: the frame's steps and the seconds between them; both from ``spec`` (an
                 :class:`~dgan.InputSpec` or a :class:`~dgan.Predictor`) if given. ``dt`` None: the data's own
                 spacing (the smallest gap between distinct times).
-            time_unit: seconds per unit of the time column (0.04 for video frames at 25 fps, 1e-9 for nanoseconds).
-            current_time: the frame's current time t_obs, in the time column's unit (the latest time if None); it
-                must be a time of the table.
+            time_unit: seconds per unit of a numeric time column (0.04 for video frames at 25 fps, 1e-9 for
+                nanoseconds). A column of datetimes (numpy, pandas with or without a time zone, polars, Arrow), ISO
+                8601 strings or timedeltas carries its own unit; ``time_unit`` then stays 1.
+            current_time: the frame's current time t_obs, in the time column's unit or kind (a datetime or ISO 8601
+                string for a column of instants; the latest time if None); it must be a time of the table.
             max_gap: the longest gap in seconds between two rows of an agent that is interpolated (1.5 · dt if None).
             duplicates: several rows of one agent at one time: ``"error"`` (refused), ``"first"`` or ``"last"``
                 (in row order), ``"mean"`` (positions, sizes, velocities averaged; headings by circular mean).

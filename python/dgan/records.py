@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan._times import TimeLike, instant_text, time_column
 from dgan._values import ClassLike, checked_array
 from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
 from dgan.tables import Columns, columns
@@ -64,10 +65,35 @@ class Names:
         ]
 
 
+#: Other names trackers and datasets give the columns :meth:`~dgan.Frame.from_records` reads (compared without case,
+#: ``_`` or ``-``), so that a table holding one of them is told which argument reads it.
+SYNONYMS: Final = {
+    "agent_id": ("trackid", "track", "objectid", "obj", "objid", "id", "agent", "pedid", "uid", "instanceid"),
+    "time": ("timestamp", "t", "frame", "frameid", "ts", "times", "timestamps", "timestampns", "sec", "seconds"),
+    "x": ("posx", "positionx", "centerx", "xm", "px", "utmx", "east", "easting"),
+    "y": ("posy", "positiony", "centery", "ym", "py", "utmy", "north", "northing"),
+    "class": ("type", "category", "label", "objecttype", "agenttype", "objectclass", "classname", "cls"),
+    "heading": ("yaw", "theta", "orientation", "angle", "headingrad"),
+    "length": ("len", "l", "dimx", "sizex"),
+    "width": ("w", "dimy", "sizey"),
+    "vx": ("velocityx", "velx", "speedx"),
+    "vy": ("velocityy", "vely", "speedy"),
+}
+
+
+def _key(name: str) -> str:
+    return name.lower().replace("_", "").replace("-", "").replace(" ", "")
+
+
 def _close(name: str, candidates: list[str], cutoff: float = 0.8) -> str | None:
-    """The candidate that is ``name`` but for case, or the one closest to it (difflib ratio ≥ ``cutoff``)."""
+    """The candidate that is ``name`` but for case, one of its :data:`SYNONYMS`, or the one closest to it (difflib
+    ratio ≥ ``cutoff``)."""
     for c in candidates:
         if c.lower() == name.lower():
+            return c
+    synonyms = SYNONYMS.get(name, ())
+    for c in candidates:
+        if _key(c) in synonyms:
             return c
     best = difflib.get_close_matches(name, candidates, n=1, cutoff=cutoff)
     return best[0] if best else None
@@ -80,6 +106,8 @@ def check_columns(cols: Columns, names: Names) -> None:
         if name not in cols:
             close = _close(name, list(cols), cutoff=0.6)
             hint = f"; did you mean {close!r} ({arg}={close!r})?" if close else ""
+            if close and arg == "time" and _key(close).startswith("frame"):
+                hint = hint[:-2] + ", with time_unit= the seconds per frame)?"
             raise InvalidFrameError(f"records lack the column {name!r}; they have {list(cols)}{hint}")
     known = set(names.required().values()) | {name for _, name in names.optional()}
     unread = [c for c in cols if c not in known]
@@ -186,12 +214,14 @@ def _check_options(t_obs: Any, dt: Any, time_unit: Any, duplicates: Any, upsampl
         raise InvalidSpecError(f"upsample must be True or False, got {upsample!r}")
 
 
-def _current_time(uniq_t: npt.NDArray[np.float64], current_time: float | None, tol: float) -> float:
+def _current_time(
+    uniq_t: npt.NDArray[np.float64], current_time: float | None, tol: float, origin: np.datetime64 | None
+) -> float:
     now = float(uniq_t.max()) if current_time is None else float(current_time)
     if not np.any(np.abs(uniq_t - now) <= tol):
+        first, last, asked = (instant_text(origin, t) for t in (uniq_t[0], uniq_t[-1], now))
         raise InvalidFrameError(
-            f"no row at current_time {now:g}; the table spans {uniq_t[0]:g}..{uniq_t[-1]:g} "
-            f"({uniq_t.size} distinct times)"
+            f"no row at current_time {asked}; the table spans {first}..{last} ({uniq_t.size} distinct times)"
         )
     return float(uniq_t[np.argmin(np.abs(uniq_t - now))])
 
@@ -226,7 +256,7 @@ def from_records(
     dt: float | None,
     spec: Any,
     time_unit: float,
-    current_time: float | None,
+    current_time: TimeLike | None,
     max_gap: float | None,
     names: Names,
     default_class: ClassLike,
@@ -243,8 +273,9 @@ def from_records(
     _check_options(t_obs, dt, time_unit, duplicates, upsample)
     cols = columns(records)
     check_columns(cols, names)
-    times, xs, ys = _numeric(cols, names.time), _numeric(cols, names.x), _numeric(cols, names.y)
-    assert times is not None
+    clock = time_column(cols[names.time], names.time, time_unit, current_time)
+    times, time_unit = clock.values, clock.unit
+    xs, ys = _numeric(cols, names.x), _numeric(cols, names.y)
     assert xs is not None
     assert ys is not None
     if not np.all(np.isfinite(times)):
@@ -257,7 +288,7 @@ def from_records(
     if dt is None:
         gaps = np.diff(uniq_t)
         dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
-    now = _current_time(uniq_t, current_time, 1e-6 * dt / time_unit)
+    now = _current_time(uniq_t, clock.now, 1e-6 * dt / time_unit, clock.origin)
     seconds = np.ascontiguousarray(times * time_unit)
     rows = {"ids": codes, "times": seconds, "xs": xs, "ys": ys, **_optional_rows(cols, names)}
     try:

@@ -4,21 +4,28 @@ image with its homography, a vector-map JSON, an Argoverse 2 map), and folders o
 from __future__ import annotations
 
 import csv
+import re
+from collections.abc import Collection, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
+import numpy.typing as npt
 
 import dgan
+from dgan._times import instant_text, time_column
 from dgan.exceptions import InvalidFrameError, InvalidMapError
 
 #: Seconds between the annotations of a Social-GAN layout file (ETH/UCY), whatever its frame numbering.
-#: Seconds between the annotations of a Social-GAN layout file (ETH/UCY), whatever its frame numbering.
 SOCIAL_GAN_DT_S = 0.4
+#: What may separate the fields of a scene table with a header.
+DELIMITERS = ",;\t|"
 
 
-def read_scene(path: Path) -> tuple[dict[str, Any], float | None]:
-    """A scene file as columns, and the seconds per unit of its time column when the format fixes it."""
+def read_scene(path: Path, text_columns: Collection[str] = ("class",)) -> tuple[dict[str, Any], float | None]:
+    """A scene file as columns, and the seconds per unit of its time column when the format fixes it. In a table
+    with a header, ``text_columns`` are kept as text, other columns of numbers (empty fields NaN) become numbers, and
+    any other column stays text (ids that are names, times in ISO 8601)."""
     if path.suffix in (".parquet", ".feather", ".arrow") and path.is_file():
         try:
             import pyarrow.feather as feather
@@ -38,23 +45,8 @@ def read_scene(path: Path) -> tuple[dict[str, Any], float | None]:
     except (OSError, UnicodeDecodeError, MemoryError) as e:
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]
-    if "," in first and any(c.isalpha() for c in first):
-        rows = list(csv.DictReader(text.splitlines()))
-        if not rows:
-            raise InvalidFrameError(f"{path} has a header but no rows")
-        cols: dict[str, Any] = {k: [r[k] for r in rows] for k in rows[0]}
-        for k in list(cols):
-            if k in ("class", "agent_id"):
-                cols[k] = np.asarray(cols[k], dtype=object)
-                continue
-            try:
-                cols[k] = np.asarray(cols[k], dtype=np.float64)
-            except ValueError as e:
-                raise InvalidFrameError(f"{path}: column {k!r} is not numeric: {e}") from None
-        ids = cols.get("agent_id")
-        if ids is not None and all(str(v).lstrip("-").isdigit() for v in ids):
-            cols["agent_id"] = ids.astype(np.int64)
-        return cols, None
+    if _is_header(first):
+        return _header_table(path, text, first, text_columns), None
     try:
         data = np.loadtxt(path, ndmin=2)
     except ValueError as e:
@@ -64,6 +56,54 @@ def read_scene(path: Path) -> tuple[dict[str, Any], float | None]:
     steps = np.diff(np.unique(data[:, 0]))
     unit = SOCIAL_GAN_DT_S / float(steps.min()) if steps.size else 1.0
     return {"time": data[:, 0], "agent_id": data[:, 1].astype(np.int64), "x": data[:, 2], "y": data[:, 3]}, unit
+
+
+def _is_header(line: str) -> bool:
+    """Whether a file's first line is a header: fields split by one of :data:`DELIMITERS`, one of them no number."""
+    return any(d in line and any(not _is_number(f) for f in line.split(d)) for d in DELIMITERS)
+
+
+def _is_number(field: str) -> bool:
+    try:
+        float(field)
+    except ValueError:
+        return False
+    return True
+
+
+def _header_table(path: Path, text: str, header: str, text_columns: Collection[str]) -> dict[str, Any]:
+    """A delimited table with a header (comma, semicolon, tab or bar, whichever the header uses) as columns."""
+    try:
+        dialect = csv.Sniffer().sniff(header, delimiters=DELIMITERS)
+    except csv.Error:
+        raise InvalidFrameError(
+            f"{path}: cannot tell which of {DELIMITERS!r} separates the header {header!r}"
+        ) from None
+    rows = [r for r in csv.reader(text.splitlines(), delimiter=dialect.delimiter) if any(f.strip() for f in r)]
+    if len(rows) < 2:
+        raise InvalidFrameError(f"{path} has a header but no rows")
+    names = [n.strip() for n in rows[0]]
+    if len(set(names)) != len(names):
+        raise InvalidFrameError(f"{path}: the header names a column twice: {names}")
+    if bad := next((i for i, r in enumerate(rows) if len(r) != len(names)), None):
+        raise InvalidFrameError(f"{path}: row {bad} has {len(rows[bad])} fields where the header has {len(names)}")
+    cols: dict[str, Any] = {}
+    for k, values in zip(names, zip(*rows[1:], strict=True), strict=True):
+        text_values = np.asarray([v.strip() for v in values], dtype=object)
+        cols[k] = text_values if k in text_columns else _numbers_or_text(text_values)
+    return cols
+
+
+def _numbers_or_text(values: npt.NDArray[Any]) -> npt.NDArray[Any]:
+    """A column of text fields as numbers when every field is one (empty fields NaN): whole numbers as int64 (ids),
+    others as float64; else the text as it is."""
+    try:
+        numbers = np.asarray([float(v) if v else np.nan for v in values], dtype=np.float64)
+    except ValueError:
+        return values
+    if all(v.lstrip("-").isdigit() for v in values):
+        return numbers.astype(np.int64)
+    return numbers
 
 
 def read_map(spec: str, pixel_to_world: str | None) -> dgan.RasterMap | dgan.VectorMap:
@@ -109,3 +149,61 @@ def scene_files(spec: str) -> list[Path] | None:
     if not files:
         raise InvalidFrameError(f"no scene files in {spec}")
     return files
+
+
+#: ``--column ARG=NAME``: each ARG and the argument of :meth:`dgan.Frame.from_records` that names that column.
+COLUMN_ARGUMENTS: Final = {
+    "agent_id": "agent_id",
+    "time": "time",
+    "x": "x",
+    "y": "y",
+    "class": "cls_column",
+    "heading": "heading",
+    "length": "length",
+    "width": "width",
+    "velocity": "velocity",
+}
+
+
+def column_names(options: Sequence[str] | None) -> dict[str, Any]:
+    """``--column ARG=NAME`` options (``velocity=VX,VY``) as keyword arguments of :meth:`dgan.Frame.from_records`."""
+    out: dict[str, Any] = {}
+    for option in options or ():
+        arg, _, name = (part.strip() for part in option.partition("="))
+        vx, vy = (part.strip() for part in name.partition(",")[::2])
+        if arg not in COLUMN_ARGUMENTS or not name or (arg == "velocity" and not (vx and vy)):
+            raise InvalidFrameError(
+                f"--column takes ARG=NAME with ARG one of {', '.join(COLUMN_ARGUMENTS)} (velocity=VX,VY), "
+                f"got {option!r}"
+            )
+        out[COLUMN_ARGUMENTS[arg]] = (vx, vy) if arg == "velocity" else name
+    return out
+
+
+def cli_wording(text: str) -> str:
+    """A message of :meth:`dgan.Frame.from_records` that names its arguments (``agent_id='track_id'``,
+    ``time_unit=``) in the options that ``dgan predict`` takes (``--column agent_id=track_id``, ``--time-unit``)."""
+    by_argument = {v: k for k, v in COLUMN_ARGUMENTS.items()}
+    text = re.sub(
+        r"\b(\w+)='([^']*)'",
+        lambda m: f"--column {by_argument[m[1]]}={m[2]}" if m[1] in by_argument else m[0],
+        text,
+    )
+    return text.replace("time_unit=", "--time-unit")
+
+
+def time_value(text: str | None) -> float | str | None:
+    """``--time``: a number in the file's time unit, or an instant (ISO 8601) as given."""
+    if text is None:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def latest_time(column: npt.NDArray[Any], name: str) -> float | str:
+    """A scene's latest time as ``dgan predict`` reports it: a number, or an instant in ISO 8601."""
+    clock = time_column(column, name, 1.0, None)
+    latest = float(clock.values.max()) if clock.values.size else float("nan")
+    return latest if clock.origin is None else instant_text(clock.origin, latest)

@@ -30,6 +30,13 @@ def _numpy(name: str, values: Any) -> npt.NDArray[Any]:
     return out
 
 
+def _pandas_values(series: Any) -> Any:
+    """A pandas column's values; datetimes with a time zone as UTC ``datetime64`` (pandas gives objects)."""
+    if getattr(series.dtype, "tz", None) is not None:
+        series = series.dt.tz_convert("UTC").dt.tz_localize(None)
+    return series.to_numpy()
+
+
 def _from_arrow(table: Any) -> Columns:
     """A pyarrow Table / RecordBatch (or anything pyarrow can read as one) as numpy columns."""
     import pyarrow as pa
@@ -69,7 +76,7 @@ def columns(records: Any) -> Columns:
     elif isinstance(records, Mapping):
         out = {str(k): _numpy(str(k), v) for k, v in records.items()}
     elif module == "pandas" and hasattr(records, "columns"):
-        out = {str(k): _numpy(str(k), records[k].to_numpy()) for k in records.columns}
+        out = {str(k): _numpy(str(k), _pandas_values(records[k])) for k in records.columns}
     elif module == "polars" and hasattr(records, "get_column"):
         out = {str(k): _numpy(str(k), records.get_column(k).to_numpy()) for k in records.columns}
     elif module == "pyarrow" or hasattr(records, "__arrow_c_stream__"):

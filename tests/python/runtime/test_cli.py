@@ -384,3 +384,116 @@ def test_predict_options_for_repeated_rows_sparse_data_and_other_classes(
     assert main(argv) == 0
     doc = json.loads(capsys.readouterr().out)
     assert [a["id"] for a in doc["agents"]] == [1]
+
+
+def _written(path: Path, header: list[str], rows: list[list[str]], sep: str) -> Path:
+    path.write_text("\n".join(sep.join(r) for r in [header, *rows]) + "\n")
+    return path
+
+
+def test_predict_reads_a_trackers_table_with_its_own_names_separator_and_times(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = zara1_records()
+    seconds = (rec["time"] - rec["time"][0]) * 0.04
+    iso = np.datetime_as_string(
+        np.datetime64("2026-05-04T10:00:00", "ms") + np.round(seconds * 1e3).astype("timedelta64[ms]"), unit="ms"
+    )
+    ours = _written(
+        tmp_path / "ours.csv",
+        ["agent_id", "time", "x", "y"],
+        [
+            [str(a), f"{t:.2f}", str(float(x)), str(float(y))]
+            for a, t, x, y in zip(rec["agent_id"], seconds, rec["x"], rec["y"], strict=True)
+        ],
+        ",",
+    )
+    theirs = [
+        [f"ped{a}", f"{t}Z", str(float(x)), str(float(y)), "pedestrian", ""]
+        for a, t, x, y in zip(rec["agent_id"], iso, rec["x"], rec["y"], strict=True)
+    ]
+    header = ["Track ID", "timestamp", "pos_x", "pos_y", "type", "note"]
+    names = [
+        "--column",
+        "agent_id=Track ID",
+        "--column",
+        "time=timestamp",
+        "--column",
+        "x=pos_x",
+        "--column",
+        "y=pos_y",
+        "--column",
+        "class=type",
+    ]
+
+    def modes(scene: Path, *options: str) -> list[object]:
+        assert main(["predict", "zara1", str(scene), "--json", *options]) == 0, capsys.readouterr().err
+        out = json.loads(capsys.readouterr().out)
+        return [out["current_time"], [m["trajectory"] for a in out["agents"] for m in a["modes"]]]
+
+    now, expected = modes(ours, "--time", "2.8")
+    assert now == 2.8
+    for sep in (";", "\t", "|"):
+        scene = _written(tmp_path / f"theirs{ord(sep)}.txt", header, theirs, sep)
+        assert modes(scene, *names, "--time", "2026-05-04T10:00:02.800") == ["2026-05-04T10:00:02.800", expected]
+    assert main(["predict", "zara1", str(scene), *names]) == 0  # the latest time, printed as the file has it
+    assert "agents at time 2026-05-04T10:00:07.600," in capsys.readouterr().out
+    # Without --column: the option to pass, in the command line's words; an unread column of a known name: a note.
+    assert main(["predict", "zara1", str(scene)]) == 2
+    assert "did you mean 'Track ID' (--column agent_id=Track ID)?" in capsys.readouterr().err
+    assert main(["predict", "zara1", str(scene), *names[:8]]) == 0
+    assert (
+        "dgan: note: the table has no column 'class' but has 'type', which is not read; pass --column class=type"
+        in capsys.readouterr().err
+    )
+    for bad in ("agent=Track ID", "velocity=vx", "time"):
+        assert main(["predict", "zara1", str(scene), "--column", bad]) == 2
+        assert "--column takes ARG=NAME with ARG one of agent_id, time, x, y, class" in capsys.readouterr().err
+    ragged = _written(
+        tmp_path / "ragged.csv", ["agent_id", "time", "x", "y"], [["1", "0", "0", "0"], ["1", "0.4"]], ","
+    )
+    assert main(["predict", "zara1", str(ragged)]) == 2
+    assert "row 2 has 2 fields where the header has 4" in capsys.readouterr().err
+
+
+def test_a_social_gan_file_in_scientific_notation_is_no_header(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rec = zara1_records()
+    scene = tmp_path / "sci.txt"
+    scene.write_text(
+        "".join(
+            f"{t:.6e}\t{a:.1e}\t{x:.9e}\t{y:.9e}\n"
+            for t, a, x, y in zip(rec["time"], rec["agent_id"], rec["x"], rec["y"], strict=True)
+        )
+    )
+    assert main(["predict", "zara1", str(scene), "--time", "5500", "--json"]) == 0
+    sci = json.loads(capsys.readouterr().out)
+    assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    assert [a["id"] for a in sci["agents"]] == [a["id"] for a in plain["agents"]]
+    np.testing.assert_allclose(
+        [m["trajectory"] for a in sci["agents"] for m in a["modes"]],
+        [m["trajectory"] for a in plain["agents"] for m in a["modes"]],
+        atol=1e-5,
+    )
+
+
+def test_a_reader_that_stops_early_is_no_error(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    scene = tmp_path / "many.csv"
+    scene.write_text(
+        "agent_id,time,x,y\n" + "".join(f"{a},{k * 0.4:.1f},{k * 0.5},{a}\n" for a in range(3000) for k in range(8))
+    )
+    run = subprocess.run(
+        f"{sys.executable} -m dgan predict zara1 {scene} | head -n 1",
+        shell=True,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert run.stdout.startswith("3000 agents at time 2.8")
+    assert "rror" not in run.stderr, run.stderr

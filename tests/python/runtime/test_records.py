@@ -186,3 +186,42 @@ def test_a_bad_track_is_refused_with_a_typed_error(
 def test_a_negative_gap_is_a_time_base_error() -> None:
     with pytest.raises(exc.TimeBaseError, match="max_gap must be a non-negative"):
         dgan.sample_track([0.0, 0.4], [[0, 0], [1, 1]], [0.2], dt=0.4, max_gap=-1.0)
+
+
+def test_a_missing_column_is_named_where_a_tracker_calls_it_otherwise() -> None:
+    rec = walk(["a", "b"], 0.4)
+    theirs = {
+        "Track-ID": rec["agent_id"],
+        "frame_id": np.round(rec["time"] / 0.4),
+        "pos_x": rec["x"],
+        "pos_y": rec["y"],
+        "yaw": np.zeros(rec["x"].size),
+    }
+    with pytest.raises(exc.InvalidFrameError, match=r"did you mean 'Track-ID' \(agent_id='Track-ID'\)\?"):
+        dgan.Frame.from_records(theirs, t_obs=8, dt=0.4)
+    with pytest.raises(
+        exc.InvalidFrameError,
+        match=r"did you mean 'frame_id' \(time='frame_id', with time_unit= the seconds per frame\)\?",
+    ):
+        dgan.Frame.from_records(theirs, t_obs=8, dt=0.4, agent_id="Track-ID")
+    with pytest.raises(exc.InvalidFrameError, match=r"did you mean 'pos_x' \(x='pos_x'\)\?"):
+        dgan.Frame.from_records(theirs, t_obs=8, dt=0.4, agent_id="Track-ID", time="frame_id")
+    with pytest.warns(exc.ColumnWarning, match="has 'yaw', which is not read; pass heading='yaw'"):
+        frame = dgan.Frame.from_records(
+            theirs, t_obs=8, dt=0.4, agent_id="Track-ID", time="frame_id", time_unit=0.4, x="pos_x", y="pos_y"
+        )
+    same = dgan.Frame.from_records(rec, t_obs=8, dt=0.4)
+    np.testing.assert_allclose(frame.positions, same.positions, atol=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        dgan.Frame.from_records(
+            theirs,
+            t_obs=8,
+            dt=0.4,
+            agent_id="Track-ID",
+            time="frame_id",
+            time_unit=0.4,
+            x="pos_x",
+            y="pos_y",
+            heading="yaw",
+        )

@@ -1,0 +1,121 @@
+"""A table's time column as seconds: numbers in a unit, or instants (datetimes, ISO 8601 strings) and durations
+(timedeltas) that carry their own. What :meth:`dgan.Frame.from_records` and ``dgan predict`` read."""
+
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from dgan.exceptions import InvalidFrameError, TimeBaseError
+
+_NS = 1e-9
+#: What ``current_time`` may be: a number in the time column's unit, or an instant or duration like its values.
+TimeLike = float | str | _dt.datetime | _dt.timedelta | np.datetime64 | np.timedelta64
+
+
+@dataclass(frozen=True)
+class TimeColumn:
+    """A time column in the unit the rest of :mod:`dgan.records` reads: ``values`` in units of ``unit`` seconds,
+    with ``now`` (the current time asked for, None for the latest) in the same unit. Instants are counted from
+    ``origin`` (the column's earliest, a ``numpy.datetime64``), numbers and durations from zero (``origin`` None)."""
+
+    values: npt.NDArray[np.float64]
+    now: float | None
+    unit: float
+    origin: np.datetime64 | None = None
+
+
+def _instant_ns(value: Any, what: str) -> int:
+    """One instant as nanoseconds since 1970 (UTC): a ``datetime`` (a zone-aware one converted to UTC, a naive one
+    read as UTC), a ``numpy.datetime64`` or an ISO 8601 string (a trailing ``Z`` allowed)."""
+    if isinstance(value, (bool, int, float, np.number)) and not isinstance(value, np.timedelta64):
+        raise InvalidFrameError(f"{what} {value!r} is a number where the time column holds instants")
+    if isinstance(value, _dt.datetime) and value.tzinfo is not None:
+        value = value.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+    if isinstance(value, (str, np.str_)):
+        value = value.strip().removesuffix("Z").removesuffix("z")
+    try:
+        instant = np.datetime64(value, "ns")
+    except (TypeError, ValueError, OverflowError) as e:
+        raise InvalidFrameError(
+            f"{what} {value!r} is not a time (a number, datetime or ISO 8601 string): {e}"
+        ) from None
+    if np.isnat(instant):
+        raise InvalidFrameError(f"{what} holds a missing time (NaT)")
+    return int(instant.astype(np.int64))
+
+
+def _instants_ns(col: npt.NDArray[Any], name: str) -> npt.NDArray[np.int64]:
+    if col.dtype.kind == "M":
+        ns = col.astype("datetime64[ns]")
+        if np.isnat(ns).any():
+            raise InvalidFrameError(f"the time column {name!r} holds missing times (NaT)")
+        return ns.astype(np.int64)
+    return np.fromiter((_instant_ns(v, f"the time column {name!r}'s value") for v in col.tolist()), np.int64, col.size)
+
+
+def _is_instants(col: npt.NDArray[Any]) -> bool:
+    """Whether a column of strings or objects holds instants (judged by its first value; every value is then read)."""
+    first = col.flat[0] if col.size else None
+    return isinstance(first, (str, np.str_, _dt.datetime, np.datetime64)) and not isinstance(first, bool)
+
+
+def time_column(col: npt.NDArray[Any], name: str, time_unit: float, current_time: TimeLike | None) -> TimeColumn:
+    """The time column ``col`` and ``current_time`` as a :class:`TimeColumn`.
+
+    Numbers are in ``time_unit`` seconds; a datetime or timedelta column (numpy, pandas with or without a time zone,
+    polars, Arrow) or ISO 8601 strings carry their own unit, so ``time_unit`` must then be left at 1, and
+    ``current_time`` is an instant (or duration) of the same kind.
+
+    Raises:
+        InvalidFrameError: values that are neither numbers nor times, missing times, a ``current_time`` of another kind.
+        TimeBaseError: a ``time_unit`` other than 1 with a column that carries its unit.
+    """
+    kind = col.dtype.kind
+    if kind in "biuf":
+        if current_time is not None and not isinstance(current_time, (int, float, np.integer, np.floating)):
+            raise InvalidFrameError(f"current_time must be a number in the time column's unit, got {current_time!r}")
+        now = None if current_time is None else float(current_time)
+        return TimeColumn(np.ascontiguousarray(col, dtype=np.float64), now, float(time_unit))
+    if kind not in "mMOUS" or (kind in "OUS" and not _is_instants(col)):
+        raise InvalidFrameError(f"column {name!r} must be numeric or times, got {col.dtype}")
+    if time_unit != 1.0:
+        raise TimeBaseError(
+            f"the time column {name!r} holds {col.dtype} values, which carry their own unit; leave time_unit at 1 "
+            f"(got {time_unit!r})"
+        )
+    if kind == "m":
+        if np.isnat(col).any():
+            raise InvalidFrameError(f"the time column {name!r} holds missing times (NaT)")
+        seconds = col.astype("timedelta64[ns]").astype(np.int64).astype(np.float64) * _NS
+        now = None if current_time is None else _duration_s(current_time)
+        return TimeColumn(seconds, now, 1.0)
+    ns = _instants_ns(col, name)
+    origin = int(ns.min()) if ns.size else 0
+    now = None if current_time is None else (_instant_ns(current_time, "current_time") - origin) * _NS
+    return TimeColumn((ns - origin).astype(np.float64) * _NS, now, 1.0, np.datetime64(origin, "ns"))
+
+
+def _duration_s(value: Any) -> float:
+    if isinstance(value, (bool, int, float, np.number)) and not isinstance(value, np.timedelta64):
+        raise InvalidFrameError(f"current_time {value!r} is a number where the time column holds durations")
+    if isinstance(value, _dt.timedelta):
+        return value.total_seconds()
+    try:
+        return float(np.timedelta64(value, "ns").astype(np.int64)) * _NS
+    except (TypeError, ValueError) as e:
+        raise InvalidFrameError(
+            f"current_time {value!r} is not a duration, as the time column's values are: {e}"
+        ) from None
+
+
+def instant_text(origin: np.datetime64 | None, seconds: float) -> str:
+    """A time of a column as a user wrote it: ``origin + seconds`` in ISO 8601 (milliseconds) for instants, else the
+    number."""
+    if origin is None:
+        return f"{seconds:g}"
+    return str(np.datetime_as_string(origin + np.timedelta64(round(seconds * 1e9), "ns"), unit="ms"))
