@@ -5,7 +5,8 @@
 //!   cargo run -p dgan-core --release --example predict -- [MODEL.onnx] [SCENE.txt] [T_OBS_FRAME]
 //! ```
 //!
-//! Defaults: the contract fixture model and the bundled zara1 excerpt (`python/dgan/data/zara1`), predicting from frame 5500.
+//! Defaults: the bundled `zara1` model (trained without the zara1 scene; run here without its map, which it takes as
+//! optional) and the bundled zara1 excerpt (`python/dgan/data/zara1`), predicting from frame 5500.
 //! The scene file is in the Social-GAN layout (`frame ped_id x y`, metres, 0.4 s steps).
 
 use dgan_core::{AgentClass, Frame, Predictor, Result};
@@ -22,7 +23,7 @@ fn repo(rel: &str) -> PathBuf {
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let model = args.get(1).map(PathBuf::from).unwrap_or_else(|| repo("tests/fixtures/contract_nomap.onnx"));
+    let model = args.get(1).map(PathBuf::from).unwrap_or_else(|| repo("python/dgan/models/zara1.onnx"));
     let scene = args.get(2).map(PathBuf::from).unwrap_or_else(|| repo("python/dgan/data/zara1/frames_5430_5620.txt"));
     let t_obs_frame: f64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5500.0);
 
