@@ -1,6 +1,7 @@
 """The engine against a bare ONNX Runtime session and the PyTorch-eager pipeline, measured in one run, one thread.
 
     python benches/bench.py [--models zara1 hdmap] [--agents 8 32 128 256] [--repeat 30]     # or: ./dev bench py
+    python benches/bench.py --main-only --plot latency.png --json run.json    # the main table, drawn
 
 For every bundled model, the real bundled scene of its time base (`dgan.demo.scene_for`) is tiled to N agents
 (copies of the scene shifted by 60 m, so each copy keeps its own neighbourhood and map), and each figure is the
@@ -56,7 +57,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import dgan  # noqa: E402
-from benches import research  # noqa: E402
+from benches import plot, research  # noqa: E402
 from benches.flops import graph_flops, sgemm_gflops, two_core_slowdown  # noqa: E402
 from benches.machine import machine_report  # noqa: E402
 from dgan.contract import KEPT_INPUTS, KEPT_OUTPUT  # noqa: E402
@@ -524,6 +525,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=30)
     ap.add_argument("--calls", type=int, default=200, help="predictions per throughput measurement")
     ap.add_argument("--flops", action="store_true", help="only the operations per agent (no timing)")
+    ap.add_argument("--plot", type=Path, help="also draw the main table's times against N into this PNG")
+    ap.add_argument("--json", type=Path, help="also write the main table's rows (and the run's sgemm) as JSON")
+    ap.add_argument("--main-only", action="store_true", help="only the main table (no threads, throughput, batches)")
     ap.add_argument("--latency", action="store_true", help="only one predict on 1 and 2 threads")
     ap.add_argument("--session-options", action="store_true", help="only ONNX Runtime's options against the engine's")
     ap.add_argument(
@@ -555,7 +559,8 @@ def run(a: argparse.Namespace) -> None:
     if a.phases:
         phase_table(a.models, a.agents, [1, 2], a.repeat, None, "cpu")
         return
-    print(f"single-thread sgemm (numpy float32, 1024²): {sgemm_gflops():.1f} GFLOP/s")
+    sgemm = sgemm_gflops()
+    print(f"single-thread sgemm (numpy float32, 1024²): {sgemm:.1f} GFLOP/s")
     matmul_ms = 2 * 512**3 / sgemm_gflops(512, 15) / 1e6
     print(f"single-thread 512³ float32 matmul: {matmul_ms:.2f} ms")
     if a.session_options:
@@ -569,8 +574,14 @@ def run(a: argparse.Namespace) -> None:
         "| research ms | vs research | MFLOP/agent | bare ORT GFLOP/s |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for name in a.models:
-        bench_model(name, a.agents, a.repeat)
+    rows = [row for name in a.models for row in bench_model(name, a.agents, a.repeat)]
+    about = {"date": time.strftime("%Y-%m-%d %H:%M"), "sgemm_gflops": sgemm, "repeat": a.repeat}
+    if a.json:
+        plot.save_run(rows, about, a.json)
+    if a.plot:
+        plot.latency_figure(rows, plot.title_of(about)).savefig(a.plot, dpi=110)
+    if a.main_only:
+        return
     latency_table(a.models, a.repeat, matmul_ms)
     print("\n| model | N | 1 thread /s | 2 threads /s | 2 vs 1 |")
     print("|---|---|---|---|---|")
