@@ -4,6 +4,7 @@ kind of table, give the frame their seconds give; their errors are typed and nam
 from __future__ import annotations
 
 import datetime as dt
+import warnings
 from typing import Any
 
 import numpy as np
@@ -118,3 +119,16 @@ def test_times_as_instants_refuse_what_cannot_be_read_and_say_why(hdmap: dgan.Pr
         dgan.Frame.from_records({**rec, "time": rec["x"] + 1j}, spec=hdmap)
     with pytest.raises(exc.InvalidFrameError, match="current_time must be a number in the time column's unit"):
         dgan.Frame.from_records(moving(), spec=hdmap, current_time="6.1")
+
+
+def test_iso_times_with_utc_offsets_are_the_instants_they_name(hdmap: dgan.Predictor) -> None:
+    rec = moving()
+    utc = as_kind(rec, "iso-strings")
+    # The same instants written two hours behind UTC (as a tracker logging local time with its offset would).
+    two_hours_behind: np.ndarray = instants(rec["time"]) - np.timedelta64(2, "h")
+    local = np.datetime_as_string(two_hours_behind, unit="ms").astype(object) + "-02:00"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's warning that it keeps no zone is not passed on
+        same(dgan.Frame.from_records({**rec, "time": local}, spec=hdmap), dgan.Frame.from_records(utc, spec=hdmap))
+        at = dgan.Frame.from_records({**rec, "time": local}, spec=hdmap, current_time="2026-03-01T06:15:06.1-02:00")
+    same(at, dgan.Frame.from_records(rec, spec=hdmap, current_time=6.1))
