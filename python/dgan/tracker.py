@@ -72,7 +72,8 @@ class Tracker:
         # the ids back as given: the integer 1 and the string '1' are two agents.
         self._integer_ids = False
         self._codes: dict[Any, int] = {}
-        self._labels: list[Any] = []
+        self._labels: dict[int, Any] = {}
+        self._next_code = 0
 
     @property
     def now(self) -> float | None:
@@ -88,9 +89,20 @@ class Tracker:
         if key is None or (isinstance(key, float) and not np.isfinite(key)):
             raise InvalidFrameError("an id is None or NaN")
         if key not in self._codes:
-            self._codes[key] = len(self._labels)
-            self._labels.append(key)
+            self._codes[key] = self._next_code
+            self._labels[self._next_code] = key
+            self._next_code += 1
         return self._codes[key]
+
+    def _forget_labels(self) -> None:
+        """Drops the ids of agents the engine no longer remembers (out of the history window), once they are more
+        than twice those it does: a stream of ever new ids keeps bounded memory. An id that returns later is a new
+        agent to the engine all the same (its history was forgotten), and gets a new code."""
+        if len(self._labels) <= 2 * len(self._native) + 64:
+            return
+        kept = set(self._native.ids().tolist())
+        self._labels = {c: k for c, k in self._labels.items() if c in kept}
+        self._codes = {k: c for c, k in self._labels.items()}
 
     def update(
         self,
@@ -132,7 +144,7 @@ class Tracker:
                 raise InvalidFrameError(f"velocities must have shape ({n}, 2), got {vel.shape}")
         if classes is not None and len(classes) != n:
             raise InvalidFrameError(f"{len(classes)} classes given for {n} detections")
-        if id_array.dtype.kind == "i" and not self._labels:
+        if id_array.dtype.kind == "i" and self._next_code == 0:
             self._integer_ids = True
             codes = np.ascontiguousarray(id_array.ravel(), dtype=np.int64)
         elif self._integer_ids and n:
@@ -151,6 +163,8 @@ class Tracker:
             "vys": None if vel is None else np.ascontiguousarray(vel[:, 1]),
         }
         self._native.update(float(time), columns)
+        if not self._integer_ids:
+            self._forget_labels()
 
     def frame(self) -> Frame:
         """The frame at the latest tick: the agents detected then, by increasing integer id (other ids: by first

@@ -467,6 +467,11 @@ impl Tracker {
         self.tracks.is_empty()
     }
 
+    /// The ids of the agents remembered, increasing: a caller that maps its own ids to these can forget the rest.
+    pub fn ids(&self) -> impl Iterator<Item = i64> + '_ {
+        self.tracks.keys().copied()
+    }
+
     /// Adds one tick: every agent detected at `time_s` (unique ids). Ticks must come in increasing time order.
     /// Detections older than the history window are forgotten, so memory stays bounded.
     pub fn update(&mut self, time_s: f64, detections: Vec<(i64, Detection)>) -> Result<()> {
@@ -677,6 +682,9 @@ mod tests {
                 all.entry(*id).or_default().push(d.clone());
             }
             tracker.update(t, dets).unwrap();
+            if tick == 13 {
+                assert_eq!(tracker.ids().collect::<Vec<_>>(), [1], "agent 2 forgotten while away");
+            }
             let streamed = tracker.frame().unwrap();
             let tracks: Vec<(i64, &[Detection])> = all.iter().map(|(i, v)| (*i, v.as_slice())).collect();
             let once = frame_at(&tracks, t, &base, AgentClass::Pedestrian).unwrap();
@@ -686,6 +694,7 @@ mod tests {
             assert!(streamed.positions().iter().zip(once.positions()).all(|(a, b)| same(*a, *b)));
         }
         assert!(tracker.len() <= 3);
+        assert_eq!(tracker.ids().collect::<Vec<_>>(), [1, 2, 3]);
         assert!(tracker.update(1.0, vec![]).is_err());
     }
 }

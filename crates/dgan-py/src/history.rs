@@ -4,7 +4,7 @@ use crate::error::{invalid_frame, IntoPyResult};
 use crate::frame::{parse_classes, PyFrame};
 use dgan_core::{frame_at_with, tracks_from_rows_with, AgentClass, Detection, Duplicates, TimeBase, Tracker};
 use ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -218,5 +218,10 @@ impl PyTracker {
     /// Agents remembered.
     fn __len__(&self) -> usize {
         self.inner.len()
+    }
+
+    /// The ids of the agents remembered, increasing.
+    fn ids<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        PyArray1::from_iter(py, self.inner.ids())
     }
 }

@@ -55,6 +55,45 @@ def test_agents_appear_vanish_and_return_with_string_ids() -> None:
     assert tracker.predict().agent_ids.tolist() == ["a", "b", "c"]
 
 
+def test_a_long_stream_of_new_string_ids_keeps_bounded_memory_and_the_right_ids() -> None:
+    """A service's stream: every agent lives 6-20 ticks under a fresh id and never returns (and one id returns after
+    it was forgotten). The tracker remembers only what its window needs, ids included, and names every agent right."""
+    p = dgan.Predictor("zara1")
+    tracker = dgan.Tracker(p)
+    rng = np.random.default_rng(0)
+    alive: dict[str, tuple[int, np.ndarray]] = {}  # id -> (last tick, start position)
+    rows: list[tuple[str, float, float, float]] = []
+    born = 0
+    for k in range(3000):
+        while len(alive) < 12:
+            alive[f"track-{born:06d}"] = (k + int(rng.integers(6, 21)), rng.uniform(-20, 20, 2))
+            born += 1
+        if k == 2990:
+            alive["track-000000"] = (k + 10, np.zeros(2))  # forgotten long ago: a new agent under an old id
+        ids = sorted(alive)
+        pos = np.array([alive[i][1] + 0.3 * k for i in ids])
+        tracker.update(0.4 * k, ids=ids, positions=pos)
+        rows += [(i, 0.4 * k, x, y) for i, (x, y) in zip(ids, pos, strict=True)]
+        alive = {i: v for i, v in alive.items() if v[0] > k}
+        if k % 500 == 499 or k == 2999:
+            recent = [r for r in rows if r[1] >= 0.4 * (k - 12)]
+            table = {
+                "agent_id": [r[0] for r in recent],
+                "time": [r[1] for r in recent],
+                "x": [r[2] for r in recent],
+                "y": [r[3] for r in recent],
+            }
+            once = dgan.Frame.from_records(table, spec=p, current_time=0.4 * k)
+            streamed = tracker.frame()
+            assert sorted(streamed.agent_ids.tolist()) == sorted(once.agent_ids.tolist()) == ids
+            order = np.argsort(streamed.agent_ids.astype(str))
+            np.testing.assert_array_equal(streamed.positions[order], once.positions)
+            np.testing.assert_array_equal(streamed.mask[order], once.mask)
+    assert born > 2000
+    assert len(tracker._codes) <= 2 * len(tracker) + 64  # the ids of about 2,000 agents gone were forgotten
+    assert "track-000000" in tracker.frame().agent_ids.tolist()
+
+
 def test_tracker_errors() -> None:
     p = dgan.Predictor("zara1")
     tracker = dgan.Tracker(p)
