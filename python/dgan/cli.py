@@ -237,7 +237,10 @@ def _predict_parser(sub: Any) -> None:
     )
     _table_options(pred)
     pred.add_argument(
-        "--map", default=None, help="a bundled scene (eth hotel univ zara1 zara2), an image, or a vector map JSON"
+        "--map",
+        default=None,
+        help="a bundled scene (eth hotel univ zara1 zara2), an image (for the ETH/UCY models a semantic mask in "
+        "dgan.scenes.MASK_PALETTE, not a photo), or a vector map JSON",
     )
     pred.add_argument("--pixel-to-world", default=None, help="the 3×3 homography file of an image --map")
     pred.add_argument("--modes", type=int, default=3, help="modes per agent (default 3)")
@@ -326,10 +329,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:
+    """A warning as one line of the command line's own (``dgan: warning: ...``), without Python's source line."""
+    print(f"dgan: warning: {message}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        code: int = args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            code: int = args.func(args)
     except DganError as e:
         print(f"dgan: error: {e}", file=sys.stderr)
         return 2

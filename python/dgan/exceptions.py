@@ -17,6 +17,7 @@ __all__ = [
     "InvalidMapError",
     "InvalidSpecError",
     "MapRequiredError",
+    "MapWarning",
     "ModelLoadError",
     "ModelNotFoundError",
     "OutputError",
@@ -101,6 +102,12 @@ class TimeUnitWarning(UserWarning):
     """No agent of a frame built from a table has two observed steps: the time column is most likely in another
     unit than ``time_unit`` says (milliseconds read as seconds), and every prediction would start from a single
     position."""
+
+
+class MapWarning(UserWarning):
+    """A raster map that is not the kind of map the model read in training: most of its pixels are not colours of
+    the semantic mask (:data:`dgan.scenes.MASK_PALETTE`) that the ETH/UCY models take (a photo, say). Such a map
+    makes their predictions worse than no map at all (docs/models.md). Issued once per :class:`~dgan.Predictor`."""
 
 
 class HeadingWarning(UserWarning):

@@ -20,11 +20,14 @@ from dgan.exceptions import (
     HeadingWarning,
     InvalidFrameError,
     InvalidSpecError,
+    MapWarning,
     ModelNotFoundError,
     UnknownClassError,
 )
 from dgan.frame import Frame
+from dgan.maps import RasterMap
 from dgan.prediction import Prediction
+from dgan.scenes import MASK_MODEL_PREFIX, MIN_PALETTE_SHARE, palette_share
 from dgan.spec import InputSpec
 
 
@@ -107,6 +110,8 @@ class Predictor:
         self._spec = InputSpec.from_dict(self._contract)
         self._modes = self._check_modes(modes)
         self._heading_warned = False
+        self._reads_mask = str(self._contract.get("name", "")).startswith(MASK_MODEL_PREFIX)
+        self._maps_checked: set[int] = set()
 
     def _check_modes(self, modes: int | None) -> int:
         k = self.num_modes
@@ -193,6 +198,7 @@ class Predictor:
         """
         m = self._modes if modes is None else self._check_modes(modes)
         frame = self._known(frame, unknown_classes)
+        self._check_map(frame)
         try:
             native = self._predictor.predict(_native(frame), m, self._checks_headings)
         except UnknownClassError as e:
@@ -208,6 +214,27 @@ class Predictor:
             return frame
         keep = np.fromiter((c in self.classes for c in frame.classes), dtype=bool, count=len(frame))
         return frame if keep.all() else frame.select(keep)
+
+    def _check_map(self, frame: Frame) -> None:
+        """Warns once (:class:`~dgan.exceptions.MapWarning`) if this model reads the ETH/UCY semantic masks and the
+        frame's raster map is no such mask (each map looked at once: a few milliseconds)."""
+        raster = getattr(frame, "map", None)
+        if not self._reads_mask or not isinstance(raster, RasterMap) or id(raster) in self._maps_checked:
+            return
+        if len(self._maps_checked) > 64:
+            self._maps_checked.clear()
+        self._maps_checked.add(id(raster))
+        share = palette_share(raster.image)
+        if share < MIN_PALETTE_SHARE:
+            self._reads_mask = False  # warned: not again
+            warnings.warn(
+                f"{self.path.name} reads its map as a semantic mask coloured in dgan.scenes.MASK_PALETTE (as "
+                f"dgan.scene_map gives; dgan.scenes.colourise_mask colours one), but {share:.0%} of this map's pixels "
+                "are its colours: a photo? Such a map makes the predictions worse than none; give a mask, or "
+                "frame.without_map(). Warned once per Predictor.",
+                MapWarning,
+                stacklevel=3,
+            )
 
     @property
     def _checks_headings(self) -> bool:
@@ -253,6 +280,8 @@ class Predictor:
         if isinstance(frames, Frame) or not isinstance(frames, Sequence):
             raise InvalidFrameError(f"predict_batch takes a sequence of dgan.Frame, got {typename(frames)}")
         frames = [self._known(f, unknown_classes) for f in frames]
+        for f in frames:
+            self._check_map(f)
         natives = [_native(f, f"frame {i} of the batch") for i, f in enumerate(frames)]
         outs = self._predictor.predict_batch(natives, m, self._checks_headings)
         for o in outs:

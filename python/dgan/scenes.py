@@ -33,6 +33,26 @@ ROW_MAJOR_SCENES: Final = frozenset({"eth", "hotel"})
 ETH_UCY_SCENES: Final = ("eth", "hotel", "univ", "zara1", "zara2")
 
 
+#: The contract name of every model trained on ETH/UCY (``dgan-ethucy-zara1``, …): they read its colourised masks.
+MASK_MODEL_PREFIX: Final = "dgan-ethucy"
+#: How far (per channel) a pixel may lie from a palette colour and still count as one (a mask saved as JPEG), and
+#: the share of such pixels below which a map is no mask.
+PALETTE_TOLERANCE: Final = 24
+MIN_PALETTE_SHARE: Final = 0.8
+
+
+def palette_share(image: npt.NDArray[np.uint8], step: int = 4) -> float:
+    """The share of an ``(H, W, 3)`` image's pixels (every ``step``-th row and column) within
+    :data:`PALETTE_TOLERANCE` of a colour of :data:`MASK_PALETTE`: 1 for a colourised mask, far less for a photo."""
+    pixels = np.asarray(image)[::step, ::step, :3].astype(np.int16)
+    if pixels.size == 0:
+        return 1.0
+    near = np.zeros(pixels.shape[:2], dtype=bool)
+    for colour in MASK_PALETTE.astype(np.int16):
+        near |= np.abs(pixels - colour).max(axis=-1) <= PALETTE_TOLERANCE
+    return float(near.mean())
+
+
 def colourise_mask(labels: npt.NDArray[np.integer]) -> npt.NDArray[np.uint8]:
     """``(H, W)`` mask ids → ``(H, W, 3)`` RGB in :data:`MASK_PALETTE`."""
     ids = np.asarray(labels)

@@ -497,3 +497,15 @@ def test_a_reader_that_stops_early_is_no_error(tmp_path: Path) -> None:
     )
     assert run.stdout.startswith("3000 agents at time 2.8")
     assert "rror" not in run.stderr, run.stderr
+
+
+def test_a_photo_as_the_map_of_a_mask_model_warns_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
+    photo = ["--map", str(scene / "rgb.jpg"), "--pixel-to-world", str(scene / "H.txt")]
+    assert main(["predict", "zara1", str(SCENE), "--time", "5500", *photo]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert [line for line in err if "warning" in line.lower()] == [
+        next(line for line in err if line.startswith("dgan: warning: zara1.onnx reads its map as a semantic mask"))
+    ]
+    assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--map", "zara1"]) == 0
+    assert "warning" not in capsys.readouterr().err

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SCENES, zara1_raster_map
+from conftest import SCENES, zara1_raster_map, zara1_records
 
 import dgan
 from dgan import exceptions as exc
@@ -233,3 +233,41 @@ def test_a_scene_models_features_are_kept_with_the_map_for_later_calls() -> None
     dgan.Predictor("zara1").predict(frame.with_map(local))
     assert local.features_kept == 2 * kept
     assert dgan.RasterMap(local.image, local.world_to_pixel).features_kept == 0
+
+
+def test_a_photo_given_to_a_model_that_reads_masks_warns_once(tmp_path: Path) -> None:
+    """The ETH/UCY models read a colourised semantic mask; the scene's photo in its place (an easy mistake: it is an
+    image with the same homography) warns once, while the mask, a JPEG of the mask and a model that reads photos
+    (sdd) do not."""
+    import warnings
+
+    from dgan.scenes import palette_share
+
+    rec = zara1_records()
+    frame = dgan.Frame.from_records(rec, t_obs=8, dt=0.4, time_unit=0.04, current_time=5500.0)
+    h = np.loadtxt(SCENES / "zara1" / "H.txt")
+    photo = dgan.RasterMap.from_pixel_to_world(SCENES / "zara1" / "rgb.jpg", h)
+    mask = dgan.scene_map("zara1")
+    pil = pytest.importorskip("PIL.Image")
+    pil.fromarray(mask.image).save(tmp_path / "mask.jpg", quality=75)
+    jpeg_mask = dgan.RasterMap.from_file(tmp_path / "mask.jpg", mask.world_to_pixel)
+    assert palette_share(mask.image) == 1.0
+    assert palette_share(jpeg_mask.image) > 0.95
+    assert palette_share(photo.image) < 0.5
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        zara1 = dgan.Predictor("zara1")
+        zara1.predict(frame.with_map(mask))
+        zara1.predict(frame.with_map(jpeg_mask))
+        zara1.predict(frame)
+        sdd = dgan.Predictor("sdd")  # reads reference photos
+        sdd.predict(
+            dgan.Frame.from_records(rec, spec=sdd, time_unit=0.04, current_time=5500.0, upsample=True, map=photo)
+        )
+    with pytest.warns(exc.MapWarning, match=r"zara1.onnx reads its map as a semantic mask .* 2\d% of this map's"):
+        zara1.predict(frame.with_map(photo))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per Predictor
+        zara1.predict(frame.with_map(photo))
+    with pytest.warns(exc.MapWarning):
+        dgan.Predictor("eth").predict_batch([frame.with_map(mask), frame.with_map(photo)])
