@@ -103,3 +103,31 @@ def checked_shift(name: str, value: Any, error: type[Exception]) -> npt.NDArray[
     if shift.shape != (2,) or not np.isfinite(shift).all():
         raise error(f"{name} must be two finite metres (x, y), got {shift.tolist()}")
     return shift
+
+
+def shown(value: Any) -> str:
+    """A value as an error message shows it: its type, and its first characters."""
+    if value is None or isinstance(value, bool):
+        return repr(value)
+    text = repr(value)
+    return f"{typename(value)} {text[:40]}{'…' if len(text) > 40 else ''}"
+
+
+def checked_real(name: str, value: Any, error: type[Exception] = InvalidFrameError, *, optional: bool = False) -> Any:
+    """``value`` as a Python float when it is a real number (an int, a float or a numpy one; not a bool, a string or
+    an array), None when ``optional`` and None, else ``error`` naming ``name``. Its range is the caller's to check."""
+    if value is None and optional:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise error(f"{name} must be a real number, got {shown(value)}")
+    try:
+        return float(value)
+    except OverflowError:
+        raise error(f"{name} is out of range: {shown(value)}") from None
+
+
+def checked_text(name: str, value: Any, error: type[Exception] = InvalidFrameError) -> str:
+    """``value`` when it is a string (a column name, a path), else ``error`` naming ``name``."""
+    if not isinstance(value, str):
+        raise error(f"{name} must be a string, got {shown(value)}")
+    return value

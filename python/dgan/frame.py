@@ -10,9 +10,9 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._times import TimeLike
-from dgan._values import ClassLike, as_given, checked_array, checked_shift, typename
+from dgan._values import ClassLike, as_given, checked_array, checked_real, checked_shift, checked_text, typename
 from dgan.contract import CLASSES
-from dgan.exceptions import InvalidFrameError, InvalidMapError, UnknownClassError
+from dgan.exceptions import InvalidFrameError, InvalidMapError, TimeBaseError, UnknownClassError
 from dgan.maps import RasterMap, VectorMap
 from dgan.records import Names, from_records
 
@@ -110,7 +110,7 @@ class Frame:
             checked_array("lengths", lengths, np.float64),
             checked_array("widths", widths, np.float64),
             None if map is None else map._map,
-            None if dt is None else float(dt),
+            checked_real("dt", dt, TimeBaseError, optional=True),
         )
 
     @classmethod
@@ -203,7 +203,14 @@ class Frame:
             TimeBaseError: data sparser than ``dt`` (naming the bundled models whose step fits), a non-positive
                 ``dt`` or ``time_unit``.
         """
-        names = Names(agent_id, time, x, y, cls_column, heading, length, width, *velocity)
+        columns = (agent_id, time, x, y, cls_column, heading, length, width)
+        arguments = ("agent_id", "time", "x", "y", "cls_column", "heading", "length", "width")
+        if not (isinstance(velocity, (tuple, list)) and len(velocity) == 2):
+            raise InvalidFrameError(f"velocity must be a pair of column names (vx, vy), got {velocity!r:.60}")
+        names = Names(
+            *(checked_text(a, c) for a, c in zip(arguments, columns, strict=True)),
+            *(checked_text("velocity", c) for c in velocity),
+        )
         native, labels, source = from_records(
             records,
             t_obs=t_obs,
@@ -342,7 +349,7 @@ class Frame:
         Raises:
             InvalidFrameError: ``gate_m`` is negative or not finite.
         """
-        native, _ = self._frame.denoised(float(gate_m))
+        native, _ = self._frame.denoised(checked_real("gate_m", gate_m))
         return Frame._wrap(native, self._labels, self._map, self._source)
 
     def with_map(self, map: RasterMap | VectorMap | None) -> Frame:

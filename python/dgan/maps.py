@@ -32,6 +32,8 @@ class RasterMap:
     @classmethod
     def from_file(cls, path: str | os.PathLike[str], world_to_pixel: npt.ArrayLike) -> RasterMap:
         """Reads a PNG or JPEG image (converted to RGB)."""
+        if not isinstance(path, (str, os.PathLike)):
+            raise InvalidMapError(f"path must be an image file's path, got {typename(path)}")
         h = checked_array("world_to_pixel", world_to_pixel, np.float64, InvalidMapError, required=True)
         obj = cls.__new__(cls)
         obj._map = _dgan.RasterMap.from_file(os.fspath(path), h)

@@ -72,6 +72,9 @@ class Predictor:
     ) -> None:
         if model is None or not isinstance(model, (str, os.PathLike)):
             raise ModelNotFoundError(f"model must be a path or a bundled model's name, got {typename(model)}")
+        if onnxruntime_library is not None and not isinstance(onnxruntime_library, (str, os.PathLike)):
+            what = typename(onnxruntime_library)
+            raise InvalidSpecError(f"onnxruntime_library must be the path of libonnxruntime.so or None, got {what}")
         lib = Path(onnxruntime_library) if onnxruntime_library is not None else onnxruntime_library_path()
         if sessions is None:
             sessions = min(2, os.cpu_count() or 1)

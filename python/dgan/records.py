@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._times import TimeLike, instant_text, time_column
-from dgan._values import ClassLike, checked_array
+from dgan._values import ClassLike, checked_array, checked_real, typename
 from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
 from dgan.tables import Columns, columns
 
@@ -202,11 +202,13 @@ def _named(error: InvalidFrameError, labels: npt.NDArray[Any] | None) -> Invalid
 
 
 def _check_options(t_obs: Any, dt: Any, time_unit: Any, duplicates: Any, upsample: Any) -> None:
-    if dt is not None and not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+    dt = checked_real("dt", dt, TimeBaseError, optional=True)
+    time_unit = checked_real("time_unit", time_unit, TimeBaseError)
+    if dt is not None and not (np.isfinite(dt) and dt > 0):
         raise TimeBaseError(f"dt must be a positive number of seconds, got {dt!r}")
     if isinstance(t_obs, bool) or not isinstance(t_obs, (int, np.integer)) or not 1 <= t_obs <= 1000:
         raise InvalidFrameError(f"t_obs must be an integer in 1..=1000, got {t_obs!r}")
-    if not (isinstance(time_unit, (int, float)) and np.isfinite(time_unit) and time_unit > 0):
+    if not (np.isfinite(time_unit) and time_unit > 0):
         raise TimeBaseError(f"time_unit must be a positive number of seconds per unit, got {time_unit!r}")
     if not isinstance(duplicates, str):  # which names are valid is the engine's to say
         raise InvalidSpecError(f"duplicates must be one of {DUPLICATES}, got {duplicates!r}")
@@ -266,11 +268,14 @@ def from_records(
     """The work of :meth:`dgan.Frame.from_records` (documented there), which wraps what this returns."""
     if spec is not None:
         spec = getattr(spec, "spec", spec)
+        if not (hasattr(spec, "t_obs") and hasattr(spec, "dt_s")):
+            raise InvalidSpecError(f"spec must be a model's InputSpec or a Predictor, got {typename(spec)}")
         t_obs = spec.t_obs if t_obs is None else t_obs
         dt = spec.dt_s if dt is None else dt
     if t_obs is None:
         raise InvalidFrameError("from_records needs t_obs (or spec=, a model's InputSpec or Predictor)")
     _check_options(t_obs, dt, time_unit, duplicates, upsample)
+    max_gap = checked_real("max_gap", max_gap, TimeBaseError, optional=True)
     cols = columns(records)
     check_columns(cols, names)
     clock = time_column(cols[names.time], names.time, time_unit, current_time)
@@ -325,4 +330,5 @@ def sample_track(
     p = checked_array("xy", xy, np.float64, required=True)
     if p.ndim != 2 or p.shape[1] != 2:
         raise InvalidFrameError(f"xy must have shape (N, 2), got {p.shape}")
-    return _dgan.sample_track(t, p, a, float(dt), None if max_gap is None else float(max_gap))
+    gap = checked_real("max_gap", max_gap, TimeBaseError, optional=True)
+    return _dgan.sample_track(t, p, a, checked_real("dt", dt, TimeBaseError), gap)

@@ -72,13 +72,17 @@ def world_to_pixel(scene: str, pixel_to_world: npt.ArrayLike) -> npt.NDArray[np.
     return np.asarray(inv, dtype=np.float64)
 
 
-@functools.lru_cache(maxsize=len(ETH_UCY_SCENES))
 def scene_map(scene: str) -> RasterMap:
     """The raster map a bundled ETH/UCY model was trained with: ``dgan.scene_map("zara1")``. The same map object on
     every call (maps do not change), so a model that keeps its map features with the map (contract 13) computes them
     once for all the frames that hold it."""
-    if scene not in ETH_UCY_SCENES:
-        raise InvalidMapError(f"no bundled scene {scene!r}; bundled scenes: {', '.join(ETH_UCY_SCENES)}")
+    if not isinstance(scene, str) or scene not in ETH_UCY_SCENES:
+        raise InvalidMapError(f"no bundled scene {scene!r:.60}; bundled scenes: {', '.join(ETH_UCY_SCENES)}")
+    return _bundled_scene_map(scene)
+
+
+@functools.lru_cache(maxsize=len(ETH_UCY_SCENES))
+def _bundled_scene_map(scene: str) -> RasterMap:
     return scene_raster_map(scene, Path(__file__).parent / "data" / "scenes" / scene)
 
 

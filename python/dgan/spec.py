@@ -231,7 +231,7 @@ def preprocess(frame: Frame, spec: InputSpec, threads: int | None = None) -> dic
         raise InvalidFrameError(
             f"preprocess takes a dgan.Frame, got {'None' if frame is None else type(frame).__name__}"
         )
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or not 1 <= threads < 2**31):
         raise InvalidSpecError(f"threads must be a positive int or None, got {threads!r}")
     out: dict[str, npt.NDArray[Any]] = _dgan.preprocess(frame._frame, _spec_json(spec), threads)
     return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as _dt
 from collections.abc import Sequence
 from typing import Any
 
@@ -9,8 +10,8 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._values import ClassLike, as_given, typename
-from dgan.exceptions import InvalidFrameError
+from dgan._values import ClassLike, as_given, checked_real, typename
+from dgan.exceptions import InvalidFrameError, TimeBaseError
 from dgan.frame import Frame
 from dgan.maps import RasterMap, VectorMap
 from dgan.prediction import Prediction
@@ -66,7 +67,8 @@ class Tracker:
         self._map = map
         self._denoise = None if denoise is None else float(denoise)
         spec = predictor.spec
-        self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, max_gap, default_class)
+        gap = checked_real("max_gap", max_gap, TimeBaseError, optional=True)
+        self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, gap, default_class)
         # Signed integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids
         # (strings, uint64 hashes, a mix of integers and strings) get codes by first appearance, and the frame gives
         # the ids back as given: the integer 1 and the string '1' are two agents.
@@ -106,7 +108,7 @@ class Tracker:
 
     def update(
         self,
-        time: float,
+        time: float | np.floating[Any] | np.integer[Any],
         ids: npt.ArrayLike | Sequence[object],
         positions: npt.ArrayLike,
         *,
@@ -122,6 +124,9 @@ class Tracker:
         Raises:
             InvalidFrameError: shapes, repeated ids, non-finite positions. TimeBaseError: a tick not after the last.
         """
+        if isinstance(time, (bool, np.bool_)) or not isinstance(time, (int, float, np.integer, np.floating)):
+            hint = " (a datetime's .timestamp(), say)" if isinstance(time, (_dt.datetime, np.datetime64)) else ""
+            raise TimeBaseError(f"time must be seconds, a real number{hint}; got {typename(time)} {time!r}")
         if ids is None or isinstance(ids, (str, bytes)):
             raise InvalidFrameError("ids must be a sequence of ids (integers or strings)")
         id_array = as_given(ids)
@@ -142,6 +147,8 @@ class Tracker:
                 raise InvalidFrameError(f"velocities must be an (N, 2) array of numbers: {e}") from None
             if vel.shape != (n, 2):
                 raise InvalidFrameError(f"velocities must have shape ({n}, 2), got {vel.shape}")
+        if classes is not None and (isinstance(classes, (str, bytes)) or not isinstance(classes, Sequence)):
+            raise InvalidFrameError(f"classes must be a sequence of class names or codes, got {typename(classes)}")
         if classes is not None and len(classes) != n:
             raise InvalidFrameError(f"{len(classes)} classes given for {n} detections")
         if id_array.dtype.kind == "i" and self._next_code == 0:

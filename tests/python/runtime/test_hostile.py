@@ -124,7 +124,7 @@ def frame_cases() -> list[Case]:
 
     for label, value in [("0", 0.0), ("-1", -1.0), ("nan", np.nan), ("inf", np.inf)]:
         cases.append((f"Frame dt {label}", lambda v=value: dgan.Frame(GOOD, dt=v), exc.TimeBaseError, "positive"))
-    cases.append(("Frame dt string", lambda: dgan.Frame(GOOD, dt="x"), ValueError, "could not convert"))
+    cases.append(("Frame dt string", lambda: dgan.Frame(GOOD, dt="x"), exc.TimeBaseError, "dt must be a real number"))
     for label, value in [("int", 5), ("a string", "zara1"), ("a dict", {}), ("an array", IMAGE)]:
         cases.append(
             (f"Frame map {label}", lambda v=value: dgan.Frame(GOOD, map=v), exc.InvalidMapError, "map must be")
@@ -748,6 +748,117 @@ def file_and_misc_cases(tmp: Path) -> list[Case]:
     return cases
 
 
+def scalar_cases() -> list[Case]:
+    """Options that take one number, name or path, given something else: each a typed error naming the option."""
+    p = dgan.Predictor("zara1")
+    rec = {"agent_id": [1, 1], "time": [0.0, 0.4], "x": [0.0, 0.5], "y": [0.0, 0.0]}
+    frame = dgan.Frame(GOOD, dt=0.4)
+    odd: list[tuple[str, Any]] = [("a string", "0.4"), ("None", None), ("a bool", True), ("a list", [0.4])]
+    odd += [("complex", 0.4j), ("a datetime", np.datetime64("2026-01-01")), ("an object", object())]
+    cases: list[Case] = []
+    real: list[tuple[str, Callable[[Any], Any], type[Exception], bool]] = [
+        ("Frame.denoised gate_m", lambda v: frame.denoised(v), exc.InvalidFrameError, False),
+        ("from_records dt", lambda v: dgan.Frame.from_records(rec, t_obs=2, dt=v), exc.TimeBaseError, True),
+        (
+            "from_records time_unit",
+            lambda v: dgan.Frame.from_records(rec, t_obs=2, time_unit=v),
+            exc.TimeBaseError,
+            False,
+        ),
+        ("from_records max_gap", lambda v: dgan.Frame.from_records(rec, t_obs=2, max_gap=v), exc.TimeBaseError, True),
+        (
+            "sample_track dt",
+            lambda v: dgan.sample_track([0.0, 1.0], [[0, 0], [1, 1]], [0.5], dt=v),
+            exc.TimeBaseError,
+            False,
+        ),
+        (
+            "sample_track max_gap",
+            lambda v: dgan.sample_track([0.0], [[0, 0]], [0.0], dt=0.5, max_gap=v),
+            exc.TimeBaseError,
+            True,
+        ),
+        ("Tracker max_gap", lambda v: dgan.Tracker(p, max_gap=v), exc.TimeBaseError, True),
+        (
+            "Tracker.update time",
+            lambda v: dgan.Tracker(p).update(v, ids=[1], positions=[[0, 0]]),
+            exc.TimeBaseError,
+            False,
+        ),
+    ]
+    for option, fn, err, none_ok in real:
+        for label, value in odd:
+            if not (none_ok and value is None):
+                cases.append(
+                    (f"{option} {label}", lambda fn=fn, v=value: fn(v), err, "must be (a real number|seconds)")
+                )
+    cases.append(
+        (
+            "from_records dt 10**400",
+            lambda: dgan.Frame.from_records(rec, t_obs=2, dt=10**400),
+            exc.TimeBaseError,
+            "out of range",
+        )
+    )
+    for label, value in odd[1:]:
+        cases.append(
+            (
+                f"from_records agent_id {label}",
+                lambda v=value: dgan.Frame.from_records(rec, t_obs=2, agent_id=v),
+                exc.InvalidFrameError,
+                "agent_id must be a string",
+            )
+        )
+        cases.append(
+            (
+                f"from_records spec {label}",  # None: no spec, the steps and dt given instead
+                lambda v=value: dgan.Frame.from_records(rec, spec=v),
+                exc.InvalidSpecError if value is not None else exc.InvalidFrameError,
+                "spec must be a model's InputSpec or a Predictor" if value is not None else "needs t_obs",
+            )
+        )
+    cases += [
+        (
+            "from_records velocity one name",
+            lambda: dgan.Frame.from_records(rec, t_obs=2, velocity="vx"),
+            exc.InvalidFrameError,
+            "a pair of column names",
+        ),
+        (
+            "from_records velocity numbers",
+            lambda: dgan.Frame.from_records(rec, t_obs=2, velocity=(1, 2)),
+            exc.InvalidFrameError,
+            "velocity must be a string",
+        ),
+        (
+            "Predictor onnxruntime_library int",
+            lambda: dgan.Predictor("zara1", onnxruntime_library=3),
+            exc.InvalidSpecError,
+            "path of libonnxruntime.so or None",
+        ),
+        (
+            "RasterMap.from_file None",
+            lambda: dgan.RasterMap.from_file(None, np.eye(3)),
+            exc.InvalidMapError,
+            "an image file's path",
+        ),
+        ("scene_map a list", lambda: dgan.scene_map(["zara1"]), exc.InvalidMapError, "no bundled scene"),
+        (
+            "Tracker.update classes an int",
+            lambda: dgan.Tracker(p).update(0.0, ids=[1], positions=[[0, 0]], classes=3),
+            exc.InvalidFrameError,
+            "classes must be a sequence",
+        ),
+        (
+            "preprocess threads 10**30",
+            lambda: dgan.preprocess(frame, p.spec, threads=10**30),
+            exc.InvalidSpecError,
+            "threads must be a positive int",
+        ),
+    ]
+    return cases
+
+
 def all_cases(tmp: Path) -> list[Case]:
     return (
         frame_cases()
@@ -758,6 +869,7 @@ def all_cases(tmp: Path) -> list[Case]:
         + contract_cases(tmp)
         + readers_cases(tmp)
         + file_and_misc_cases(tmp)
+        + scalar_cases()
     )
 
 

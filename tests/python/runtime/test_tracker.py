@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import datetime
+
 import numpy as np
 import pytest
 from conftest import shared_data
@@ -112,11 +114,20 @@ def test_tracker_errors() -> None:
         tracker.update(1.4, ids=["x"], positions=[[0, 0]])
     with pytest.raises(exc.InvalidFrameError, match="Predictor"):
         dgan.Tracker("zara1")  # type: ignore[arg-type]
+    for when in ("1.4", None, True, [1.4], 1.4j, np.datetime64("2026-01-01T00:00:01")):
+        with pytest.raises(exc.TimeBaseError, match="time must be seconds, a real number"):
+            tracker.update(when, ids=[1], positions=[[0, 0]])  # type: ignore[arg-type]
+    with pytest.raises(exc.TimeBaseError, match=r"a datetime's \.timestamp\(\), say"):
+        tracker.update(datetime.datetime(2026, 1, 1), ids=[1], positions=[[0, 0]])  # type: ignore[arg-type]
+    with pytest.raises(exc.TimeBaseError, match="finite"):
+        tracker.update(float("inf"), ids=[1], positions=[[0, 0]])
+    tracker.update(np.float32(1.2), ids=[1], positions=[[0, 0]])  # numpy numbers are seconds too
     for gate in (-0.1, float("nan"), "0.1"):
         with pytest.raises(exc.InvalidFrameError, match="denoise"):
             dgan.Tracker(p, denoise=gate)  # type: ignore[arg-type]
-    # An error loses nothing: the tracker still holds both agents at 1.0 s.
-    assert len(tracker.frame()) == 2
+    # An error loses nothing: the tracker holds its agents (agent 1 at 1.2 s, its history from 1.0 s).
+    assert tracker.now == pytest.approx(1.2)
+    assert len(tracker.frame()) == 1
 
 
 def test_a_denoising_tracker_gives_the_denoised_frame() -> None:
