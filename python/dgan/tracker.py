@@ -34,7 +34,9 @@ class Tracker:
     """Keeps every agent's history at a model's time base from detections fed one tick at a time (the core is the
     engine's, shared with :meth:`Frame.from_records`): agents appear, vanish and return; ticks may come at any rate
     at least as dense as the model's (denser or jittered ticks are interpolated). The frame at a tick equals
-    ``Frame.from_records`` of the same detections given at once.
+    ``Frame.from_records`` of the same detections given at once. A tracker pickles and copies with its history (a
+    service saves its state and goes on from it; a copy explores other detections), and keeps bounded memory: what
+    is older than its window is forgotten, the agents' ids included.
 
     Args:
         predictor: the model whose time base (``dt``, ``T_obs``) the history follows.
@@ -67,8 +69,9 @@ class Tracker:
         self._map = map
         self._denoise = None if denoise is None else float(denoise)
         spec = predictor.spec
-        gap = checked_real("max_gap", max_gap, TimeBaseError, optional=True)
-        self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, gap, default_class)
+        self._max_gap = checked_real("max_gap", max_gap, TimeBaseError, optional=True)
+        self._default_class = default_class
+        self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, self._max_gap, default_class)
         # Signed integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids
         # (strings, uint64 hashes, a mix of integers and strings) get codes by first appearance, and the frame gives
         # the ids back as given: the integer 1 and the string '1' are two agents.
@@ -76,6 +79,13 @@ class Tracker:
         self._codes: dict[Any, int] = {}
         self._labels: dict[int, Any] = {}
         self._next_code = 0
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """A tracker pickles (and copies, ``copy.copy`` too) with what it remembers: a service can save its state
+        and go on from it, a copy can be fed other detections without touching this one."""
+        options = (self._predictor, self._map, self._max_gap, self._default_class, self._denoise)
+        ids = (self._integer_ids, dict(self._labels), self._next_code)
+        return _unpickle_tracker, (options, self._native.state(), ids)
 
     @property
     def now(self) -> float | None:
@@ -189,3 +199,16 @@ class Tracker:
         """The predictions of every agent detected at the latest tick (``unknown_classes`` as
         :meth:`Predictor.predict`)."""
         return self._predictor.predict(self.frame(), modes=modes, unknown_classes=unknown_classes)
+
+
+def _unpickle_tracker(
+    options: tuple[Any, ...], state: dict[str, Any], ids: tuple[bool, dict[int, Any], int]
+) -> Tracker:
+    predictor, world_map, max_gap, default_class, denoise = options
+    tracker = Tracker(predictor, map=world_map, max_gap=max_gap, default_class=default_class, denoise=denoise)
+    spec = predictor.spec
+    tracker._native = _dgan.Tracker.restore(spec.t_obs, spec.dt_s, max_gap, default_class, state)
+    tracker._integer_ids, labels, tracker._next_code = ids
+    tracker._labels = dict(labels)
+    tracker._codes = {label: code for code, label in tracker._labels.items()}
+    return tracker

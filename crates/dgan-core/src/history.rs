@@ -472,6 +472,46 @@ impl Tracker {
         self.tracks.keys().copied()
     }
 
+    /// What the tracker remembers: each agent's detections, oldest first, by id. With [`Tracker::now_s`], what
+    /// [`Tracker::restore`] takes to give the same tracker back (a service saving its state, a copy to explore).
+    pub fn tracks(&self) -> &BTreeMap<i64, Vec<Detection>> {
+        &self.tracks
+    }
+
+    /// A tracker on `base` that remembers `tracks` (as [`Tracker::tracks`] gives them) at the latest tick `now_s`:
+    /// its frames from there on are those of the tracker they were saved from. Refuses what no tracker could hold:
+    /// detections without a tick (`now_s` None), after `now_s`, not in increasing time order, an empty track, or a
+    /// time or position that is not finite.
+    pub fn restore(
+        base: TimeBase,
+        default_class: AgentClass,
+        tracks: BTreeMap<i64, Vec<Detection>>,
+        now_s: Option<f64>,
+    ) -> Result<Self> {
+        let bad = |what: String| Err(DganError::InvalidFrame(format!("cannot restore the tracker: {what}")));
+        match now_s {
+            None if !tracks.is_empty() => return bad("detections but no tick".into()),
+            Some(now) if !now.is_finite() => return bad(format!("the latest tick {now} is not finite")),
+            _ => {}
+        }
+        let now = now_s.unwrap_or(f64::INFINITY);
+        for (id, track) in &tracks {
+            if track.is_empty() {
+                return bad(format!("agent {id} has no detection"));
+            }
+            let finite = track.iter().all(|d| d.time_s.is_finite() && d.position.iter().all(|p| p.is_finite()));
+            let ordered = track.windows(2).all(|w| w[0].time_s < w[1].time_s);
+            if !finite || !ordered || track.last().is_some_and(|d| d.time_s > now) {
+                return bad(format!("agent {id}'s detections are not finite, increasing times up to the latest tick"));
+            }
+        }
+        let mut tracker = Self { base, default_class, tracks, now_s };
+        if let Some(now) = now_s {
+            tracker.forget(now);
+        }
+        Ok(tracker)
+    }
+
     /// Adds one tick: every agent detected at `time_s` (unique ids). Ticks must come in increasing time order.
     /// Detections older than the history window are forgotten, so memory stays bounded.
     pub fn update(&mut self, time_s: f64, detections: Vec<(i64, Detection)>) -> Result<()> {
@@ -696,5 +736,20 @@ mod tests {
         assert!(tracker.len() <= 3);
         assert_eq!(tracker.ids().collect::<Vec<_>>(), [1, 2, 3]);
         assert!(tracker.update(1.0, vec![]).is_err());
+        // Saved and restored, it goes on as the tracker it was saved from.
+        let mut copy =
+            Tracker::restore(base, AgentClass::Pedestrian, tracker.tracks().clone(), tracker.now_s()).unwrap();
+        for t in [12.0, 12.4, 12.8] {
+            tracker.update(t, vec![(1, Detection::at(t, t, 0.0)), (4, Detection::at(t, 1.0, t))]).unwrap();
+            copy.update(t, vec![(1, Detection::at(t, t, 0.0)), (4, Detection::at(t, 1.0, t))]).unwrap();
+            let (a, b) = (tracker.frame().unwrap(), copy.frame().unwrap());
+            assert_eq!((a.ids(), a.mask()), (b.ids(), b.mask()));
+            assert!(a.positions().iter().zip(b.positions()).all(|(x, y)| x == y || (x.is_nan() && y.is_nan())));
+        }
+        let late = BTreeMap::from([(1, vec![Detection::at(20.0, 0.0, 0.0)])]);
+        assert!(Tracker::restore(base, AgentClass::Pedestrian, late.clone(), Some(12.8)).is_err());
+        assert!(Tracker::restore(base, AgentClass::Pedestrian, late, None).is_err());
+        let unordered = BTreeMap::from([(1, vec![Detection::at(1.0, 0.0, 0.0), Detection::at(0.6, 0.0, 0.0)])]);
+        assert!(Tracker::restore(base, AgentClass::Pedestrian, unordered, Some(1.0)).is_err());
     }
 }

@@ -181,6 +181,9 @@ fn time_base(t_obs: usize, dt: f64, max_gap: Option<f64>) -> PyResult<TimeBase> 
     .py()
 }
 
+/// One number of a detection, a column of [`PyTracker::state`].
+type DetectionValue = fn(&Detection) -> f64;
+
 /// A streaming tracker (see `dgan.Tracker`).
 #[derive(Debug)]
 #[pyclass(name = "Tracker", module = "dgan._dgan")]
@@ -223,5 +226,64 @@ impl PyTracker {
     /// The ids of the agents remembered, increasing.
     fn ids<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
         PyArray1::from_iter(py, self.inner.ids())
+    }
+
+    /// What it remembers, one row per detection: `ids`, `times`, `xs`, `ys`, `classes` (codes, -1 for the default
+    /// class), `headings`, `lengths`, `widths`, `vxs`, `vys`, and `now`; [`PyTracker::restore`] takes it back.
+    fn state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let rows: Vec<(i64, &Detection)> =
+            self.inner.tracks().iter().flat_map(|(id, track)| track.iter().map(move |d| (*id, d))).collect();
+        let out = PyDict::new(py);
+        out.set_item("ids", PyArray1::from_iter(py, rows.iter().map(|r| r.0)))?;
+        let class = |d: &Detection| d.class.map_or(-1, |c| i64::from(c.code()));
+        out.set_item("classes", PyArray1::from_iter(py, rows.iter().map(|r| class(r.1))))?;
+        let columns: [(&str, DetectionValue); 8] = [
+            ("times", |d| d.time_s),
+            ("xs", |d| d.position[0]),
+            ("ys", |d| d.position[1]),
+            ("headings", |d| d.heading),
+            ("lengths", |d| d.length),
+            ("widths", |d| d.width),
+            ("vxs", |d| d.velocity[0]),
+            ("vys", |d| d.velocity[1]),
+        ];
+        for (name, value) in columns {
+            out.set_item(name, PyArray1::from_iter(py, rows.iter().map(|r| value(r.1))))?;
+        }
+        out.set_item("now", self.inner.now_s())?;
+        Ok(out)
+    }
+
+    /// A tracker on the time base given that remembers `state` (as [`PyTracker::state`] gives it).
+    #[staticmethod]
+    #[pyo3(signature = (t_obs, dt, max_gap, default_class, state))]
+    fn restore(
+        t_obs: usize,
+        dt: f64,
+        max_gap: Option<f64>,
+        default_class: Bound<'_, PyAny>,
+        state: &Bound<'_, PyDict>,
+    ) -> PyResult<Self> {
+        let cols = Columns::from_dict(state)?;
+        let times: PyReadonlyArray1<'_, f64> = required_floats(state, "times")?;
+        let mut rows = Columns { classes: None, ..cols }.detections(times.as_slice()?)?;
+        let codes: PyReadonlyArray1<'_, i64> = item(state, "classes")?
+            .ok_or_else(|| invalid_frame("the column classes is required"))?
+            .extract()
+            .map_err(|_| invalid_frame("classes must be a 1-D int64 array"))?;
+        let codes = codes.as_slice()?;
+        if codes.len() != rows.len() {
+            return Err(invalid_frame(format!("{} classes given for {} rows", codes.len(), rows.len())));
+        }
+        for ((_, d), code) in rows.iter_mut().zip(codes) {
+            d.class = if *code < 0 { None } else { Some(AgentClass::from_code(*code).py()?) };
+        }
+        let mut tracks: std::collections::BTreeMap<i64, Vec<Detection>> = std::collections::BTreeMap::new();
+        for (id, d) in rows {
+            tracks.entry(id).or_default().push(d);
+        }
+        let now: Option<f64> = item(state, "now")?.map(|v| v.extract()).transpose()?;
+        let base = time_base(t_obs, dt, max_gap)?;
+        Ok(Self { inner: Tracker::restore(base, parse_default_class(&default_class)?, tracks, now).py()? })
     }
 }

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import datetime
+import pickle
 
 import numpy as np
 import pytest
@@ -94,6 +96,43 @@ def test_a_long_stream_of_new_string_ids_keeps_bounded_memory_and_the_right_ids(
     assert born > 2000
     assert len(tracker._codes) <= 2 * len(tracker) + 64  # the ids of about 2,000 agents gone were forgotten
     assert "track-000000" in tracker.frame().agent_ids.tolist()
+
+
+@pytest.mark.parametrize("ids", [["a", "b", "c"], [7, 3, 11]], ids=["strings", "integers"])
+def test_a_saved_or_copied_tracker_goes_on_as_the_original_and_apart_from_it(ids: list[object]) -> None:
+    """Pickled (a service saving its state) or copied, a tracker remembers what the original did: fed the same
+    detections, both give the same predictions; fed others, the original is untouched."""
+    p = dgan.Predictor("zara1")
+    tracker = dgan.Tracker(p, map=dgan.scene_map("zara1"), max_gap=0.9, default_class="pedestrian", denoise=0.2)
+
+    def tick(t: dgan.Tracker, k: int, shift: float = 0.0) -> None:
+        pos = [[0.3 * k + shift, 0.0], [0.0, 0.4 * k], [2.0, 1.0 + 0.2 * k]]
+        seen = [0, 2] if k % 5 == 3 else [0, 1, 2]  # the second agent drops out now and then
+        t.update(0.4 * k, ids=[ids[i] for i in seen], positions=[pos[i] for i in seen], headings=[0.1] * len(seen))
+
+    for k in range(12):
+        tick(tracker, k)
+    saved = pickle.dumps(tracker)
+    copies = [pickle.loads(saved), copy.copy(tracker), copy.deepcopy(tracker)]
+    for k in range(12, 20):
+        tick(tracker, k)
+        for c in copies:
+            tick(c, k)
+            a, b = tracker.predict(), c.predict()
+            assert a.agent_ids.tolist() == b.agent_ids.tolist()
+            np.testing.assert_array_equal(a.trajectories, b.trajectories)
+            np.testing.assert_array_equal(a.probabilities, b.probabilities)
+    before = tracker.predict()
+    tick(copies[1], 20, shift=5.0)  # a copy fed other detections leaves the original as it was
+    assert tracker.now == pytest.approx(0.4 * 19)
+    np.testing.assert_array_equal(tracker.predict().trajectories, before.trajectories)
+    restored = pickle.loads(saved)
+    assert restored.now == pytest.approx(0.4 * 11)
+    assert len(restored) == 3
+    state = tracker._native.state()
+    state["times"] = state["times"][::-1].copy()
+    with pytest.raises(exc.InvalidFrameError, match="cannot restore the tracker"):
+        dgan._dgan.Tracker.restore(8, 0.4, None, "pedestrian", state)
 
 
 def test_tracker_errors() -> None:
