@@ -41,7 +41,7 @@ def read_scene(path: Path, text_columns: Collection[str] = ("class",)) -> tuple[
         what = "does not exist" if not path.exists() else "is not a regular file"
         raise InvalidFrameError(f"cannot read scene {path}: it {what}")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (a spreadsheet's CSV) is no column name
     except (OSError, UnicodeDecodeError, MemoryError) as e:
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]

@@ -509,3 +509,18 @@ def test_a_photo_as_the_map_of_a_mask_model_warns_in_one_line(capsys: pytest.Cap
     ]
     assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--map", "zara1"]) == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_a_spreadsheets_csv_with_a_byte_order_mark_and_crlf_reads_as_any(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rows = ["agent_id,time,x,y"] + [f"{a},{t * 0.4:.1f},{t * 0.5 + a},{a}" for a in range(3) for t in range(8)]
+    plain, excel = tmp_path / "plain.csv", tmp_path / "excel.csv"
+    plain.write_text("\n".join(rows) + "\n")
+    excel.write_bytes(b"\xef\xbb\xbf" + ("\r\n".join(rows) + "\r\n").encode())
+    outs = []
+    for scene in (plain, excel):
+        assert main(["predict", "zara1", str(scene), "--json"]) == 0, capsys.readouterr().err
+        outs.append(json.loads(capsys.readouterr().out))
+    assert outs[0] == outs[1]
+    assert [a["id"] for a in outs[1]["agents"]] == [0, 1, 2]
