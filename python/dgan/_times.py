@@ -138,3 +138,25 @@ def instant_text(origin: np.datetime64 | None, seconds: float) -> str:
     if origin is None:
         return f"{seconds:g}"
     return str(np.datetime_as_string(origin + np.timedelta64(round(seconds * 1e9), "ns"), unit="ms"))
+
+
+@dataclass(frozen=True)
+class TableTime:
+    """A frame's current time as its table gave it: ``now`` in the time column's unit (``unit_s`` seconds) or, for a
+    column of instants, a ``numpy.datetime64``. What a prediction's ``time`` column counts from."""
+
+    now: float | np.datetime64
+    unit_s: float = 1.0
+
+    def at(self, offsets_s: npt.NDArray[np.float64]) -> npt.NDArray[Any]:
+        """The times ``offsets_s`` seconds after now, as the table writes them (numbers, or ``datetime64[ns]``)."""
+        if isinstance(self.now, np.datetime64):
+            return self.now + np.round(np.asarray(offsets_s) * 1e9).astype("timedelta64[ns]")
+        return np.round(float(self.now) + np.asarray(offsets_s, dtype=np.float64) / self.unit_s, 9)
+
+    @classmethod
+    def of(cls, clock: TimeColumn, now: float) -> TableTime:
+        """The time ``now`` of a :class:`TimeColumn` (in its unit) as its table wrote it."""
+        if clock.origin is None:
+            return cls(float(now), clock.unit)
+        return cls(clock.origin + np.timedelta64(round(now * 1e9), "ns"))

@@ -9,7 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._times import TimeLike
+from dgan._times import TableTime, TimeLike
 from dgan._values import ClassLike, as_given, checked_array, checked_real, checked_shift, checked_text, typename
 from dgan.contract import CLASSES
 from dgan.exceptions import InvalidFrameError, InvalidMapError, TimeBaseError, UnknownClassError
@@ -53,6 +53,11 @@ def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[An
     if len({*labels.tolist()}) != labels.size:
         raise InvalidFrameError("ids repeat")
     return np.arange(labels.size, dtype=np.int64), labels
+
+
+#: What a frame built from a table knows of it: the rows' median spacing in seconds, whether they were upsampled, and
+#: the frame's time as the table wrote it.
+Source = tuple[float | None, bool] | tuple[float | None, bool, TableTime | None]
 
 
 class Frame:
@@ -99,7 +104,7 @@ class Frame:
         n = pos.shape[0] if pos.ndim >= 1 else 0
         codes, self._labels = _ids(ids, n)
         self._map = map
-        self._source: tuple[float | None, bool] | None = None
+        self._source: Source | None = None
         self._frame = _dgan.Frame(
             pos,
             checked_array("mask", mask, np.bool_),
@@ -119,7 +124,7 @@ class Frame:
         native: _dgan.Frame,
         labels: npt.NDArray[Any] | None,
         map: RasterMap | VectorMap | None,
-        source: tuple[float | None, bool] | None = None,
+        source: Source | None = None,
     ) -> Frame:
         out = cls.__new__(cls)
         out._frame, out._labels, out._map, out._source = native, labels, map, source
@@ -275,6 +280,18 @@ class Frame:
         return None if self._source is None else self._source[0]
 
     @property
+    def time(self) -> float | np.datetime64 | None:
+        """The frame's current time as its table or tracker gave it: a number in the time column's unit (a
+        :class:`~dgan.Tracker`'s seconds), or a ``numpy.datetime64`` for a column of instants; None for a frame built
+        from arrays. A prediction of the frame counts its ``time`` column from it (:meth:`Prediction.to_records`)."""
+        clock = self._table_time
+        return None if clock is None else clock.now
+
+    @property
+    def _table_time(self) -> TableTime | None:
+        return self._source[2] if self._source is not None and len(self._source) > 2 else None
+
+    @property
     def upsampled(self) -> bool:
         """Whether :meth:`from_records` interpolated data sparser than ``dt`` onto its grid (``upsample=True``)."""
         return self._source is not None and self._source[1]
@@ -368,7 +385,7 @@ def _unpickle_frame(
     state: tuple[Any, ...],
     labels: npt.NDArray[Any] | None,
     map: RasterMap | VectorMap | None,
-    source: tuple[float | None, bool] | None,
+    source: Source | None,
 ) -> Frame:
     """A frame from :meth:`Frame._state` and what the Python side keeps (for pickling and :meth:`Frame.select`)."""
     (pos, mask, codes, headings, velocities, lengths, widths), classes, dt = state

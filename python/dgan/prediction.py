@@ -12,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan._times import TableTime
 from dgan.exceptions import OutputError
 
 Columns = dict[str, npt.NDArray[Any]]
@@ -30,6 +31,8 @@ class Prediction:
         edges: ``(E, 2)`` undirected attention-zone edges between frame rows ``i < j``.
         classes: the model's class names.
         dt_s: seconds between predicted steps (the model's time base); step ``s`` is ``(s + 1) · dt_s`` after now.
+        time: the frame's current time as its table or tracker gave it (:attr:`Frame.time`, with its unit), None
+            for a frame built from arrays; :meth:`to_records` then has a ``time`` column.
     """
 
     agent_ids: npt.NDArray[Any]
@@ -40,10 +43,16 @@ class Prediction:
     edges: npt.NDArray[np.int64]
     classes: tuple[str, ...]
     dt_s: float = float("nan")
+    time: TableTime | None = None
 
     @classmethod
     def from_native(
-        cls, native: _dgan.Prediction, agent_ids: npt.NDArray[Any], classes: tuple[str, ...], dt_s: float
+        cls,
+        native: _dgan.Prediction,
+        agent_ids: npt.NDArray[Any],
+        classes: tuple[str, ...],
+        dt_s: float,
+        time: TableTime | None = None,
     ) -> Prediction:
         """The engine's prediction with the frame's ids as given, the model's classes and time base."""
         return cls(
@@ -55,6 +64,7 @@ class Prediction:
             edges=native.edges,
             classes=classes,
             dt_s=dt_s,
+            time=time,
         )
 
     def __len__(self) -> int:
@@ -68,7 +78,8 @@ class Prediction:
     def to_records(self) -> dict[str, npt.NDArray[Any]]:
         """The prediction as a long table of numpy columns, one row per agent, mode and step: ``agent_id``,
         ``mode`` (0 = most probable), ``probability``, ``class`` (the mode's anchor class), ``class_probability``,
-        ``step`` (1..T_f), ``time_offset_s``, ``x``, ``y`` (world metres)."""
+        ``step`` (1..T_f), ``time_offset_s``, ``x``, ``y`` (world metres); for a frame of a table or a tracker also
+        ``time``, each step's time as the table wrote its times (a number in its unit, or ``datetime64[ns]``)."""
         return prediction_columns(self)
 
     def to_pandas(self) -> Any:
@@ -124,17 +135,19 @@ def prediction_columns(prediction: Prediction) -> Columns:
     names = np.asarray(prediction.classes, dtype=object)
     mode_class = prediction.mode_classes[agent, mode] if n else np.zeros(0, dtype=np.int64)
     xy = prediction.trajectories.reshape(-1, 2)
-    return {
+    offsets = np.round(step * prediction.dt_s, 9)
+    columns: Columns = {
         "agent_id": prediction.agent_ids[agent],
         "mode": mode.astype(np.int64),
         "probability": prediction.probabilities[agent, mode],
         "class": names[mode_class] if n else np.zeros(0, dtype=object),
         "class_probability": prediction.class_probabilities[agent, mode_class] if n else np.zeros(0),
         "step": step.astype(np.int64),
-        "time_offset_s": np.round(step * prediction.dt_s, 9),
-        "x": xy[:, 0].copy(),
-        "y": xy[:, 1].copy(),
+        "time_offset_s": offsets,
     }
+    if prediction.time is not None:
+        columns["time"] = prediction.time.at(offsets)
+    return columns | {"x": xy[:, 0].copy(), "y": xy[:, 1].copy()}
 
 
 def _arrow_ids(ids: npt.NDArray[Any]) -> Any:

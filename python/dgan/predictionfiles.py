@@ -10,6 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 import dgan
 from dgan.exceptions import InvalidFrameError
 
@@ -74,7 +76,7 @@ def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction],
     names = list(extra) + list(preds[0].to_records())
     rows: list[tuple[Any, ...]] = []
     for i, pr in enumerate(preds):
-        cols = {k: v.tolist() for k, v in pr.to_records().items()}
+        cols = {k: _listed(v) for k, v in pr.to_records().items()}
         cols.update({k: [v[i]] * len(cols["x"]) for k, v in extra.items()})
         rows.extend(zip(*(cols[k] for k in names), strict=True))
 
@@ -89,3 +91,10 @@ def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction],
             f.write("".join(json.dumps(dict(zip(names, r, strict=True))) + "\n" for r in rows).encode())
 
     write_atomically(out, write)
+
+
+def _listed(column: Any) -> list[Any]:
+    """A column's values for CSV or JSON: instants in ISO 8601 (milliseconds), everything else as numpy lists it."""
+    if column.dtype.kind == "M":
+        return [str(t) for t in np.datetime_as_string(column, unit="ms")]
+    return list(column.tolist())

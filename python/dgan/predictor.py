@@ -207,7 +207,7 @@ class Predictor:
         except UnknownClassError as e:
             raise UnknownClassError(f"{e}; unknown_classes='ignore' predicts only the agents of its classes") from None
         self._warn_headings(native.headings)
-        return Prediction.from_native(native, frame.agent_ids, self.classes, self._spec.dt_s)
+        return Prediction.from_native(native, frame.agent_ids, self.classes, self._spec.dt_s, frame._table_time)
 
     def _known(self, frame: Frame, unknown_classes: str) -> Frame:
         """``frame``, or with ``unknown_classes="ignore"`` its agents of the model's classes."""
@@ -290,7 +290,10 @@ class Predictor:
         for o in outs:
             self._warn_headings(o.headings)
         dt_s = self._spec.dt_s
-        return [Prediction.from_native(o, f.agent_ids, self.classes, dt_s) for o, f in zip(outs, frames, strict=True)]
+        return [
+            Prediction.from_native(o, f.agent_ids, self.classes, dt_s, f._table_time)
+            for o, f in zip(outs, frames, strict=True)
+        ]
 
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickles as its model and options (for multiprocessing, Ray, Dask, Spark): the receiver loads the model

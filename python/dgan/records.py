@@ -17,14 +17,14 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._times import TimeLike, instant_text, time_column
+from dgan._times import TableTime, TimeLike, instant_text, time_column
 from dgan._values import ClassLike, checked_array, checked_real, typename
 from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
 from dgan.tables import Columns, columns
 
 #: What a table becomes: the engine's frame, the ids as given of its rows (None when its codes are the ids), and
-#: the data's own spacing with whether it was upsampled.
-Parsed = tuple[_dgan.Frame, npt.NDArray[Any] | None, tuple[float | None, bool] | None]
+#: the data's own spacing with whether it was upsampled and the frame's time as the table wrote it.
+Parsed = tuple[_dgan.Frame, npt.NDArray[Any] | None, tuple[float | None, bool, TableTime | None] | None]
 
 #: How repeated (agent, time) rows may be resolved (the engine's ``Duplicates``).
 DUPLICATES: Final = tuple(_dgan.DUPLICATES)
@@ -308,7 +308,8 @@ def from_records(
     except InvalidFrameError as e:
         raise _named(e, labels) from None
     _warn_time_unit(native, time_unit, _median_gap(codes, seconds))
-    return native, None if labels is None else labels[native.ids], (spacing, upsampled)
+    source = (spacing, upsampled, TableTime.of(clock, now))
+    return native, None if labels is None else labels[native.ids], source
 
 
 def sample_track(

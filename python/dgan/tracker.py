@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
+from dgan._times import TableTime
 from dgan._values import ClassLike, as_given, checked_real, typename
 from dgan.exceptions import InvalidFrameError, TimeBaseError
 from dgan.frame import Frame
@@ -191,7 +192,7 @@ class Tracker:
         if not self._integer_ids:
             labels = np.empty(len(native), dtype=object)
             labels[:] = [self._labels[c] for c in native.ids]
-        out = Frame._wrap(native, labels, None)
+        out = Frame._wrap(native, labels, None, (None, False, TableTime(float(self._native.now or 0.0))))
         out = out if self._map is None else out.with_map(self._map)
         return out if self._denoise is None else out.denoised(self._denoise)
 

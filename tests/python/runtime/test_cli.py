@@ -135,9 +135,10 @@ def test_predict_with_a_map_and_a_table_out(tmp_path: Path, capsys: pytest.Captu
     err = capsys.readouterr().err
     assert "no --map given" not in err
     lines = out.read_text().splitlines()
-    assert lines[0] == "agent_id,mode,probability,class,class_probability,step,time_offset_s,x,y"
+    assert lines[0] == "agent_id,mode,probability,class,class_probability,step,time_offset_s,time,x,y"
     assert len(lines) == 1 + 18 * 3 * 12
     assert lines[1].startswith("76,0,")
+    assert [line.split(",")[7] for line in lines[1:4]] == ["5510.0", "5520.0", "5530.0"]  # frame ids, as the file
     # The same scene without --map: a note that the model runs without its map, and other predictions.
     assert main(["predict", "zara1", str(SCENE), "--time", "5500", "--out", str(tmp_path / "nomap.parquet")]) == 0
     assert "no --map given; zara1 runs without a map" in capsys.readouterr().err
@@ -145,7 +146,7 @@ def test_predict_with_a_map_and_a_table_out(tmp_path: Path, capsys: pytest.Captu
 
     table = pq.read_table(tmp_path / "nomap.parquet")
     assert table.num_rows == 18 * 3 * 12
-    assert table.column("x").to_pylist()[0] != float(lines[1].split(",")[7])
+    assert table.column("x").to_pylist()[0] != float(lines[1].split(",")[8])
     # An image map with its homography, and a vector map file.
     scene = ROOT / "python" / "dgan" / "data" / "scenes" / "zara1"
     args = ["predict", "zara1", str(SCENE), "--time", "5500", "--json", "--modes", "1"]

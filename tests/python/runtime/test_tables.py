@@ -129,10 +129,15 @@ def test_prediction_as_a_long_table(tmp_path: Path) -> None:
         "class_probability",
         "step",
         "time_offset_s",
+        "time",
         "x",
         "y",
     ]
     assert all(len(v) == n * m * t_f for v in rec.values())
+    # A frame of a table counts its times as the table does (here units of 0.8333 s, the frame's time 8 units).
+    assert isinstance(frame.time, float)
+    np.testing.assert_allclose(rec["time"][:3], frame.time + np.arange(1, 4) * (1 / 3) / (1 / 0.4 / 3))
+    assert "time" not in dgan.Predictor("sdd").predict(dgan.Frame(frame.positions, dt=1 / 3)).to_records()
     # Row (agent i, mode k, step s) holds trajectories[i, k, s - 1].
     i, k, s = 2, 1, 5
     row = (i * m + k) * t_f + (s - 1)
@@ -144,7 +149,7 @@ def test_prediction_as_a_long_table(tmp_path: Path) -> None:
     assert rec["class"][row] == pred.classes[pred.mode_classes[i, k]]
     assert rec["class_probability"][row] == pred.class_probabilities[i, pred.mode_classes[i, k]]
     df = pred.to_pandas()
-    assert df.shape == (n * m * t_f, 9)
+    assert df.shape == (n * m * t_f, 10)
     assert df["agent_id"].iloc[0] == pred.agent_ids[0]
     path = tmp_path / "pred.parquet"
     pred.to_parquet(path)

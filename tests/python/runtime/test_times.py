@@ -132,3 +132,25 @@ def test_iso_times_with_utc_offsets_are_the_instants_they_name(hdmap: dgan.Predi
         same(dgan.Frame.from_records({**rec, "time": local}, spec=hdmap), dgan.Frame.from_records(utc, spec=hdmap))
         at = dgan.Frame.from_records({**rec, "time": local}, spec=hdmap, current_time="2026-03-01T06:15:06.1-02:00")
     same(at, dgan.Frame.from_records(rec, spec=hdmap, current_time=6.1))
+
+
+def test_a_prediction_counts_its_times_as_the_table_wrote_them(hdmap: dgan.Predictor) -> None:
+    rec = moving()
+    at = instants(np.array([6.1]))[0]
+    frame = dgan.Frame.from_records(as_kind(rec, "datetime64"), spec=hdmap, current_time=at)
+    assert frame.time == at
+    assert frame.select(np.array([True, False, True])).time == at  # kept by what derives a frame
+    out = hdmap.predict(frame).to_records()
+    assert out["time"].dtype == np.dtype("datetime64[ns]")
+    np.testing.assert_array_equal(out["time"][:3], at + np.array([200, 400, 600], dtype="timedelta64[ms]"))
+    by_seconds = dgan.Frame.from_records(rec, spec=hdmap, current_time=6.1)
+    assert by_seconds.time == pytest.approx(6.1)
+    np.testing.assert_allclose(hdmap.predict(by_seconds).to_records()["time"][:3], [6.3, 6.5, 6.7])
+    in_ms = {**rec, "time": np.round(rec["time"] * 1000)}
+    frame_ms = dgan.Frame.from_records(in_ms, spec=hdmap, time_unit=0.001, current_time=6100)
+    np.testing.assert_allclose(hdmap.predict(frame_ms).to_records()["time"][:3], [6300, 6500, 6700])
+    tracker = dgan.Tracker(hdmap)
+    for t in (0.0, 0.2, 0.4):
+        tracker.update(100.0 + t, ids=["a"], positions=[[t, 0.0]])
+    assert tracker.frame().time == pytest.approx(100.4)
+    np.testing.assert_allclose(tracker.predict().to_records()["time"][:2], [100.6, 100.8])
