@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from dgan._values import checked_array, checked_real, shown
 from dgan.exceptions import DganError, InvalidFrameError, InvalidMapError, InvalidSpecError
 from dgan.frame import Frame
 from dgan.maps import RasterMap, VectorMap
@@ -105,12 +106,26 @@ def _truths(
     if isinstance(ground_truth, Mapping):
         for i, a in enumerate(frame.agent_ids.tolist()):
             if a in ground_truth:
-                truth[i] = np.asarray(ground_truth[a], dtype=np.float64).reshape(-1, 2)[:t_f]
+                future = checked_array(f"ground_truth[{a!r}]", ground_truth[a], np.float64, required=True)
+                truth[i] = future.reshape(-1, 2)[:t_f]
         return truth
-    gt = np.asarray(ground_truth, dtype=np.float64)
+    gt = checked_array("ground_truth", ground_truth, np.float64)
     if gt.ndim != 3 or gt.shape[0] != n or gt.shape[2] != 2:
         raise InvalidFrameError(f"ground_truth must have shape (N={n}, T, 2), got {gt.shape}")
     return [gt[i, :t_f] for i in range(n)]
+
+
+def _check_options(ax: Any, margin_m: Any, in_pixels: Any, headings: Any) -> None:
+    """Refuses what :func:`plot` cannot draw with, naming the option."""
+    margin = checked_real("margin_m", margin_m, InvalidSpecError)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InvalidSpecError(f"margin_m must be a finite, non-negative number of metres, got {margin_m!r}")
+    if not isinstance(in_pixels, (bool, np.bool_)):
+        raise InvalidSpecError(f"in_pixels must be True or False, got {shown(in_pixels)}")
+    if headings is not None and not isinstance(headings, Mapping):
+        raise InvalidSpecError(f"headings must map agent ids to headings in radians, got {shown(headings)}")
+    if ax is not None and not (hasattr(ax, "figure") and hasattr(ax, "imshow")):
+        raise InvalidSpecError(f"ax must be a matplotlib Axes or None, got {shown(ax)}")
 
 
 def _new_axes(plt: Any, picture: Arr | None, lo: Arr, hi: Arr) -> Any:
@@ -204,6 +219,7 @@ def plot(
 
     if not isinstance(frame, Frame) or not isinstance(prediction, Prediction):
         raise InvalidFrameError("plot takes a dgan.Frame and its dgan.Prediction")
+    _check_options(ax, margin_m, in_pixels, headings)
     scene_map = frame.map if map is None else map
     picture, h = None, None
     if in_pixels:

@@ -137,3 +137,23 @@ def test_rerun_recording(tmp_path: Path) -> None:
     out = subprocess.run([str(rerun_cli), "rrd", "print", str(path)], capture_output=True, text=True, check=True)
     for entity in ("/dgan/observed", "/dgan/agents", "/dgan/modes", "/dgan/map"):
         assert entity in out.stdout, entity
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("margin_m", "5", "margin_m must be a real number"),
+        ("margin_m", None, "margin_m must be a real number"),
+        ("margin_m", float("nan"), "finite, non-negative number of metres"),
+        ("margin_m", -1.0, "finite, non-negative number of metres"),
+        ("in_pixels", np.zeros(3), "in_pixels must be True or False"),
+        ("headings", [0.1, 0.2], "headings must map agent ids"),
+        ("ax", 3, "ax must be a matplotlib Axes"),
+        ("ground_truth", "north", "ground_truth must be an array of float64"),
+        ("ground_truth", {76: [[1j, 0.0]]}, r"ground_truth\[76\] must be an array of float64"),
+    ],
+)
+def test_plot_refuses_options_it_cannot_draw_with(option: str, value: object, message: str) -> None:
+    frame, pred, _ = zara1()
+    with pytest.raises(exc.DganError, match=message):
+        dgan.plot(frame, pred, **{option: value})  # type: ignore[arg-type]
