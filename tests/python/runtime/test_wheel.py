@@ -46,7 +46,9 @@ SCRIPT = textwrap.dedent(
         assert pred.agent_ids.tolist() == ref.agent_ids.tolist(), name
         assert np.array_equal(pred.trajectories, ref.trajectories), name
         assert np.array_equal(pred.probabilities, ref.probabilities), name
-    assert pred.to_pandas().shape == (18 * p.num_modes * 12, 9)
+    table = pred.to_pandas()
+    assert table.shape == (18 * p.num_modes * 12, 10), table.shape
+    assert np.allclose(table["time"].to_numpy()[:2], [220.4, 220.8]), table["time"][:2]  # the table's own seconds
     print("identical across", sorted(preds))
     """
 )
