@@ -41,7 +41,7 @@ PALETTE_TOLERANCE: Final = 24
 MIN_PALETTE_SHARE: Final = 0.8
 
 
-def palette_share(image: npt.NDArray[np.uint8], step: int = 4) -> float:
+def palette_share(image: npt.NDArray[np.uint8], step: int = 8) -> float:
     """The share of an ``(H, W, 3)`` image's pixels (every ``step``-th row and column) within
     :data:`PALETTE_TOLERANCE` of a colour of :data:`MASK_PALETTE`: 1 for a colourised mask, far less for a photo."""
     pixels = np.asarray(image)[::step, ::step, :3].astype(np.int16)
