@@ -12,6 +12,7 @@ from dgan._dgan import __version__
 from dgan.contract import CLASSES, MAP_ELEMENT_KINDS
 from dgan.exceptions import DganError
 from dgan.frame import Frame
+from dgan.labels import COMMON_CLASS_NAMES
 from dgan.maps import RasterMap, VectorMap
 from dgan.prediction import Prediction
 from dgan.predictor import Predictor, available_execution_providers
@@ -38,6 +39,7 @@ from dgan.viz import plot
 
 __all__ = [
     "CLASSES",
+    "COMMON_CLASS_NAMES",
     "MAP_ELEMENT_KINDS",
     "ClassPrior",
     "DganError",

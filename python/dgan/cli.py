@@ -24,11 +24,20 @@ from pathlib import Path
 from typing import Any
 
 import dgan
-from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError
+from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, UnknownClassError
 from dgan.frame import DENOISE_GATE_M
 from dgan.predictionfiles import prediction_json, write_records, write_table
 from dgan.records import DUPLICATES
-from dgan.scenefiles import cli_wording, column_names, latest_time, read_map, read_scene, scene_files, time_value
+from dgan.scenefiles import (
+    class_names,
+    cli_wording,
+    column_names,
+    latest_time,
+    read_map,
+    read_scene,
+    scene_files,
+    time_value,
+)
 
 
 def _info(args: argparse.Namespace) -> int:
@@ -112,9 +121,10 @@ def _frame_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> tuple
                 map=scene_map,
                 duplicates=args.duplicates,
                 upsample=args.upsample,
+                class_names=class_names(args.class_name, args.common_classes),
                 **names,
             )
-        except InvalidFrameError as e:
+        except (InvalidFrameError, UnknownClassError) as e:
             raise type(e)(cli_wording(str(e))) from None
     for w in caught:
         if issubclass(w.category, ColumnWarning):
@@ -298,6 +308,18 @@ def _table_options(pred: Any) -> None:
     )
     pred.add_argument(
         "--upsample", action="store_true", help="interpolate data up to 2.5x sparser than the model's step"
+    )
+    pred.add_argument(
+        "--class-name",
+        action="append",
+        metavar="LABEL=CLASS",
+        help="read LABEL of the class column as CLASS (vehicle, cyclist or pedestrian); repeatable",
+    )
+    pred.add_argument(
+        "--common-classes",
+        action="store_true",
+        help="read common labels of the class column (car, truck, person, bicycle, TYPE_VEHICLE ...) as dgan's "
+        "classes (dgan.COMMON_CLASS_NAMES)",
     )
 
 

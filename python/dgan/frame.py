@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -173,6 +173,7 @@ class Frame:
         width: str = "width",
         velocity: tuple[str, str] = ("vx", "vy"),
         default_class: ClassLike = "pedestrian",
+        class_names: Mapping[Any, ClassLike] | None = None,
         map: RasterMap | VectorMap | None = None,
         duplicates: str = "error",
         upsample: bool = False,
@@ -196,6 +197,8 @@ class Frame:
                 (in row order), ``"mean"`` (positions, sizes, velocities averaged; headings by circular mean).
             upsample: interpolate data up to 2.5× sparser than ``dt`` onto its grid (2 Hz data for a 0.4 s model),
                 bridging gaps up to 1.5× the data's spacing; :attr:`upsampled` records it.
+            class_names: the class column's labels read as dgan classes (``{"car": "vehicle", ...}``, without case;
+                :data:`dgan.COMMON_CLASS_NAMES` holds common ones); a label it does not name is read as it is.
 
         Data denser than ``dt`` or irregular are interpolated linearly at the grid times; steps an agent was not seen
         are masked out. Agents with a row at ``current_time`` are the frame's agents; optional columns (class,
@@ -226,6 +229,7 @@ class Frame:
             max_gap=max_gap,
             names=names,
             default_class=default_class,
+            class_names=class_names,
             duplicates=duplicates,
             upsample=upsample,
         )

@@ -10,6 +10,7 @@ import difflib
 import functools
 import re
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -20,6 +21,7 @@ from dgan import _dgan
 from dgan._times import TableTime, TimeLike, instant_text, time_column
 from dgan._values import ClassLike, checked_array, checked_real, typename
 from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
+from dgan.labels import relabelled
 from dgan.tables import Columns, columns
 
 #: What a table becomes: the engine's frame, the ids as given of its rows (None when its codes are the ids), and
@@ -160,11 +162,12 @@ def _numeric(cols: Columns, name: str) -> npt.NDArray[np.float64] | None:
     return np.ascontiguousarray(c, dtype=np.float64)
 
 
-def _optional_rows(cols: Columns, names: Names) -> dict[str, Any]:
-    """The optional per-row columns the engine reads (None where the table has none)."""
+def _optional_rows(cols: Columns, names: Names, class_names: Mapping[Any, ClassLike] | None) -> dict[str, Any]:
+    """The optional per-row columns the engine reads (None where the table has none), the classes read through
+    ``class_names``."""
     klass = cols.get(names.cls)
     return {
-        "classes": None if klass is None else klass.tolist(),
+        "classes": None if klass is None else relabelled(klass.tolist(), class_names),
         "headings": _numeric(cols, names.heading),
         "lengths": _numeric(cols, names.length),
         "widths": _numeric(cols, names.width),
@@ -262,6 +265,7 @@ def from_records(
     max_gap: float | None,
     names: Names,
     default_class: ClassLike,
+    class_names: Mapping[Any, ClassLike] | None,
     duplicates: str,
     upsample: bool,
 ) -> Parsed:
@@ -295,7 +299,7 @@ def from_records(
         dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
     now = _current_time(uniq_t, clock.now, 1e-6 * dt / time_unit, clock.origin)
     seconds = np.ascontiguousarray(times * time_unit)
-    rows = {"ids": codes, "times": seconds, "xs": xs, "ys": ys, **_optional_rows(cols, names)}
+    rows = {"ids": codes, "times": seconds, "xs": xs, "ys": ys, **_optional_rows(cols, names, class_names)}
     try:
         native, spacing, upsampled = _dgan.frame_from_rows(
             rows, now * time_unit, int(t_obs), float(dt), max_gap, default_class, duplicates, bool(upsample)

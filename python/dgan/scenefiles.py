@@ -189,7 +189,22 @@ def cli_wording(text: str) -> str:
         lambda m: f"--column {by_argument[m[1]]}={m[2]}" if m[1] in by_argument else m[0],
         text,
     )
+    text = text.replace("class_names=dgan.COMMON_CLASS_NAMES", "--common-classes")
+    text = re.sub(r"class_names=\{'([^']*)': \.\.\.\}", r"--class-name \1=CLASS", text)
     return text.replace("time_unit=", "--time-unit")
+
+
+def class_names(options: Sequence[str] | None, common: bool) -> dict[str, str] | None:
+    """``--class-name LABEL=CLASS`` options over :data:`dgan.COMMON_CLASS_NAMES` with ``--common-classes``."""
+    names: dict[str, str] = dict(dgan.COMMON_CLASS_NAMES) if common else {}
+    for option in options or ():
+        label, _, name = (part.strip() for part in option.partition("="))
+        if not label or not name:
+            raise InvalidFrameError(
+                f"--class-name takes LABEL=CLASS (CLASS one of {', '.join(dgan.CLASSES)}), got {option!r}"
+            )
+        names[label] = name
+    return names or None
 
 
 def time_value(text: str | None) -> float | str | None:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -14,6 +14,7 @@ from dgan._times import TableTime
 from dgan._values import ClassLike, as_given, checked_real, typename
 from dgan.exceptions import InvalidFrameError, TimeBaseError
 from dgan.frame import Frame
+from dgan.labels import relabelled
 from dgan.maps import RasterMap, VectorMap
 from dgan.prediction import Prediction
 from dgan.predictor import Predictor
@@ -44,6 +45,7 @@ class Tracker:
         map: the scene's map, attached to every frame.
         max_gap: the longest gap in seconds between two detections of an agent that is interpolated (1.5 · dt).
         default_class: the class of detections that give none.
+        class_names: the detections' labels read as dgan classes (as :meth:`Frame.from_records` reads them).
         denoise: a gate in metres: every frame is :meth:`Frame.denoised` with it (tracks that far or farther off
             their least-squares parabola smoothed), for a detector's noisy positions; None (the default) keeps them
             (a model that declares ``denoise_gate_m``, contract 10, smooths them in the engine all the same).
@@ -61,6 +63,7 @@ class Tracker:
         max_gap: float | None = None,
         default_class: ClassLike = "pedestrian",
         denoise: float | None = None,
+        class_names: Mapping[Any, ClassLike] | None = None,
     ) -> None:
         if not isinstance(predictor, Predictor):
             raise InvalidFrameError(f"Tracker needs a dgan.Predictor, got {typename(predictor)}")
@@ -72,6 +75,8 @@ class Tracker:
         spec = predictor.spec
         self._max_gap = checked_real("max_gap", max_gap, TimeBaseError, optional=True)
         self._default_class = default_class
+        self._class_names = class_names
+        relabelled([], class_names)  # a class_names that is no mapping is refused here
         self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, self._max_gap, default_class)
         # Signed integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids
         # (strings, uint64 hashes, a mix of integers and strings) get codes by first appearance, and the frame gives
@@ -84,7 +89,7 @@ class Tracker:
     def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
         """A tracker pickles (and copies, ``copy.copy`` too) with what it remembers: a service can save its state
         and go on from it, a copy can be fed other detections without touching this one."""
-        options = (self._predictor, self._map, self._max_gap, self._default_class, self._denoise)
+        options = (self._predictor, self._map, self._max_gap, self._default_class, self._denoise, self._class_names)
         ids = (self._integer_ids, dict(self._labels), self._next_code)
         return _unpickle_tracker, (options, self._native.state(), ids)
 
@@ -173,7 +178,7 @@ class Tracker:
             "ids": codes,
             "xs": np.ascontiguousarray(pos2[:, 0]),
             "ys": np.ascontiguousarray(pos2[:, 1]),
-            "classes": None if classes is None else list(classes),
+            "classes": None if classes is None else relabelled(list(classes), self._class_names),
             "headings": _column("headings", headings, n),
             "lengths": _column("lengths", lengths, n),
             "widths": _column("widths", widths, n),
@@ -205,8 +210,15 @@ class Tracker:
 def _unpickle_tracker(
     options: tuple[Any, ...], state: dict[str, Any], ids: tuple[bool, dict[int, Any], int]
 ) -> Tracker:
-    predictor, world_map, max_gap, default_class, denoise = options
-    tracker = Tracker(predictor, map=world_map, max_gap=max_gap, default_class=default_class, denoise=denoise)
+    predictor, world_map, max_gap, default_class, denoise, class_names = options
+    tracker = Tracker(
+        predictor,
+        map=world_map,
+        max_gap=max_gap,
+        default_class=default_class,
+        denoise=denoise,
+        class_names=class_names,
+    )
     spec = predictor.spec
     tracker._native = _dgan.Tracker.restore(spec.t_obs, spec.dt_s, max_gap, default_class, state)
     tracker._integer_ids, labels, tracker._next_code = ids

@@ -525,3 +525,19 @@ def test_a_spreadsheets_csv_with_a_byte_order_mark_and_crlf_reads_as_any(
         outs.append(json.loads(capsys.readouterr().out))
     assert outs[0] == outs[1]
     assert [a["id"] for a in outs[1]["agents"]] == [0, 1, 2]
+
+
+def test_predict_reads_a_trackers_labels_as_asked(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rows = ["agent_id,time,x,y,class"] + [
+        f"{a},{t * 0.2:.1f},{t * 0.3},{4 * a},{label}" for a, label in enumerate(["car", "Person"]) for t in range(10)
+    ]
+    scene = tmp_path / "labels.csv"
+    scene.write_text("\n".join(rows) + "\n")
+    assert main(["predict", "hdmap", str(scene)]) == 2
+    assert "'car' is no dgan class" in (err := capsys.readouterr().err)
+    assert "--common-classes reads it as 'vehicle' (or map your labels yourself: --class-name car=CLASS)" in err
+    for options in (["--common-classes"], ["--class-name", "car=vehicle", "--class-name", "person=pedestrian"]):
+        assert main(["predict", "hdmap", str(scene), "--json", *options]) == 0
+        assert [a["class"] for a in json.loads(capsys.readouterr().out)["agents"]] == ["vehicle", "pedestrian"]
+    assert main(["predict", "hdmap", str(scene), "--class-name", "car"]) == 2
+    assert "--class-name takes LABEL=CLASS" in capsys.readouterr().err
