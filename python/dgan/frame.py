@@ -13,6 +13,7 @@ from dgan._times import TableTime, TimeLike
 from dgan._values import ClassLike, as_given, checked_array, checked_real, checked_shift, checked_text, typename
 from dgan.contract import CLASSES
 from dgan.exceptions import InvalidFrameError, InvalidMapError, TimeBaseError, UnknownClassError
+from dgan.labels import relabelled
 from dgan.maps import RasterMap, VectorMap
 from dgan.records import Names, from_records
 
@@ -21,12 +22,15 @@ from dgan.records import Names, from_records
 DENOISE_GATE_M = 0.1
 
 
-def _classes(classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int) -> list[Any]:
+def _classes(
+    classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int, class_names: Mapping[Any, ClassLike] | None
+) -> list[Any]:
     if classes is None:
         return ["pedestrian"] * n
     if isinstance(classes, (str, bytes)) or not hasattr(classes, "__iter__"):
         raise InvalidFrameError(f"classes must be a sequence with one class per agent, got {typename(classes)}")
-    out = np.asarray(classes).tolist() if isinstance(classes, np.ndarray) else list(classes)  # type: ignore[arg-type]
+    given = np.asarray(classes).tolist() if isinstance(classes, np.ndarray) else list(classes)  # type: ignore[arg-type]
+    out = relabelled(given, class_names)
     for c in out:
         if isinstance(c, bool) or not isinstance(c, (str, int)):
             raise UnknownClassError(f"a class must be a name {CLASSES} or a code 0, 1, 2; got {c!r}")
@@ -76,6 +80,8 @@ class Frame:
         map: a :class:`RasterMap` or :class:`VectorMap` of the scene.
         dt: seconds between the steps. A model refuses a frame whose ``dt`` differs from its own
             (:class:`~dgan.exceptions.TimeBaseError`); None takes the steps as the model's.
+        class_names: other labels of ``classes`` read as dgan classes (``{"car": "vehicle"}``, without case;
+            :data:`dgan.COMMON_CLASS_NAMES` holds common ones).
 
     Raises:
         InvalidFrameError: wrong shapes, non-finite valid positions, an agent without a valid step.
@@ -97,6 +103,8 @@ class Frame:
         widths: npt.ArrayLike | None = None,
         map: RasterMap | VectorMap | None = None,
         dt: float | None = None,
+        *,
+        class_names: Mapping[Any, ClassLike] | None = None,
     ) -> None:
         pos = checked_array("positions", positions, np.float64, required=True)
         if map is not None and not isinstance(map, (RasterMap, VectorMap)):
@@ -108,7 +116,7 @@ class Frame:
         self._frame = _dgan.Frame(
             pos,
             checked_array("mask", mask, np.bool_),
-            _classes(classes, n),
+            _classes(classes, n, class_names),
             codes,
             checked_array("headings", headings, np.float64),
             checked_array("velocities", velocities, np.float64),

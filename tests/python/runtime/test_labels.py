@@ -62,3 +62,12 @@ def test_a_tracker_reads_its_detections_labels_and_keeps_the_mapping_when_saved(
         tracker.update(2.0, ids=[1], positions=[[3.0, 0.0]], classes=["truck"])
     with pytest.raises(exc.InvalidSpecError, match="class_names must map"):
         dgan.Tracker(p, class_names="common")  # type: ignore[arg-type]
+
+
+def test_a_frame_of_arrays_reads_labels_as_asked() -> None:
+    positions = np.cumsum(np.full((2, 8, 2), 0.4), axis=1)
+    with pytest.raises(exc.UnknownClassError, match="'person' is no dgan class"):
+        dgan.Frame(positions, classes=["person", "car"])
+    frame = dgan.Frame(positions, classes=["person", "car"], class_names=dgan.COMMON_CLASS_NAMES)
+    assert frame.classes == ["pedestrian", "vehicle"]
+    assert pickle.loads(pickle.dumps(frame)).classes == ["pedestrian", "vehicle"]
