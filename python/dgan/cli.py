@@ -60,6 +60,8 @@ def _info(args: argparse.Namespace) -> int:
         needed = "optional (runs without a map too)" if m.optional else "required"
         print(f"map        {m.height_px}x{m.width_px} px at {m.resolution_m} m/px, {where}; {needed}")
         print(f"map kind   {kind or 'a raster image or a vector map (--map of dgan predict)'}")
+        if str(c.get("name", "")).startswith(dgan.scenes.MASK_MODEL_PREFIX):
+            print("map input  a semantic mask coloured in dgan.scenes.MASK_PALETTE (--map <scene>), not a photo")
     prior = spec.prior
     if prior.kind == "none":
         print("prior      none (absolute anchors, contract 1)")

@@ -23,6 +23,13 @@ def test_info(nomap_model: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "no map branch" in out
 
 
+def test_info_says_which_map_image_a_mask_model_reads(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", "zara1"]) == 0
+    assert "map input  a semantic mask coloured in dgan.scenes.MASK_PALETTE" in capsys.readouterr().out
+    assert main(["info", "sdd"]) == 0  # reads its videos' reference photos
+    assert "map input" not in capsys.readouterr().out
+
+
 def test_info_names_contract_9s_temperatures(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["info", "sdd"]) == 0  # bundled with a speed-dependent and a class temperature
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("temperature"))
