@@ -41,7 +41,7 @@ def _utc_offsets_read() -> Iterator[None]:
         yield
 
 
-def _instant_ns(value: Any, what: str) -> int:
+def instant_ns(value: Any, what: str) -> int:
     """One instant as nanoseconds since 1970 (UTC): a ``datetime`` (a zone-aware one converted to UTC, a naive one
     read as UTC), a ``numpy.datetime64`` or an ISO 8601 string (a trailing ``Z`` allowed)."""
     if isinstance(value, (bool, int, float, np.number)) and not isinstance(value, np.timedelta64):
@@ -74,7 +74,7 @@ def _instants_ns(col: npt.NDArray[Any], name: str) -> npt.NDArray[np.int64]:
         if np.isnat(ns).any():
             raise InvalidFrameError(f"the time column {name!r} holds missing times (NaT)")
         return ns.astype(np.int64)
-    return np.fromiter((_instant_ns(v, f"the time column {name!r}'s value") for v in col.tolist()), np.int64, col.size)
+    return np.fromiter((instant_ns(v, f"the time column {name!r}'s value") for v in col.tolist()), np.int64, col.size)
 
 
 def _is_instants(col: npt.NDArray[Any]) -> bool:
@@ -115,7 +115,7 @@ def time_column(col: npt.NDArray[Any], name: str, time_unit: float, current_time
         return TimeColumn(seconds, now, 1.0)
     ns = _instants_ns(col, name)
     origin = int(ns.min()) if ns.size else 0
-    now = None if current_time is None else (_instant_ns(current_time, "current_time") - origin) * _NS
+    now = None if current_time is None else (instant_ns(current_time, "current_time") - origin) * _NS
     return TimeColumn((ns - origin).astype(np.float64) * _NS, now, 1.0, np.datetime64(origin, "ns"))
 
 

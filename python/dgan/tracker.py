@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._times import TableTime
+from dgan._times import TableTime, instant_ns
 from dgan._values import ClassLike, as_given, checked_real, typename
 from dgan.exceptions import InvalidFrameError, TimeBaseError
 from dgan.frame import Frame
@@ -76,6 +76,7 @@ class Tracker:
         self._max_gap = checked_real("max_gap", max_gap, TimeBaseError, optional=True)
         self._default_class = default_class
         self._class_names = class_names
+        self._origin: np.datetime64 | None = None  # the first tick's time, for a tracker fed datetimes
         relabelled([], class_names)  # a class_names that is no mapping is refused here
         self._native = _dgan.Tracker(spec.t_obs, spec.dt_s, self._max_gap, default_class)
         # Signed integer ids go to the engine as they are (agents ordered by id, as in Frame.from_records); other ids
@@ -91,12 +92,38 @@ class Tracker:
         and go on from it, a copy can be fed other detections without touching this one."""
         options = (self._predictor, self._map, self._max_gap, self._default_class, self._denoise, self._class_names)
         ids = (self._integer_ids, dict(self._labels), self._next_code)
-        return _unpickle_tracker, (options, self._native.state(), ids)
+        return _unpickle_tracker, (options, self._native.state(), ids, self._origin)
 
     @property
-    def now(self) -> float | None:
-        """The latest tick's time in seconds."""
-        return self._native.now
+    def now(self) -> float | np.datetime64 | None:
+        """The latest tick's time: seconds, or a ``numpy.datetime64`` for a tracker fed datetimes."""
+        clock = self._tick_time()
+        return None if clock is None else clock.now
+
+    def _tick_time(self) -> TableTime | None:
+        """The latest tick's time as the ticks gave it."""
+        now = self._native.now
+        if now is None:
+            return None
+        if self._origin is None:
+            return TableTime(float(now))
+        return TableTime(self._origin + np.timedelta64(round(now * 1e9), "ns"))
+
+    def _seconds(self, time: Any) -> float:
+        """A tick's time as the engine's seconds: a real number as it is; a datetime (or ``numpy.datetime64``) as
+        seconds after this tracker's first tick, which every tick then gives as a datetime too."""
+        if isinstance(time, (_dt.datetime, np.datetime64)):
+            ns = instant_ns(time, "time")
+            if self._native.now is not None and self._origin is None:
+                raise TimeBaseError("this tracker's ticks are seconds; give seconds at every tick, not a datetime")
+            if self._origin is None:
+                self._origin = np.datetime64(ns, "ns")
+            return float(ns - int(self._origin.astype(np.int64))) * 1e-9
+        if isinstance(time, (bool, np.bool_)) or not isinstance(time, (int, float, np.integer, np.floating)):
+            raise TimeBaseError(f"time must be seconds, a real number, or a datetime; got {typename(time)} {time!r}")
+        if self._origin is not None:
+            raise TimeBaseError("this tracker's ticks are datetimes; give a datetime at every tick, not seconds")
+        return float(time)
 
     def __len__(self) -> int:
         """Agents remembered (seen within the history window)."""
@@ -124,7 +151,7 @@ class Tracker:
 
     def update(
         self,
-        time: float | np.floating[Any] | np.integer[Any],
+        time: float | np.floating[Any] | np.integer[Any] | _dt.datetime | np.datetime64,
         ids: npt.ArrayLike | Sequence[object],
         positions: npt.ArrayLike,
         *,
@@ -134,15 +161,14 @@ class Tracker:
         widths: npt.ArrayLike | None = None,
         velocities: npt.ArrayLike | None = None,
     ) -> None:
-        """Adds one tick: every agent detected at ``time`` seconds (after the previous tick), with its id (integer
-        or string), world position ``(N, 2)`` in metres, and optionally class, heading, size and velocity.
+        """Adds one tick: every agent detected at ``time`` (seconds, or a datetime at every tick; after the previous
+        tick), with its id (integer or string), world position ``(N, 2)`` in metres, and optionally class, heading,
+        size and velocity.
 
         Raises:
             InvalidFrameError: shapes, repeated ids, non-finite positions. TimeBaseError: a tick not after the last.
         """
-        if isinstance(time, (bool, np.bool_)) or not isinstance(time, (int, float, np.integer, np.floating)):
-            hint = " (a datetime's .timestamp(), say)" if isinstance(time, (_dt.datetime, np.datetime64)) else ""
-            raise TimeBaseError(f"time must be seconds, a real number{hint}; got {typename(time)} {time!r}")
+        seconds = self._seconds(time)
         if ids is None or isinstance(ids, (str, bytes)):
             raise InvalidFrameError("ids must be a sequence of ids (integers or strings)")
         id_array = as_given(ids)
@@ -185,7 +211,7 @@ class Tracker:
             "vxs": None if vel is None else np.ascontiguousarray(vel[:, 0]),
             "vys": None if vel is None else np.ascontiguousarray(vel[:, 1]),
         }
-        self._native.update(float(time), columns)
+        self._native.update(seconds, columns)
         if not self._integer_ids:
             self._forget_labels()
 
@@ -197,7 +223,7 @@ class Tracker:
         if not self._integer_ids:
             labels = np.empty(len(native), dtype=object)
             labels[:] = [self._labels[c] for c in native.ids]
-        out = Frame._wrap(native, labels, None, (None, False, TableTime(float(self._native.now or 0.0))))
+        out = Frame._wrap(native, labels, None, (None, False, self._tick_time()))
         out = out if self._map is None else out.with_map(self._map)
         return out if self._denoise is None else out.denoised(self._denoise)
 
@@ -208,7 +234,10 @@ class Tracker:
 
 
 def _unpickle_tracker(
-    options: tuple[Any, ...], state: dict[str, Any], ids: tuple[bool, dict[int, Any], int]
+    options: tuple[Any, ...],
+    state: dict[str, Any],
+    ids: tuple[bool, dict[int, Any], int],
+    origin: np.datetime64 | None = None,
 ) -> Tracker:
     predictor, world_map, max_gap, default_class, denoise, class_names = options
     tracker = Tracker(
@@ -224,4 +253,5 @@ def _unpickle_tracker(
     tracker._integer_ids, labels, tracker._next_code = ids
     tracker._labels = dict(labels)
     tracker._codes = {label: code for code, label in tracker._labels.items()}
+    tracker._origin = origin
     return tracker
