@@ -10,31 +10,15 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._times import TableTime, TimeLike
-from dgan._values import ClassLike, as_given, checked_array, checked_real, checked_shift, checked_text, typename
-from dgan.contract import CLASSES
-from dgan.exceptions import InvalidFrameError, InvalidMapError, TimeBaseError, UnknownClassError
-from dgan.labels import relabelled
+from dgan._values import ClassLike, as_given, checked_array, checked_real, checked_shift, checked_text
+from dgan.exceptions import InvalidFrameError, InvalidMapError, TimeBaseError
+from dgan.labels import classes_of
 from dgan.maps import RasterMap, VectorMap
 from dgan.records import Names, from_records
 
 #: :meth:`Frame.denoised`'s default gate, metres: chosen on the ETH/UCY validation windows (0.08, 0.10 and 0.12 m
 #: tried; 0.10 the lowest that kept clean top-1 ADE within 0.5% on every fold).
 DENOISE_GATE_M = 0.1
-
-
-def _classes(
-    classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int, class_names: Mapping[Any, ClassLike] | None
-) -> list[Any]:
-    if classes is None:
-        return ["pedestrian"] * n
-    if isinstance(classes, (str, bytes)) or not hasattr(classes, "__iter__"):
-        raise InvalidFrameError(f"classes must be a sequence with one class per agent, got {typename(classes)}")
-    given = np.asarray(classes).tolist() if isinstance(classes, np.ndarray) else list(classes)  # type: ignore[arg-type]
-    out = relabelled(given, class_names)
-    for c in out:
-        if isinstance(c, bool) or not isinstance(c, (str, int)):
-            raise UnknownClassError(f"a class must be a name {CLASSES} or a code 0, 1, 2; got {c!r}")
-    return out
 
 
 def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[Any] | None]:
@@ -116,7 +100,7 @@ class Frame:
         self._frame = _dgan.Frame(
             pos,
             checked_array("mask", mask, np.bool_),
-            _classes(classes, n, class_names),
+            classes_of(classes, n, class_names),
             codes,
             checked_array("headings", headings, np.float64),
             checked_array("velocities", velocities, np.float64),

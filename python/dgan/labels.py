@@ -11,9 +11,12 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any, Final
 
-from dgan._values import ClassLike, shown
+import numpy as np
+import numpy.typing as npt
+
+from dgan._values import ClassLike, shown, typename
 from dgan.contract import CLASSES
-from dgan.exceptions import InvalidSpecError, UnknownClassError
+from dgan.exceptions import InvalidFrameError, InvalidSpecError, UnknownClassError
 
 _VEHICLES = (
     "car",
@@ -75,3 +78,20 @@ def _refuse_common(labels: Sequence[Any]) -> None:
                 f"{label!r} is no dgan class (known: {', '.join(CLASSES)}); class_names=dgan.COMMON_CLASS_NAMES reads "
                 f"it as {COMMON_CLASS_NAMES[key]!r} (or map your labels yourself: class_names={{'{label}': ...}})"
             )
+
+
+def classes_of(
+    classes: Sequence[ClassLike] | npt.ArrayLike | None, n: int, class_names: Mapping[Any, ClassLike] | None
+) -> list[Any]:
+    """One class per agent of a frame built from arrays, its labels read through ``class_names``: what
+    :class:`dgan.Frame` gives the engine (which refuses the names and codes it does not know)."""
+    if classes is None:
+        return ["pedestrian"] * n
+    if isinstance(classes, (str, bytes)) or not hasattr(classes, "__iter__"):
+        raise InvalidFrameError(f"classes must be a sequence with one class per agent, got {typename(classes)}")
+    given = np.asarray(classes).tolist() if isinstance(classes, np.ndarray) else list(classes)  # type: ignore[arg-type]
+    out = relabelled(given, class_names)
+    for c in out:
+        if isinstance(c, bool) or not isinstance(c, (str, int)):
+            raise UnknownClassError(f"a class must be a name {CLASSES} or a code 0, 1, 2; got {c!r}")
+    return out
