@@ -23,6 +23,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 import dgan
 from dgan.cliargs import predict_arguments
 from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, UnknownClassError
@@ -31,7 +33,6 @@ from dgan.scenefiles import (
     class_names,
     cli_wording,
     column_names,
-    latest_time,
     read_map,
     read_scene,
     scene_files,
@@ -104,59 +105,72 @@ def _models(args: argparse.Namespace) -> int:
     return 0
 
 
-def _frame_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> tuple[dgan.Frame, float | str]:
-    """The frame of a scene file at ``--time`` (its last time by default), and that time."""
+def _frames_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> list[tuple[dgan.Frame, float | str]]:
+    """The frames of a scene file, each with its time: at ``--time`` (its last time by default), or with ``--every``
+    at each of its times."""
     names = column_names(args.column)
     cols, unit = read_scene(scene, text_columns=(names.get("cls_column", "class"),))
     time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
     scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
+    times = np.unique(cols[names.get("time", "time")]).tolist() if args.every else [args.time]
+    options = {"spec": p, "time_unit": time_unit, "map": scene_map, "duplicates": args.duplicates}
+    options |= {"upsample": args.upsample, "class_names": class_names(args.class_name, args.common_classes), **names}
+    frames = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ColumnWarning)
-        try:
-            frame = dgan.Frame.from_records(
-                cols,
-                spec=p,
-                time_unit=time_unit,
-                current_time=args.time,
-                map=scene_map,
-                duplicates=args.duplicates,
-                upsample=args.upsample,
-                class_names=class_names(args.class_name, args.common_classes),
-                **names,
-            )
-        except (InvalidFrameError, UnknownClassError) as e:
-            raise type(e)(cli_wording(str(e))) from None
+        for when in times:
+            try:
+                frame = dgan.Frame.from_records(cols, current_time=when, **options)
+            except (InvalidFrameError, UnknownClassError) as e:
+                raise type(e)(cli_wording(str(e))) from None
+            frames.append((_denoised(args, frame), _time_text(frame.time if frame.time is not None else when)))
+    for message in dict.fromkeys(str(w.message) for w in caught if issubclass(w.category, ColumnWarning)):
+        print(f"dgan: note: {cli_wording(message)}", file=sys.stderr)
     for w in caught:
-        if issubclass(w.category, ColumnWarning):
-            print(f"dgan: note: {cli_wording(str(w.message))}", file=sys.stderr)
-        else:
+        if not issubclass(w.category, ColumnWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    now = args.time if args.time is not None else latest_time(cols[names.get("time", "time")], "time")
-    if args.denoise is not None:
-        frame = frame.denoised(args.denoise)
-        gate = p.spec.denoise_gate_m
-        if gate and args.denoise > gate:
-            print(
-                f"note: the model smooths tracks {gate:g} m or more off their parabola itself (contract 10), so "
-                f"--denoise {args.denoise:g} leaves no track between {gate:g} and {args.denoise:g} m as given",
-                file=sys.stderr,
-            )
-    return frame, now
+    return frames
+
+
+def _time_text(at: Any) -> float | str:
+    """A frame's time as the command line prints it: a number, or an instant in ISO 8601 (milliseconds)."""
+    if isinstance(at, np.datetime64):
+        return str(np.datetime_as_string(at, unit="ms"))
+    return at if isinstance(at, str) else float("nan") if at is None else float(at)
+
+
+def _denoised(args: argparse.Namespace, frame: dgan.Frame) -> dgan.Frame:
+    return frame if args.denoise is None else frame.denoised(args.denoise)
+
+
+def _denoise_note(args: argparse.Namespace, p: dgan.Predictor) -> None:
+    gate = p.spec.denoise_gate_m
+    if args.denoise is not None and gate and args.denoise > gate:
+        print(
+            f"note: the model smooths tracks {gate:g} m or more off their parabola itself (contract 10), so "
+            f"--denoise {args.denoise:g} leaves no track between {gate:g} and {args.denoise:g} m as given",
+            file=sys.stderr,
+        )
 
 
 def _predict_many(args: argparse.Namespace, p: dgan.Predictor, files: list[Path]) -> int:
     """``dgan predict MODEL DIR|GLOB --out TABLE``: every scene file, one table with a ``scene`` column."""
     if args.out is None:
-        raise InvalidFrameError("several scenes (a directory or a glob) need --out TABLE (.parquet, .csv or .jsonl)")
-    preds = []
+        what = "--every" if args.every and len(files) == 1 else "several scenes (a directory or a glob)"
+        raise InvalidFrameError(f"{what} needs --out TABLE (.parquet, .csv or .jsonl)")
+    preds: list[dgan.Prediction] = []
+    names: list[str] = []
     for scene in _progress(files, "scenes"):
         try:
-            preds.append(p.predict(_frame_of(args, p, scene)[0], unknown_classes=args.unknown_classes))
+            frames = [f for f, _ in _frames_of(args, p, scene)]
+            preds += p.predict_batch(frames, unknown_classes=args.unknown_classes)
         except DganError as e:
             raise type(e)(f"{scene}: {e}") from None
-    write_records({"scene": [f.name for f in files]}, preds, Path(args.out))
+        names += [scene.name] * len(frames)
+    write_records({"scene": names}, preds, Path(args.out))
     agents = sum(len(pr) for pr in preds)
-    print(f"wrote {agents} agents of {len(files)} scenes to {args.out}", file=sys.stderr)
+    at = f" at {len(preds)} times" if args.every else ""
+    print(f"wrote {agents} agents of {len(files)} scenes{at} to {args.out}", file=sys.stderr)
     return 0
 
 
@@ -178,10 +192,11 @@ def _progress(items: list[Path], what: str) -> Any:
 
 def _predict(args: argparse.Namespace) -> int:
     p = dgan.Predictor(args.model, modes=args.modes, execution_provider=args.provider)
+    _denoise_note(args, p)
     files = scene_files(args.scene)
-    if files is not None:
-        return _predict_many(args, p, files)
-    frame, now = _frame_of(args, p, Path(args.scene))
+    if files is not None or args.every:
+        return _predict_many(args, p, files or [Path(args.scene)])
+    ((frame, now),) = _frames_of(args, p, Path(args.scene))
     if p.spec.map is not None and frame.map is None and p.spec.map.optional:
         print(
             f"dgan: note: no --map given; {args.model} runs without a map (its map is optional; "

@@ -88,6 +88,11 @@ def table_options(pred: Any) -> None:
         "--upsample", action="store_true", help="interpolate data up to 2.5x sparser than the model's step"
     )
     pred.add_argument(
+        "--every",
+        action="store_true",
+        help="predict at every time of the scene (of each scene), into one --out table with a time column",
+    )
+    pred.add_argument(
         "--class-name",
         action="append",
         metavar="LABEL=CLASS",

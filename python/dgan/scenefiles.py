@@ -13,7 +13,6 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
-from dgan._times import instant_text, time_column
 from dgan.exceptions import InvalidFrameError, InvalidMapError
 
 #: Seconds between the annotations of a Social-GAN layout file (ETH/UCY), whatever its frame numbering.
@@ -215,10 +214,3 @@ def time_value(text: str | None) -> float | str | None:
         return float(text)
     except ValueError:
         return text
-
-
-def latest_time(column: npt.NDArray[Any], name: str) -> float | str:
-    """A scene's latest time as ``dgan predict`` reports it: a number, or an instant in ISO 8601."""
-    clock = time_column(column, name, 1.0, None)
-    latest = float(clock.values.max()) if clock.values.size else float("nan")
-    return latest if clock.origin is None else instant_text(clock.origin, latest)

@@ -548,3 +548,27 @@ def test_predict_reads_a_trackers_labels_as_asked(tmp_path: Path, capsys: pytest
         assert [a["class"] for a in json.loads(capsys.readouterr().out)["agents"]] == ["vehicle", "pedestrian"]
     assert main(["predict", "hdmap", str(scene), "--class-name", "car"]) == 2
     assert "--class-name takes LABEL=CLASS" in capsys.readouterr().err
+
+
+def test_predict_at_every_time_of_a_scene_into_one_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "every.parquet"
+    assert main(["predict", "zara1", str(SCENE), "--every", "--map", "zara1", "--modes", "2", "--out", str(out)]) == 0
+    assert "at 20 times" in capsys.readouterr().err  # frames 5430..5620 every 10
+    table = pq.read_table(out).to_pandas()
+    first_steps = table[table["step"] == 1]
+    assert sorted(first_steps["time"].unique()) == [5440.0 + 10 * k for k in range(20)]
+    # The rows predicted from 5500 are what --time 5500 predicts.
+    at = table[(table["time"] - table["time_offset_s"] / 0.04).round(6) == 5500.0]
+    one = tmp_path / "one.parquet"
+    assert (
+        main(["predict", "zara1", str(SCENE), "--time", "5500", "--map", "zara1", "--modes", "2", "--out", str(one)])
+        == 0
+    )
+    alone = pq.read_table(one).to_pandas()
+    assert len(at) == len(alone) == 18 * 2 * 12
+    np.testing.assert_allclose(at[["x", "y"]].to_numpy(), alone[["x", "y"]].to_numpy(), atol=1e-6)
+    capsys.readouterr()
+    assert main(["predict", "zara1", str(SCENE), "--every"]) == 2
+    assert "--every needs --out TABLE" in capsys.readouterr().err
