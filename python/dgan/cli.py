@@ -156,8 +156,8 @@ def _denoise_note(args: argparse.Namespace, p: dgan.Predictor) -> None:
 def _predict_many(args: argparse.Namespace, p: dgan.Predictor, files: list[Path]) -> int:
     """``dgan predict MODEL DIR|GLOB --out TABLE``: every scene file, one table with a ``scene`` column."""
     if args.out is None:
-        what = "--every" if args.every and len(files) == 1 else "several scenes (a directory or a glob)"
-        raise InvalidFrameError(f"{what} needs --out TABLE (.parquet, .csv or .jsonl)")
+        what = "--every needs" if args.every and len(files) == 1 else "several scenes (a directory or a glob) need"
+        raise InvalidFrameError(f"{what} --out TABLE (.parquet, .csv or .jsonl)")
     preds: list[dgan.Prediction] = []
     names: list[str] = []
     for scene in _progress(files, "scenes"):
