@@ -41,10 +41,25 @@ def _utc_offsets_read() -> Iterator[None]:
         yield
 
 
+def _is_number(value: Any) -> bool:
+    """Whether a ``current_time`` (or a value of an object column) is a plain number, not a time."""
+    return isinstance(value, (bool, int, float, np.number)) and not isinstance(value, np.timedelta64)
+
+
+def after(origin: np.datetime64, seconds: float) -> np.datetime64:
+    """The instant ``seconds`` after ``origin``, to the nanosecond."""
+    return origin + np.timedelta64(round(seconds * 1e9), "ns")
+
+
+def iso_text(instants: Any) -> Any:
+    """Instants (one or an array) as the command line and text tables write them: ISO 8601 to the millisecond."""
+    return np.datetime_as_string(instants, unit="ms")
+
+
 def instant_ns(value: Any, what: str) -> int:
     """One instant as nanoseconds since 1970 (UTC): a ``datetime`` (a zone-aware one converted to UTC, a naive one
     read as UTC), a ``numpy.datetime64`` or an ISO 8601 string (a trailing ``Z`` allowed)."""
-    if isinstance(value, (bool, int, float, np.number)) and not isinstance(value, np.timedelta64):
+    if _is_number(value):
         raise InvalidFrameError(f"{what} {value!r} is a number where the time column holds instants")
     if isinstance(value, _dt.datetime) and value.tzinfo is not None:
         value = value.astimezone(_dt.timezone.utc).replace(tzinfo=None)
@@ -80,7 +95,7 @@ def _instants_ns(col: npt.NDArray[Any], name: str) -> npt.NDArray[np.int64]:
 def _is_instants(col: npt.NDArray[Any]) -> bool:
     """Whether a column of strings or objects holds instants (judged by its first value; every value is then read)."""
     first = col.flat[0] if col.size else None
-    return isinstance(first, (str, np.str_, _dt.datetime, np.datetime64)) and not isinstance(first, bool)
+    return isinstance(first, (str, np.str_, _dt.datetime, np.datetime64))
 
 
 def time_column(col: npt.NDArray[Any], name: str, time_unit: float, current_time: TimeLike | None) -> TimeColumn:
@@ -120,7 +135,7 @@ def time_column(col: npt.NDArray[Any], name: str, time_unit: float, current_time
 
 
 def _duration_s(value: Any) -> float:
-    if isinstance(value, (bool, int, float, np.number)) and not isinstance(value, np.timedelta64):
+    if _is_number(value):
         raise InvalidFrameError(f"current_time {value!r} is a number where the time column holds durations")
     if isinstance(value, _dt.timedelta):
         return value.total_seconds()
@@ -135,9 +150,7 @@ def _duration_s(value: Any) -> float:
 def instant_text(origin: np.datetime64 | None, seconds: float) -> str:
     """A time of a column as a user wrote it: ``origin + seconds`` in ISO 8601 (milliseconds) for instants, else the
     number."""
-    if origin is None:
-        return f"{seconds:g}"
-    return str(np.datetime_as_string(origin + np.timedelta64(round(seconds * 1e9), "ns"), unit="ms"))
+    return f"{seconds:g}" if origin is None else str(iso_text(after(origin, seconds)))
 
 
 @dataclass(frozen=True)
@@ -157,6 +170,4 @@ class TableTime:
     @classmethod
     def of(cls, clock: TimeColumn, now: float) -> TableTime:
         """The time ``now`` of a :class:`TimeColumn` (in its unit) as its table wrote it."""
-        if clock.origin is None:
-            return cls(float(now), clock.unit)
-        return cls(clock.origin + np.timedelta64(round(now * 1e9), "ns"))
+        return cls(float(now), clock.unit) if clock.origin is None else cls(after(clock.origin, now))

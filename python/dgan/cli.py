@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 import dgan
+from dgan._times import iso_text
 from dgan.cliargs import predict_arguments
 from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, UnknownClassError
 from dgan.predictionfiles import prediction_json, write_records, write_table
@@ -59,7 +60,7 @@ def _info(args: argparse.Namespace) -> int:
         needed = "optional (runs without a map too)" if m.optional else "required"
         print(f"map        {m.height_px}x{m.width_px} px at {m.resolution_m} m/px, {where}; {needed}")
         print(f"map kind   {kind or 'a raster image or a vector map (--map of dgan predict)'}")
-        if str(c.get("name", "")).startswith(dgan.scenes.MASK_MODEL_PREFIX):
+        if dgan.scenes.reads_masks(c):
             print("map input  a semantic mask coloured in dgan.scenes.MASK_PALETTE (--map <scene>), not a photo")
     prior = spec.prior
     if prior.kind == "none":
@@ -135,7 +136,7 @@ def _frames_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> list
 def _time_text(at: Any) -> float | str:
     """A frame's time as the command line prints it: a number, or an instant in ISO 8601 (milliseconds)."""
     if isinstance(at, np.datetime64):
-        return str(np.datetime_as_string(at, unit="ms"))
+        return str(iso_text(at))
     return at if isinstance(at, str) else float("nan") if at is None else float(at)
 
 

@@ -45,7 +45,7 @@ def _ids(ids: Any, n: int) -> tuple[npt.NDArray[np.int64] | None, npt.NDArray[An
 
 #: What a frame built from a table knows of it: the rows' median spacing in seconds, whether they were upsampled, and
 #: the frame's time as the table wrote it.
-Source = tuple[float | None, bool] | tuple[float | None, bool, TableTime | None]
+Source = tuple[float | None, bool, TableTime | None]
 
 
 class Frame:
@@ -285,7 +285,7 @@ class Frame:
 
     @property
     def _table_time(self) -> TableTime | None:
-        return self._source[2] if self._source is not None and len(self._source) > 2 else None
+        return None if self._source is None else self._source[2]
 
     @property
     def upsampled(self) -> bool:

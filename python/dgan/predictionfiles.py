@@ -10,9 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 import dgan
+from dgan._times import iso_text
 from dgan.exceptions import InvalidFrameError
 
 
@@ -96,5 +95,5 @@ def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction],
 def _listed(column: Any) -> list[Any]:
     """A column's values for CSV or JSON: instants in ISO 8601 (milliseconds), everything else as numpy lists it."""
     if column.dtype.kind == "M":
-        return [str(t) for t in np.datetime_as_string(column, unit="ms")]
+        return [str(t) for t in iso_text(column)]
     return list(column.tolist())

@@ -27,7 +27,7 @@ from dgan.exceptions import (
 from dgan.frame import Frame
 from dgan.maps import RasterMap
 from dgan.prediction import Prediction
-from dgan.scenes import MASK_MODEL_PREFIX, MIN_PALETTE_SHARE, palette_share
+from dgan.scenes import MIN_PALETTE_SHARE, palette_share, reads_masks
 from dgan.spec import InputSpec
 
 
@@ -113,7 +113,7 @@ class Predictor:
         self._spec = InputSpec.from_dict(self._contract)
         self._modes = self._check_modes(modes)
         self._heading_warned = False
-        self._reads_mask = str(self._contract.get("name", "")).startswith(MASK_MODEL_PREFIX)
+        self._reads_mask = reads_masks(self._contract)
         self._maps_checked: set[int] = set()
 
     def _check_modes(self, modes: int | None) -> int:

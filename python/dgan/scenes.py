@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import os
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Final
 
@@ -39,6 +40,11 @@ MASK_MODEL_PREFIX: Final = "dgan-ethucy"
 #: the share of such pixels below which a map is no mask.
 PALETTE_TOLERANCE: Final = 24
 MIN_PALETTE_SHARE: Final = 0.8
+
+
+def reads_masks(contract: Mapping[str, object]) -> bool:
+    """Whether a model (its contract) reads the colourised ETH/UCY masks: every model trained on ETH/UCY does."""
+    return str(contract.get("name", "")).startswith(MASK_MODEL_PREFIX)
 
 
 def palette_share(image: npt.NDArray[np.uint8], step: int = 8) -> float:

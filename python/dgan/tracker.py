@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._times import TableTime, instant_ns
+from dgan._times import TableTime, after, instant_ns
 from dgan._values import ClassLike, as_given, checked_real, typename
 from dgan.exceptions import InvalidFrameError, TimeBaseError
 from dgan.frame import Frame
@@ -105,9 +105,7 @@ class Tracker:
         now = self._native.now
         if now is None:
             return None
-        if self._origin is None:
-            return TableTime(float(now))
-        return TableTime(self._origin + np.timedelta64(round(now * 1e9), "ns"))
+        return TableTime(float(now)) if self._origin is None else TableTime(after(self._origin, now))
 
     def _seconds(self, time: Any) -> float:
         """A tick's time as the engine's seconds: a real number as it is; a datetime (or ``numpy.datetime64``) as
