@@ -7,9 +7,10 @@
 
 from __future__ import annotations
 
-from dgan import contract, demo, exceptions, metrics, models, scenes, tables
+from dgan import contract, demo, evaluation, exceptions, metrics, models, scenes, series, tables
 from dgan._dgan import __version__
 from dgan.contract import CLASSES, MAP_ELEMENT_KINDS
+from dgan.evaluation import evaluate
 from dgan.exceptions import DganError
 from dgan.frame import Frame
 from dgan.labels import COMMON_CLASS_NAMES
@@ -59,6 +60,8 @@ __all__ = [
     "contract",
     "crop_grid",
     "demo",
+    "evaluate",
+    "evaluation",
     "exceptions",
     "kinematic_prior",
     "metrics",
@@ -70,6 +73,7 @@ __all__ = [
     "scene_map",
     "scene_raster",
     "scenes",
+    "series",
     "still_agents",
     "tables",
     "to_agent_frame",

@@ -1,6 +1,7 @@
 """Type stubs of the native module ``dgan._dgan`` (checked against the module by ``mypy.stubtest``)."""
 
 import os
+from collections.abc import Sequence
 from typing import Any, final
 
 import numpy as np
@@ -22,7 +23,7 @@ __all__ = [
     "attention_graph",
     "available_execution_providers",
     "crop_grid",
-    "frame_from_rows",
+    "frames_from_rows",
     "init_onnxruntime",
     "kinematic_prior",
     "preprocess",
@@ -47,7 +48,7 @@ CONTRACT_VERSION: int
 #: ``padded``; ``kept``, a padded model whose features are kept with the map; in the contract's order), ``outputs``,
 #: ``kept_output``. Read it through :mod:`dgan.contract`.
 CONTRACT: dict[str, Any]
-#: The choices of ``frame_from_rows``' ``duplicates`` (``dgan_core::Duplicates::ALL``).
+#: The choices of ``frames_from_rows``' ``duplicates`` (``dgan_core::Duplicates::ALL``).
 DUPLICATES: list[str]
 #: Data at most this many times sparser than the grid are upsampled (``dgan_core::history::UPSAMPLE_LIMIT``).
 UPSAMPLE_LIMIT: float
@@ -174,16 +175,17 @@ class Tracker:
         t_obs: int, dt: float, max_gap: float | None, default_class: str | int, state: dict[str, Any]
     ) -> Tracker: ...
 
-def frame_from_rows(
+def frames_from_rows(
     columns: dict[str, Any],
-    now: float,
+    nows: Sequence[float],
     t_obs: int,
     dt: float,
     max_gap: float | None,
     default_class: str | int,
     duplicates: str = "error",
     upsample: bool = False,
-) -> tuple[Frame, float | None, bool]: ...
+    t_f: int = 0,
+) -> list[tuple[Frame, float | None, bool, npt.NDArray[np.float64] | None, npt.NDArray[np.bool_] | None]]: ...
 def sample_track(
     times: npt.NDArray[np.float64],
     xy: npt.NDArray[np.float64],

@@ -7,7 +7,7 @@ import contextlib
 import datetime as _dt
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -30,6 +30,19 @@ class TimeColumn:
     now: float | None
     unit: float
     origin: np.datetime64 | None = None
+    #: What the column holds: "number", "duration" or "instant".
+    kind: str = "number"
+
+    def time_of(self, value: TimeLike) -> float:
+        """A time given as the column's values are (a number, a duration, an instant) in the column's unit."""
+        if self.kind == "number":
+            if not isinstance(value, (int, float, np.integer, np.floating)):
+                raise InvalidFrameError(f"current_time must be a number in the time column's unit, got {value!r}")
+            return float(value)
+        if self.kind == "duration":
+            return _duration_s(value)
+        origin = 0 if self.origin is None else int(self.origin.astype("datetime64[ns]").astype(np.int64))
+        return (instant_ns(value, "current_time") - origin) * _NS
 
 
 @contextlib.contextmanager
@@ -111,27 +124,24 @@ def time_column(col: npt.NDArray[Any], name: str, time_unit: float, current_time
     """
     kind = col.dtype.kind
     if kind in "biuf":
-        if current_time is not None and not isinstance(current_time, (int, float, np.integer, np.floating)):
-            raise InvalidFrameError(f"current_time must be a number in the time column's unit, got {current_time!r}")
-        now = None if current_time is None else float(current_time)
-        return TimeColumn(np.ascontiguousarray(col, dtype=np.float64), now, float(time_unit))
-    if kind not in "mMOUS" or (kind in "OUS" and not _is_instants(col)):
+        clock = TimeColumn(np.ascontiguousarray(col, dtype=np.float64), None, float(time_unit))
+    elif kind not in "mMOUS" or (kind in "OUS" and not _is_instants(col)):
         raise InvalidFrameError(f"column {name!r} must be numeric or times, got {col.dtype}")
-    if time_unit != 1.0:
+    elif time_unit != 1.0:
         raise TimeBaseError(
             f"the time column {name!r} holds {col.dtype} values, which carry their own unit; leave time_unit at 1 "
             f"(got {time_unit!r})"
         )
-    if kind == "m":
+    elif kind == "m":
         if np.isnat(col).any():
             raise InvalidFrameError(f"the time column {name!r} holds missing times (NaT)")
         seconds = col.astype("timedelta64[ns]").astype(np.int64).astype(np.float64) * _NS
-        now = None if current_time is None else _duration_s(current_time)
-        return TimeColumn(seconds, now, 1.0)
-    ns = _instants_ns(col, name)
-    origin = int(ns.min()) if ns.size else 0
-    now = None if current_time is None else (instant_ns(current_time, "current_time") - origin) * _NS
-    return TimeColumn((ns - origin).astype(np.float64) * _NS, now, 1.0, np.datetime64(origin, "ns"))
+        clock = TimeColumn(seconds, None, 1.0, kind="duration")
+    else:
+        ns = _instants_ns(col, name)
+        origin = int(ns.min()) if ns.size else 0
+        clock = TimeColumn((ns - origin).astype(np.float64) * _NS, None, 1.0, np.datetime64(origin, "ns"), "instant")
+    return clock if current_time is None else replace(clock, now=clock.time_of(current_time))
 
 
 def _duration_s(value: Any) -> float:

@@ -9,6 +9,9 @@
   one annotation every 0.4 s), a table with a header (``agent_id,time,x,y[,class,heading,length,width,vx,vy]``,
   separated by commas, semicolons, tabs or bars; time in seconds unless ``--time-unit`` says otherwise, or ISO 8601
   instants; other names with ``--column ARG=NAME``), or a parquet / feather table.
+- ``dgan evaluate MODEL SCENE [--map MAP] [--out FILE] [--plot PNG]``: the model's top-1 and best-of-K errors beside
+  constant velocity's on every agent of a scene file seen over its window and horizon, at every time, by class and
+  for moving and standing agents (:func:`dgan.evaluate`).
 """
 
 from __future__ import annotations
@@ -20,16 +23,18 @@ import sys
 import time
 import warnings
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 import dgan
+from dgan._progress import progress
 from dgan._times import iso_text
-from dgan.cliargs import predict_arguments
-from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, UnknownClassError
-from dgan.predictionfiles import prediction_json, write_records, write_table
+from dgan.cliargs import evaluate_arguments, predict_arguments
+from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError
+from dgan.predictionfiles import prediction_json, write_columns, write_records, write_table
 from dgan.scenefiles import (
     class_names,
     cli_wording,
@@ -109,28 +114,63 @@ def _models(args: argparse.Namespace) -> int:
 def _frames_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> list[tuple[dgan.Frame, float | str]]:
     """The frames of a scene file, each with its time: at ``--time`` (its last time by default), or with ``--every``
     at each of its times."""
-    names = column_names(args.column)
-    cols, unit = read_scene(scene, text_columns=(names.get("cls_column", "class"),))
-    time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
-    scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
-    times = np.unique(cols[names.get("time", "time")]).tolist() if args.every else [args.time]
-    options = {"spec": p, "time_unit": time_unit, "map": scene_map, "duplicates": args.duplicates}
-    options |= {"upsample": args.upsample, "class_names": class_names(args.class_name, args.common_classes), **names}
-    frames = []
+    cols, options = _table_of(args, scene)
+    options["spec"] = p
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ColumnWarning)
-        for when in times:
-            try:
-                frame = dgan.Frame.from_records(cols, current_time=when, **options)
-            except (InvalidFrameError, UnknownClassError) as e:
-                raise type(e)(cli_wording(str(e))) from None
-            frames.append((_denoised(args, frame), _time_text(frame.time if frame.time is not None else when)))
+        if args.every:  # the table read once for all its times
+            read = dgan.series.frames(cols, **options)
+        else:
+            read = [dgan.Frame.from_records(cols, current_time=args.time, **options)]
+        frames = [(_denoised(args, f), _time_text(f.time if f.time is not None else args.time)) for f in read]
     for message in dict.fromkeys(str(w.message) for w in caught if issubclass(w.category, ColumnWarning)):
         print(f"dgan: note: {cli_wording(message)}", file=sys.stderr)
     for w in caught:
         if not issubclass(w.category, ColumnWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return frames
+
+
+def _table_of(args: argparse.Namespace, scene: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A scene file's columns, and the options of :meth:`dgan.Frame.from_records` the command line gives for it."""
+    names = column_names(args.column)
+    cols, unit = read_scene(scene, text_columns=(names.get("cls_column", "class"),))
+    time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
+    scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
+    options = {"time_unit": time_unit, "map": scene_map, "duplicates": args.duplicates, "upsample": args.upsample}
+    return cols, options | {"class_names": class_names(args.class_name, args.common_classes), **names}
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    """``dgan evaluate MODEL SCENE``: the model beside constant velocity on every target of the scene (or scenes)."""
+    p = dgan.Predictor(args.model)
+    files = scene_files(args.scene) or [Path(args.scene)]
+    options = {"modes": args.modes, "stride": args.stride, "standing_m": args.standing_m}
+    options |= {"min_targets": args.min_targets, "unknown_classes": args.unknown_classes}
+    parts, names = [], []
+    for scene in progress(files, "scenes") if len(files) > 1 else files:
+        cols, table = _table_of(args, scene)
+        try:
+            parts.append(dgan.evaluate(p, cols, progress=len(files) == 1, **options, **table))
+        except DganError as e:
+            if len(files) == 1:
+                raise
+            raise type(e)(f"{scene}: {e}") from None
+        names.append(scene.name)
+    result = dgan.evaluation.joined(parts, names) if len(parts) > 1 else parts[0]
+    result = replace(result, model=args.model)
+    if args.out is not None:
+        write_columns(result.to_records(), Path(args.out))
+        print(f"wrote {len(result)} targets to {args.out}", file=sys.stderr)
+    if args.plot is not None:
+        result.plot().savefig(args.plot, dpi=120)
+        print(f"drew {args.plot}", file=sys.stderr)
+    if args.json:
+        json.dump({"model": args.model, "scenes": names, "times": result.times, "rows": result.rows()}, sys.stdout)
+        print()
+    else:
+        print(result)
+    return 0
 
 
 def _time_text(at: Any) -> float | str:
@@ -161,7 +201,7 @@ def _predict_many(args: argparse.Namespace, p: dgan.Predictor, files: list[Path]
         raise InvalidFrameError(f"{what} --out TABLE (.parquet, .csv or .jsonl)")
     preds: list[dgan.Prediction] = []
     names: list[str] = []
-    for scene in _progress(files, "scenes"):
+    for scene in progress(files, "scenes"):
         try:
             frames = [f for f, _ in _frames_of(args, p, scene)]
             preds += p.predict_batch(frames, unknown_classes=args.unknown_classes)
@@ -173,22 +213,6 @@ def _predict_many(args: argparse.Namespace, p: dgan.Predictor, files: list[Path]
     at = f" at {len(preds)} times" if args.every else ""
     print(f"wrote {agents} agents of {len(files)} scenes{at} to {args.out}", file=sys.stderr)
     return 0
-
-
-def _progress(items: list[Path], what: str) -> Any:
-    """A progress bar on stderr (tqdm where installed, a counter otherwise)."""
-    try:
-        from tqdm import tqdm
-
-        return tqdm(items, unit=what[:-1], desc=what, file=sys.stderr, disable=None)
-    except ImportError:
-
-        def counted() -> Any:
-            for i, item in enumerate(items, 1):
-                yield item
-                print(f"\r{what}: {i}/{len(items)}", end="\n" if i == len(items) else "", file=sys.stderr)
-
-        return counted()
 
 
 def _predict(args: argparse.Namespace) -> int:
@@ -250,8 +274,10 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _predict_parser(sub: Any) -> None:
-    """``dgan predict``'s arguments (:mod:`dgan.cliargs`), run by :func:`_predict`."""
+    """``dgan predict``'s and ``dgan evaluate``'s arguments (:mod:`dgan.cliargs`), run by :func:`_predict` and
+    :func:`_evaluate`."""
     predict_arguments(sub).set_defaults(func=_predict)
+    evaluate_arguments(sub).set_defaults(func=_evaluate)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -284,7 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _show_warning(message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:
     """A warning as one line of the command line's own (``dgan: warning: ...``), without Python's source line."""
-    print(f"dgan: warning: {message}", file=sys.stderr)
+    print(f"dgan: warning: {cli_wording(str(message))}", file=sys.stderr)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -294,7 +320,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             warnings.showwarning = _show_warning
             code: int = args.func(args)
     except DganError as e:
-        print(f"dgan: error: {e}", file=sys.stderr)
+        print(f"dgan: error: {cli_wording(str(e))}", file=sys.stderr)
         return 2
     except BrokenPipeError:  # e.g. `dgan predict ... | head`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes stdout

@@ -1,5 +1,5 @@
-"""The arguments of ``dgan predict`` (what :mod:`dgan.cli` runs with them): the model and scene, how a scene table
-is read (its columns, times, classes, repeated and sparse rows), its map, and the output."""
+"""The arguments of ``dgan predict`` and ``dgan evaluate`` (what :mod:`dgan.cli` runs with them): the model and
+scene, how a scene table is read (its columns, times, classes, repeated and sparse rows), its map, and the output."""
 
 from __future__ import annotations
 
@@ -25,12 +25,17 @@ def predict_arguments(sub: Any) -> argparse.ArgumentParser:
     )
     table_options(pred)
     pred.add_argument(
-        "--map",
+        "--time",
+        type=time_value,
         default=None,
-        help="a bundled scene (eth hotel univ zara1 zara2), an image (for the ETH/UCY models a semantic mask in "
-        "dgan.scenes.MASK_PALETTE, not a photo), or a vector map JSON",
+        help="current time t_obs in the file's unit, or an ISO 8601 instant where its times are (default: the last)",
     )
-    pred.add_argument("--pixel-to-world", default=None, help="the 3×3 homography file of an image --map")
+    pred.add_argument(
+        "--every",
+        action="store_true",
+        help="predict at every time of the scene (of each scene), into one --out table with a time column",
+    )
+    map_options(pred)
     pred.add_argument("--modes", type=int, default=3, help="modes per agent (default 3)")
     pred.add_argument(
         "--provider", default="cpu", help="ONNX Runtime execution provider: cpu (default), cuda or cuda:N"
@@ -57,14 +62,57 @@ def predict_arguments(sub: Any) -> argparse.ArgumentParser:
     return pred  # type: ignore[no-any-return]
 
 
-def table_options(pred: Any) -> None:
-    """How ``dgan predict`` reads a scene table: its columns, times and repeated or sparse rows."""
+def map_options(pred: Any) -> None:
+    """A scene's map: ``--map`` and an image's homography."""
     pred.add_argument(
-        "--time",
-        type=time_value,
+        "--map",
         default=None,
-        help="current time t_obs in the file's unit, or an ISO 8601 instant where its times are (default: the last)",
+        help="a bundled scene (eth hotel univ zara1 zara2), an image (for the ETH/UCY models a semantic mask in "
+        "dgan.scenes.MASK_PALETTE, not a photo), or a vector map JSON",
     )
+    pred.add_argument("--pixel-to-world", default=None, help="the 3×3 homography file of an image --map")
+
+
+def evaluate_arguments(sub: Any) -> argparse.ArgumentParser:
+    """``dgan evaluate``'s sub-parser with its arguments."""
+    ev = sub.add_parser(
+        "evaluate",
+        help="score a model on a scene file's tracks beside constant velocity: every agent seen over the model's "
+        "window and horizon, at every time",
+    )
+    ev.add_argument("model")
+    ev.add_argument("scene", help="a scene file as dgan predict reads it; a directory or a quoted glob pools them")
+    table_options(ev)
+    map_options(ev)
+    ev.add_argument("--modes", type=int, default=None, help="K of best-of-K (default 20, or the model's if fewer)")
+    ev.add_argument("--stride", type=int, default=1, help="score every STRIDE-th time (default 1: every time)")
+    ev.add_argument(
+        "--standing-m",
+        type=float,
+        default=1.0,
+        help="an agent that moved less than this from its first observed to its last true position is standing "
+        "(the table's unit; default 1)",
+    )
+    ev.add_argument(
+        "--min-targets",
+        type=int,
+        default=1,
+        help="leave out times with fewer targets (2: the Social-GAN protocol of the ETH/UCY results)",
+    )
+    ev.add_argument(
+        "--unknown-classes",
+        choices=("error", "ignore"),
+        default="error",
+        help="agents of classes the model does not know: refuse (default) or leave them out",
+    )
+    ev.add_argument("--json", action="store_true", help="print the table's rows as JSON to stdout")
+    ev.add_argument("--out", default=None, help="write every target's errors: .csv, .parquet or .jsonl")
+    ev.add_argument("--plot", default=None, metavar="PNG", help="draw top-1 beside constant velocity (dgan[plot])")
+    return ev  # type: ignore[no-any-return]
+
+
+def table_options(pred: Any) -> None:
+    """How a scene table is read: its columns, time unit, classes and repeated or sparse rows."""
     pred.add_argument(
         "--column",
         action="append",
@@ -86,11 +134,6 @@ def table_options(pred: Any) -> None:
     )
     pred.add_argument(
         "--upsample", action="store_true", help="interpolate data up to 2.5x sparser than the model's step"
-    )
-    pred.add_argument(
-        "--every",
-        action="store_true",
-        help="predict at every time of the scene (of each scene), into one --out table with a time column",
     )
     pred.add_argument(
         "--class-name",

@@ -10,11 +10,12 @@ import numpy.typing as npt
 
 from dgan import _dgan
 from dgan._times import TableTime, TimeLike
-from dgan._values import ClassLike, as_given, checked_array, checked_real, checked_shift, checked_text
+from dgan._values import ClassLike, as_given, checked_array, checked_real, checked_shift
+from dgan.columnnames import names_of
 from dgan.exceptions import InvalidFrameError, InvalidMapError, TimeBaseError
 from dgan.labels import classes_of
 from dgan.maps import RasterMap, VectorMap
-from dgan.records import Names, from_records
+from dgan.records import from_records
 
 #: :meth:`Frame.denoised`'s default gate, metres: chosen on the ETH/UCY validation windows (0.08, 0.10 and 0.12 m
 #: tried; 0.10 the lowest that kept clean top-1 ADE within 0.5% on every fold).
@@ -203,14 +204,10 @@ class Frame:
             TimeBaseError: data sparser than ``dt`` (naming the bundled models whose step fits), a non-positive
                 ``dt`` or ``time_unit``.
         """
-        columns = (agent_id, time, x, y, cls_column, heading, length, width)
-        arguments = ("agent_id", "time", "x", "y", "cls_column", "heading", "length", "width")
-        if not (isinstance(velocity, (tuple, list)) and len(velocity) == 2):
-            raise InvalidFrameError(f"velocity must be a pair of column names (vx, vy), got {velocity!r:.60}")
-        names = Names(
-            *(checked_text(a, c) for a, c in zip(arguments, columns, strict=True)),
-            *(checked_text("velocity", c) for c in velocity),
-        )
+        names = names_of(
+            agent_id=agent_id, time=time, x=x, y=y, cls_column=cls_column, heading=heading, length=length,
+            width=width, velocity=velocity,
+        )  # fmt: skip
         native, labels, source = from_records(
             records,
             t_obs=t_obs,

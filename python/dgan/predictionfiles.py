@@ -78,9 +78,15 @@ def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction],
         cols = {k: _listed(v) for k, v in pr.to_records().items()}
         cols.update({k: [v[i]] * len(cols["x"]) for k, v in extra.items()})
         rows.extend(zip(*(cols[k] for k in names), strict=True))
+    _write_rows(out, names, rows)
+
+
+def _write_rows(out: Path, names: list[str], rows: list[tuple[Any, ...]]) -> None:
+    """Rows under a header as CSV, or as JSON lines, by ``out``'s extension, atomically."""
+    from dgan.prediction import write_atomically
 
     def write(f: Any) -> None:
-        if suffix == ".csv":
+        if out.suffix.lower() == ".csv":
             text = io.StringIO()
             w = csv.writer(text)
             w.writerow(names)
@@ -90,6 +96,24 @@ def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction],
             f.write("".join(json.dumps(dict(zip(names, r, strict=True))) + "\n" for r in rows).encode())
 
     write_atomically(out, write)
+
+
+def write_columns(columns: dict[str, Any], out: Path) -> None:
+    """Columns of equal length (``dgan evaluate --out``) as CSV, parquet or JSON lines, by extension, atomically."""
+    from dgan.prediction import write_atomically
+
+    suffix = out.suffix.lower()
+    if suffix not in (".csv", ".parquet", ".jsonl", ".ndjson"):
+        raise InvalidFrameError(f"--out must end in .csv, .parquet or .jsonl, got {out.name}")
+    if suffix == ".parquet":
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        table = pa.table({k: list(v) if v.dtype == object else v for k, v in columns.items()})
+        write_atomically(out, lambda f: pq.write_table(table, f))
+        return
+    names = list(columns)
+    _write_rows(out, names, list(zip(*(_listed(columns[k]) for k in names), strict=True)))
 
 
 def _listed(column: Any) -> list[Any]:

@@ -6,7 +6,6 @@ is the engine's ``dgan_core::history``, shared with the streaming :class:`~dgan.
 
 from __future__ import annotations
 
-import difflib
 import functools
 import re
 import warnings
@@ -18,9 +17,10 @@ import numpy as np
 import numpy.typing as npt
 
 from dgan import _dgan
-from dgan._times import TableTime, TimeLike, instant_text, time_column
+from dgan._times import TableTime, TimeColumn, TimeLike, instant_text, time_column
 from dgan._values import ClassLike, checked_array, checked_real, typename
-from dgan.exceptions import ColumnWarning, InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
+from dgan.columnnames import Names, check_columns
+from dgan.exceptions import InvalidFrameError, InvalidSpecError, TimeBaseError, TimeUnitWarning
 from dgan.labels import relabelled
 from dgan.tables import Columns, columns
 
@@ -34,94 +34,6 @@ DUPLICATES: Final = tuple(_dgan.DUPLICATES)
 #: engine's relative slack (``dgan_core::history``).
 UPSAMPLE_LIMIT: Final = _dgan.UPSAMPLE_LIMIT
 _SLACK: Final = 1.0 + _dgan.SPARSE_SLACK
-
-
-@dataclass(frozen=True)
-class Names:
-    """The table's column names :meth:`~dgan.Frame.from_records` reads, by what they hold, and the argument that
-    names each."""
-
-    agent_id: str = "agent_id"
-    time: str = "time"
-    x: str = "x"
-    y: str = "y"
-    cls: str = "class"
-    heading: str = "heading"
-    length: str = "length"
-    width: str = "width"
-    vx: str = "vx"
-    vy: str = "vy"
-
-    def required(self) -> dict[str, str]:
-        return {"agent_id": self.agent_id, "time": self.time, "x": self.x, "y": self.y}
-
-    def optional(self) -> list[tuple[str, str]]:
-        """(argument, column) of each optional column; both velocity columns are named by ``velocity``."""
-        return [
-            ("cls_column", self.cls),
-            ("heading", self.heading),
-            ("length", self.length),
-            ("width", self.width),
-            ("velocity", self.vx),
-            ("velocity", self.vy),
-        ]
-
-
-#: Other names trackers and datasets give the columns :meth:`~dgan.Frame.from_records` reads (compared without case,
-#: ``_`` or ``-``), so that a table holding one of them is told which argument reads it.
-SYNONYMS: Final = {
-    "agent_id": ("trackid", "track", "objectid", "obj", "objid", "id", "agent", "pedid", "uid", "instanceid"),
-    "time": ("timestamp", "t", "frame", "frameid", "ts", "times", "timestamps", "timestampns", "sec", "seconds"),
-    "x": ("posx", "positionx", "centerx", "xm", "px", "utmx", "east", "easting"),
-    "y": ("posy", "positiony", "centery", "ym", "py", "utmy", "north", "northing"),
-    "class": ("type", "category", "label", "objecttype", "agenttype", "objectclass", "classname", "cls"),
-    "heading": ("yaw", "theta", "orientation", "angle", "headingrad"),
-    "length": ("len", "l", "dimx", "sizex"),
-    "width": ("w", "dimy", "sizey"),
-    "vx": ("velocityx", "velx", "speedx"),
-    "vy": ("velocityy", "vely", "speedy"),
-}
-
-
-def _key(name: str) -> str:
-    return name.lower().replace("_", "").replace("-", "").replace(" ", "")
-
-
-def _close(name: str, candidates: list[str], cutoff: float = 0.8) -> str | None:
-    """The candidate that is ``name`` but for case, one of its :data:`SYNONYMS`, or the one closest to it (difflib
-    ratio ≥ ``cutoff``)."""
-    for c in candidates:
-        if c.lower() == name.lower():
-            return c
-    synonyms = SYNONYMS.get(name, ())
-    for c in candidates:
-        if _key(c) in synonyms:
-            return c
-    best = difflib.get_close_matches(name, candidates, n=1, cutoff=cutoff)
-    return best[0] if best else None
-
-
-def check_columns(cols: Columns, names: Names) -> None:
-    """Refuses a missing required column (naming a close match) and warns (:class:`ColumnWarning`) of an optional
-    column that is absent while one close to it is there, unread."""
-    for arg, name in names.required().items():
-        if name not in cols:
-            close = _close(name, list(cols), cutoff=0.6)
-            hint = f"; did you mean {close!r} ({arg}={close!r})?" if close else ""
-            if close and arg == "time" and _key(close).startswith("frame"):
-                hint = hint[:-2] + ", with time_unit= the seconds per frame)?"
-            raise InvalidFrameError(f"records lack the column {name!r}; they have {list(cols)}{hint}")
-    known = set(names.required().values()) | {name for _, name in names.optional()}
-    unread = [c for c in cols if c not in known]
-    for arg, name in names.optional():
-        close = None if name in cols else _close(name, unread)
-        if close is not None:
-            warnings.warn(
-                f"the table has no column {name!r} but has {close!r}, which is not read; pass "
-                f"{arg}={close!r} to read it" + (" (as a (vx, vy) pair)" if arg == "velocity" else ""),
-                ColumnWarning,
-                stacklevel=4,
-            )
 
 
 def record_ids(raw: npt.NDArray[Any], name: str) -> tuple[npt.NDArray[np.int64], npt.NDArray[Any] | None]:
@@ -250,11 +162,29 @@ def _warn_time_unit(frame: _dgan.Frame, time_unit: float, gap_s: float) -> None:
             f"another unit than time_unit={time_unit:g} s per unit (milliseconds read as seconds?); every prediction "
             "would start from a single position",
             TimeUnitWarning,
-            stacklevel=4,
+            stacklevel=5,
         )
 
 
-def from_records(
+@dataclass(frozen=True)
+class Table:
+    """A long table read once: its rows as the engine takes them (``rows``, times in seconds), the ids as given
+    (``labels``, None when its codes are the ids), its time column (``clock``; ``clock.now`` the current time asked
+    for) and distinct times (``times``, in the column's unit), and the grid every frame of it is resampled to."""
+
+    rows: dict[str, Any]
+    labels: npt.NDArray[Any] | None
+    clock: TimeColumn
+    times: npt.NDArray[np.float64]
+    t_obs: int
+    dt: float
+    max_gap: float | None
+    default_class: ClassLike
+    duplicates: str
+    upsample: bool
+
+
+def read_table(
     records: Any,
     *,
     t_obs: int | None,
@@ -268,8 +198,9 @@ def from_records(
     class_names: Mapping[Any, ClassLike] | None,
     duplicates: str,
     upsample: bool,
-) -> Parsed:
-    """The work of :meth:`dgan.Frame.from_records` (documented there), which wraps what this returns."""
+) -> Table:
+    """The work of :meth:`dgan.Frame.from_records` (documented there) up to the resampling: the table checked and
+    read once, for frames at one or many of its times (:func:`frames_at`)."""
     if spec is not None:
         spec = getattr(spec, "spec", spec)
         if not (hasattr(spec, "t_obs") and hasattr(spec, "dt_s")):
@@ -283,37 +214,63 @@ def from_records(
     cols = columns(records)
     check_columns(cols, names)
     clock = time_column(cols[names.time], names.time, time_unit, current_time)
-    times, time_unit = clock.values, clock.unit
     xs, ys = _numeric(cols, names.x), _numeric(cols, names.y)
     assert xs is not None
     assert ys is not None
-    if not np.all(np.isfinite(times)):
+    if not np.all(np.isfinite(clock.values)):
         raise InvalidFrameError("the time column holds NaN or infinite values")
     codes, labels = record_ids(cols[names.agent_id], names.agent_id)
-    uniq_t = np.unique(times)
-    if uniq_t.size == 0:
-        empty = _dgan.Frame(np.zeros((0, t_obs, 2)), None, [], None, None, None, None, None, None, dt)
-        return empty, None, None
+    uniq_t = np.unique(clock.values)
     if dt is None:
         gaps = np.diff(uniq_t)
-        dt = float(f"{float(gaps.min()) * time_unit:.9g}") if gaps.size else 1.0
-    now = _current_time(uniq_t, clock.now, 1e-6 * dt / time_unit, clock.origin)
-    seconds = np.ascontiguousarray(times * time_unit)
+        dt = float(f"{float(gaps.min()) * clock.unit:.9g}") if gaps.size else 1.0
+    seconds = np.ascontiguousarray(clock.values * clock.unit)
     rows = {"ids": codes, "times": seconds, "xs": xs, "ys": ys, **_optional_rows(cols, names, class_names)}
+    return Table(rows, labels, clock, uniq_t, int(t_obs), float(dt), max_gap, default_class, duplicates, upsample)
+
+
+#: What a frame of :func:`frames_at` is: the frame as :func:`from_records` gives it, and with ``t_f`` > 0 its
+#: agents' next ``t_f`` positions ``(N, t_f, 2)`` and their mask ``(N, t_f)``.
+Framed = tuple[Parsed, tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]] | None]
+
+
+def frames_at(table: Table, nows: list[float | None], t_f: int = 0) -> list[Framed]:
+    """The frames of ``table`` at each of ``nows`` (in its time column's unit, each a time of the table; None for
+    the latest), grouped and resampled by the engine in one call; with ``t_f`` > 0 each with what its agents did over
+    the next ``t_f`` steps on the same grid (``dgan_core::frame_and_future_at``)."""
+    t_obs, dt, unit = table.t_obs, table.dt, table.clock.unit
+    if table.times.size == 0:
+        empty = _dgan.Frame(np.zeros((0, t_obs, 2)), None, [], None, None, None, None, None, None, dt)
+        nothing = (np.zeros((0, t_f, 2)), np.zeros((0, t_f), dtype=bool)) if t_f else None
+        return [((empty, None, None), nothing) for _ in nows]
+    at = [_current_time(table.times, now, 1e-6 * dt / unit, table.clock.origin) for now in nows]
+    seconds = table.rows["times"]
     try:
-        native, spacing, upsampled = _dgan.frame_from_rows(
-            rows, now * time_unit, int(t_obs), float(dt), max_gap, default_class, duplicates, bool(upsample)
-        )
+        out = _dgan.frames_from_rows(
+            table.rows, [t * unit for t in at], t_obs, dt, table.max_gap, table.default_class,
+            table.duplicates, bool(table.upsample), t_f,
+        )  # fmt: skip
     except TimeBaseError as e:
         spacing_s = getattr(e, "spacing_s", None)
         if spacing_s is None:
-            raise _named(e, labels) from None
-        raise TimeBaseError(f"{e}; {sparse_advice(spacing_s, bool(upsample))}") from None
+            raise _named(e, table.labels) from None
+        raise TimeBaseError(f"{e}; {sparse_advice(spacing_s, bool(table.upsample))}") from None
     except InvalidFrameError as e:
-        raise _named(e, labels) from None
-    _warn_time_unit(native, time_unit, _median_gap(codes, seconds))
-    source = (spacing, upsampled, TableTime.of(clock, now))
-    return native, None if labels is None else labels[native.ids], source
+        raise _named(e, table.labels) from None
+    gap = _median_gap(table.rows["ids"], seconds)
+    framed: list[Framed] = []
+    for now, (native, spacing, upsampled, future, future_mask) in zip(at, out, strict=True):
+        _warn_time_unit(native, unit, gap)
+        labels = None if table.labels is None else table.labels[native.ids]
+        parsed: Parsed = (native, labels, (spacing, upsampled, TableTime.of(table.clock, now)))
+        framed.append((parsed, None if future is None or future_mask is None else (future, future_mask)))
+    return framed
+
+
+def from_records(records: Any, **options: Any) -> Parsed:
+    """The work of :meth:`dgan.Frame.from_records` (documented there), which wraps what this returns."""
+    table = read_table(records, **options)
+    return frames_at(table, [table.clock.now])[0][0]
 
 
 def sample_track(

@@ -181,8 +181,11 @@ def column_names(options: Sequence[str] | None) -> dict[str, Any]:
 
 def cli_wording(text: str) -> str:
     """A message of :meth:`dgan.Frame.from_records` that names its arguments (``agent_id='track_id'``,
-    ``time_unit=``) in the options that ``dgan predict`` takes (``--column agent_id=track_id``, ``--time-unit``)."""
+    ``time_unit=``) in the options that ``dgan predict`` takes (``--column agent_id=track_id``, ``--time-unit``);
+    every error the command line prints passes through it."""
     by_argument = {v: k for k, v in COLUMN_ARGUMENTS.items()}
+    text = text.replace("unknown_classes='ignore'", "--unknown-classes ignore")
+    text = text.replace('(duplicates="first", "last" or "mean" in Python)', "(--duplicates first, last or mean)")
     text = re.sub(
         r"\b(\w+)='([^']*)'",
         lambda m: f"--column {by_argument[m[1]]}={m[2]}" if m[1] in by_argument else m[0],
@@ -190,6 +193,7 @@ def cli_wording(text: str) -> str:
     )
     text = text.replace("class_names=dgan.COMMON_CLASS_NAMES", "--common-classes")
     text = re.sub(r"class_names=\{'([^']*)': \.\.\.\}", r"--class-name \1=CLASS", text)
+    text = text.replace("upsample=True in Python", "--upsample")
     return text.replace("time_unit=", "--time-unit")
 
 

@@ -286,6 +286,17 @@ pub fn frame_at_with(
     default_class: AgentClass,
     upsample: bool,
 ) -> Result<Resampled> {
+    frame_and_base_at(tracks, now_s, base, default_class, upsample).map(|(r, _)| r)
+}
+
+/// [`frame_at_with`] and the time base it sampled with (its gap widened where the data were upsampled).
+fn frame_and_base_at(
+    tracks: &[(i64, &[Detection])],
+    now_s: f64,
+    base: &TimeBase,
+    default_class: AgentClass,
+    upsample: bool,
+) -> Result<(Resampled, TimeBase)> {
     if !now_s.is_finite() {
         return Err(DganError::TimeBase(format!("the current time must be finite, got {now_s}")));
     }
@@ -305,7 +316,48 @@ pub fn frame_at_with(
         }
     }
     let frame = frame_from_windows(windows, now_s, &base, default_class)?;
-    Ok(Resampled { frame, spacing_s, upsampled })
+    Ok((Resampled { frame, spacing_s, upsampled }, base))
+}
+
+/// What each agent of a frame did next: its positions at the `t_f` grid times after the frame's current time.
+#[derive(Debug, Clone)]
+pub struct Future {
+    /// `(N, t_f, 2)` world positions, NaN where the agent was not seen (nor interpolable).
+    pub positions: Array3<f64>,
+    /// `(N, t_f)` whether each step was seen.
+    pub mask: Array2<bool>,
+}
+
+/// [`frame_at_with`], and what each of its agents did over the `t_f` grid steps after `now_s` ([`Future`]),
+/// sampled from the same tracks as the frame samples their past (the same gaps bridged, nothing extrapolated): the
+/// ground truth an evaluation scores the frame's prediction against, on the model's own grid.
+pub fn frame_and_future_at(
+    tracks: &[(i64, &[Detection])],
+    now_s: f64,
+    base: &TimeBase,
+    default_class: AgentClass,
+    upsample: bool,
+    t_f: usize,
+) -> Result<(Resampled, Future)> {
+    if t_f > crate::spec::MAX_STEPS {
+        return Err(DganError::InvalidSpec(format!("t_f must be in 0..={}, got {t_f}", crate::spec::MAX_STEPS)));
+    }
+    let (resampled, sampled_on) = frame_and_base_at(tracks, now_s, base, default_class, upsample)?;
+    let by_id: std::collections::HashMap<i64, &[Detection]> = tracks.iter().copied().collect();
+    let ids = resampled.frame.ids();
+    let mut positions = Array3::<f64>::from_elem((ids.len(), t_f, 2), f64::NAN);
+    let mut mask = Array2::<bool>::from_elem((ids.len(), t_f), false);
+    for (i, id) in ids.iter().enumerate() {
+        let track = by_id.get(id).copied().unwrap_or_default();
+        for k in 0..t_f {
+            if let Some(p) = sample(track, now_s + (k + 1) as f64 * sampled_on.dt_s, &sampled_on) {
+                positions[[i, k, 0]] = p[0];
+                positions[[i, k, 1]] = p[1];
+                mask[[i, k]] = true;
+            }
+        }
+    }
+    Ok((resampled, Future { positions, mask }))
 }
 
 /// The frame of the agents seen at `now_s`, each sampled at the grid times.
@@ -613,6 +665,49 @@ mod tests {
             }
         }
         assert!(samples[5].is_none());
+    }
+
+    #[test]
+    fn a_future_is_the_frame_of_the_later_time() {
+        // Agent 1 walks at 1 m/s with a jittered clock; agent 2 leaves after 2.0 s; agent 3 skips a step at 2.4 s.
+        let base = TimeBase::new(4, 0.4).unwrap();
+        let mut rows = Vec::new();
+        for k in 0..12 {
+            let t = f64::from(k) * 0.4;
+            let jitter = if k % 2 == 0 { 0.01 } else { -0.01 };
+            rows.push((1, Detection::at(t + jitter, t + jitter, 0.0)));
+            if t <= 2.0 {
+                rows.push((2, Detection::at(t, 0.0, t)));
+            }
+            if k != 6 {
+                rows.push((3, Detection::at(t, -t, 1.0)));
+            }
+        }
+        rows.push((1, Detection::at(1.2, 1.2, 0.0))); // the current time itself, as a row
+        let tracks = tracks_from_rows(rows).unwrap();
+        let views: Vec<(i64, &[Detection])> = tracks.iter().map(|(i, t)| (*i, t.as_slice())).collect();
+        let (r, future) = frame_and_future_at(&views, 1.2, &base, AgentClass::Pedestrian, false, 5).unwrap();
+        assert_eq!(r.frame.ids(), [1, 2, 3]);
+        assert_eq!(future.positions.dim(), (3, 5, 2));
+        // Each future step is what the frame ending at that step holds there.
+        for k in 1..=5 {
+            let later = frame_at(&views, 1.2 + 0.4 * f64::from(k), &base, AgentClass::Pedestrian);
+            for (i, id) in [1, 2, 3].iter().enumerate() {
+                let row = later.as_ref().ok().and_then(|f| f.ids().iter().position(|x| x == id));
+                let seen = future.mask[[i, k as usize - 1]];
+                if let (Some(j), true) = (row, seen) {
+                    let f = later.as_ref().unwrap();
+                    let p = [f.positions()[[j, 3, 0]], f.positions()[[j, 3, 1]]];
+                    assert_eq!(p, [future.positions[[i, k as usize - 1, 0]], future.positions[[i, k as usize - 1, 1]]]);
+                }
+            }
+        }
+        assert!((future.positions[[0, 4, 0]] - 3.2).abs() < 1e-12); // interpolated across the jitter
+        assert_eq!(future.mask.row(1).to_vec(), [true, true, false, false, false]); // gone after 2.0 s
+        assert_eq!(future.mask.row(2).to_vec(), [true, true, false, true, true]); // the step it skipped
+        assert!(future.positions[[1, 2, 0]].is_nan());
+        let err = frame_and_future_at(&views, 1.2, &base, AgentClass::Pedestrian, false, 100_000).unwrap_err();
+        assert!(matches!(err, DganError::InvalidSpec(_)), "{err}");
     }
 
     #[test]

@@ -59,8 +59,8 @@ pub use contract::ModelContract;
 pub use error::{DganError, Result};
 pub use frame::Frame;
 pub use history::{
-    frame_at, frame_at_with, sample_track, tracks_from_rows, tracks_from_rows_with, Detection, Duplicates, Resampled,
-    TimeBase, Tracker,
+    frame_and_future_at, frame_at, frame_at_with, sample_track, tracks_from_rows, tracks_from_rows_with, Detection,
+    Duplicates, Future, Resampled, TimeBase, Tracker,
 };
 pub use map::{MapElement, MapElementKind, RasterMap, SceneMap, VectorMap};
 pub use preprocess::Limits;

@@ -1,10 +1,10 @@
-//! Time bases: `frame_from_rows` (behind `dgan.Frame.from_records`) and the streaming `Tracker`.
+//! Time bases: `frames_from_rows` (behind `dgan.Frame.from_records` and `dgan.evaluate`) and the streaming `Tracker`.
 
 use crate::error::{invalid_frame, IntoPyResult};
 use crate::frame::{parse_classes, PyFrame};
-use dgan_core::{frame_at_with, tracks_from_rows_with, AgentClass, Detection, Duplicates, TimeBase, Tracker};
+use dgan_core::{frame_and_future_at, tracks_from_rows_with, AgentClass, Detection, Duplicates, TimeBase, Tracker};
 use ndarray::Array2;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -110,23 +110,30 @@ fn parse_default_class(class: &Bound<'_, PyAny>) -> PyResult<AgentClass> {
     Ok(parse_classes(list.as_any())?[0])
 }
 
-/// The frame at `now` (seconds) of a long table's rows (`columns` as [`Columns`], plus `times`, float64 seconds):
-/// grouped by id (repeated times resolved by `duplicates`), resampled to `t_obs` steps `dt` apart (data up to 2.5×
-/// sparser interpolated with `upsample`). Returns the frame, the data's median spacing and whether it was upsampled.
+/// What one frame of [`frames_from_rows`] holds: the frame, the data's median spacing, whether it was upsampled,
+/// and with `t_f` > 0 its agents' future positions `(N, t_f, 2)` with their mask `(N, t_f)`.
+type RowsFrame<'py> =
+    (PyFrame, Option<f64>, bool, Option<Bound<'py, PyArray3<f64>>>, Option<Bound<'py, PyArray2<bool>>>);
+
+/// The frames at each of `nows` (seconds) of a long table's rows (`columns` as [`Columns`], plus `times`, float64
+/// seconds), the table grouped once: by id (repeated times resolved by `duplicates`), resampled to `t_obs` steps
+/// `dt` apart (data up to 2.5× sparser interpolated with `upsample`). With `t_f` > 0 each frame comes with what its
+/// agents did over the next `t_f` steps (`dgan_core::frame_and_future_at`), the ground truth of an evaluation.
 #[pyfunction]
-#[pyo3(signature = (columns, now, t_obs, dt, max_gap, default_class, duplicates="error", upsample=false))]
+#[pyo3(signature = (columns, nows, t_obs, dt, max_gap, default_class, duplicates="error", upsample=false, t_f=0))]
 #[allow(clippy::too_many_arguments)]
-pub fn frame_from_rows<'py>(
+pub fn frames_from_rows<'py>(
     py: Python<'py>,
     columns: &Bound<'py, PyDict>,
-    now: f64,
+    nows: Vec<f64>,
     t_obs: usize,
     dt: f64,
     max_gap: Option<f64>,
     default_class: Bound<'py, PyAny>,
     duplicates: &str,
     upsample: bool,
-) -> PyResult<(PyFrame, Option<f64>, bool)> {
+    t_f: usize,
+) -> PyResult<Vec<RowsFrame<'py>>> {
     let default_class = parse_default_class(&default_class)?;
     let duplicates: Duplicates = duplicates.parse().py()?;
     let base = time_base(t_obs, dt, max_gap)?;
@@ -136,10 +143,22 @@ pub fn frame_from_rows<'py>(
         .detach(|| {
             let tracks = tracks_from_rows_with(rows, duplicates)?;
             let views: Vec<(i64, &[Detection])> = tracks.iter().map(|(i, t)| (*i, t.as_slice())).collect();
-            frame_at_with(&views, now, &base, default_class, upsample)
+            nows.iter()
+                .map(|&now| frame_and_future_at(&views, now, &base, default_class, upsample, t_f))
+                .collect::<dgan_core::Result<Vec<_>>>()
         })
         .py()?;
-    Ok((PyFrame { inner: out.frame }, out.spacing_s, out.upsampled))
+    Ok(out
+        .into_iter()
+        .map(|(r, future)| {
+            let (positions, mask) = if t_f > 0 {
+                (Some(future.positions.into_pyarray(py)), Some(future.mask.into_pyarray(py)))
+            } else {
+                (None, None)
+            };
+            (PyFrame { inner: r.frame }, r.spacing_s, r.upsampled, positions, mask)
+        })
+        .collect())
 }
 
 /// One track's positions `xy (N, 2)` at `times (N,)` seconds sampled at `at (M,)` seconds on a grid `dt` apart

@@ -33,7 +33,7 @@ fn _dgan(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<predictor::PyPredictor>()?;
     m.add_class::<predictor::PyPrediction>()?;
     m.add_class::<history::PyTracker>()?;
-    m.add_function(wrap_pyfunction!(history::frame_from_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(history::frames_from_rows, m)?)?;
     m.add_function(wrap_pyfunction!(history::sample_track, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::preprocess, m)?)?;
     m.add_function(wrap_pyfunction!(preprocess::validate_spec, m)?)?;

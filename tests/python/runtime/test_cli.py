@@ -373,11 +373,11 @@ def test_predict_options_for_repeated_rows_sparse_data_and_other_classes(
     path = tmp_path / "street.csv"
     path.write_text("\n".join(rows) + "\n")
     assert main(["predict", "zara1", str(path)]) == 2
-    assert "duplicates=" in capsys.readouterr().err
+    assert "(--duplicates first, last or mean)" in capsys.readouterr().err  # in the command line's words
     assert main(["predict", "zara1", str(path), "--duplicates", "last"]) == 2
-    assert "upsample=True" in capsys.readouterr().err
+    assert "upsampling (--upsample)" in capsys.readouterr().err
     assert main(["predict", "zara1", str(path), "--duplicates", "last", "--upsample"]) == 2
-    assert "unknown_classes='ignore'" in capsys.readouterr().err
+    assert "--unknown-classes ignore predicts" in capsys.readouterr().err
     argv = [
         "predict",
         "zara1",
@@ -572,3 +572,36 @@ def test_predict_at_every_time_of_a_scene_into_one_table(tmp_path: Path, capsys:
     capsys.readouterr()
     assert main(["predict", "zara1", str(SCENE), "--every"]) == 2
     assert "--every needs --out TABLE" in capsys.readouterr().err
+
+
+def test_evaluate_prints_the_table_writes_targets_and_draws(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out, chart = tmp_path / "targets.csv", tmp_path / "chart.png"
+    args = ["evaluate", "zara1", str(SCENE), "--map", "zara1", "--modes", "5", "--out", str(out)]
+    assert main([*args, "--plot", str(chart)]) == 0
+    printed = capsys.readouterr()
+    assert "zara1: 14 targets at 1 times" in printed.out
+    assert "min5 ADE/FDE" in printed.out
+    assert "wrote 14 targets" in printed.err
+    header, *lines = out.read_text().splitlines()
+    assert header.startswith("time,agent_id,class,moving,ade,fde,min5_ade")
+    assert len(lines) == 14
+    assert chart.stat().st_size > 10_000
+    expected = dgan.evaluate("zara1", zara1_records(), time_unit=0.04, map=dgan.scene_map("zara1"), modes=5)
+    assert main(["evaluate", "zara1", str(SCENE), "--map", "zara1", "--modes", "5", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    assert rows[0]["ade"] == pytest.approx(expected.rows()[0]["ade"], abs=1e-12)
+
+
+def test_evaluate_pools_scenes_and_speaks_the_command_lines_words(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for name in ("a.txt", "b.txt"):
+        (tmp_path / name).write_text(SCENE.read_text())
+    assert main(["evaluate", "univ", str(tmp_path), "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["scenes"] == ["a.txt", "b.txt"]
+    assert got["rows"][0]["targets"] == 28
+    assert main(["evaluate", "hdmap", str(SCENE)]) == 2  # 2.5 Hz data for a 5 Hz model
+    assert "--upsample" in capsys.readouterr().err
+    assert main(["evaluate", "zara1", str(SCENE), "--stride", "0"]) == 2
+    assert "stride must be" in capsys.readouterr().err
