@@ -22,7 +22,7 @@ class RasterMap:
     Pixels are ``(u, v)`` = (column, row) with integer values at pixel centres. ``image`` is ``(H, W, 3)`` uint8.
     """
 
-    __slots__ = ("_map",)
+    __slots__ = ("__weakref__", "_map")
 
     def __init__(self, image: npt.ArrayLike, world_to_pixel: npt.ArrayLike) -> None:
         img = checked_array("image", image, np.uint8, InvalidMapError, required=True)

@@ -6,6 +6,7 @@ import json
 import numbers
 import os
 import warnings
+import weakref
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -114,7 +115,7 @@ class Predictor:
         self._modes = self._check_modes(modes)
         self._heading_warned = False
         self._reads_mask = reads_masks(self._contract)
-        self._maps_checked: set[int] = set()
+        self._maps_checked: weakref.WeakSet[RasterMap] = weakref.WeakSet()  # by reference: ids are reused
 
     def _check_modes(self, modes: int | None) -> int:
         k = self.num_modes
@@ -222,11 +223,9 @@ class Predictor:
         """Warns once (:class:`~dgan.exceptions.MapWarning`) if this model reads the ETH/UCY semantic masks and the
         frame's raster map is no such mask (each map looked at once: about 1.4 ms for a 576 × 720 image)."""
         raster = getattr(frame, "map", None)
-        if not self._reads_mask or not isinstance(raster, RasterMap) or id(raster) in self._maps_checked:
+        if not self._reads_mask or not isinstance(raster, RasterMap) or raster in self._maps_checked:
             return
-        if len(self._maps_checked) > 64:
-            self._maps_checked.clear()
-        self._maps_checked.add(id(raster))
+        self._maps_checked.add(raster)
         share = palette_share(raster.image)
         if share < MIN_PALETTE_SHARE:
             self._reads_mask = False  # warned: not again

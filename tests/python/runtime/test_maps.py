@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import gc
 from pathlib import Path
 
 import numpy as np
@@ -271,3 +272,22 @@ def test_a_photo_given_to_a_model_that_reads_masks_warns_once(tmp_path: Path) ->
         zara1.predict(frame.with_map(photo))
     with pytest.warns(exc.MapWarning):
         dgan.Predictor("eth").predict_batch([frame.with_map(mask), frame.with_map(photo)])
+
+
+def test_a_predictor_forgets_the_maps_it_checked_once_they_are_freed() -> None:
+    """The maps a predictor has checked are remembered by reference, not by ``id()``: a freed map's id goes to the
+    next object made, so a photo could have passed unchecked (seen in a script: 30 masks made and freed one by one,
+    then a photo whose id was one of theirs)."""
+    rec = zara1_records()
+    frame = dgan.Frame.from_records(rec, t_obs=8, dt=0.4, time_unit=0.04, current_time=5500.0)
+    mask, photo_image = dgan.scene_map("zara1"), zara1_raster_map().image
+    zara1 = dgan.Predictor("zara1")
+    masks = [dgan.RasterMap(mask.image, mask.world_to_pixel) for _ in range(30)]
+    for m in masks:
+        zara1.predict(frame.with_map(m))
+    assert len(zara1._maps_checked) == 30
+    del masks, m
+    gc.collect()
+    assert len(zara1._maps_checked) == 0  # nothing left whose id a new map could take
+    with pytest.warns(exc.MapWarning):
+        zara1.predict(frame.with_map(dgan.RasterMap(photo_image, mask.world_to_pixel)))
