@@ -9,9 +9,7 @@
 //! optional) and the bundled zara1 excerpt (`python/dgan/data/zara1`), predicting from frame 5500.
 //! The scene file is in the Social-GAN layout (`frame ped_id x y`, metres, 0.4 s steps).
 
-use dgan_core::{AgentClass, Frame, Predictor, Result};
-use ndarray::{Array2, Array3};
-use std::collections::BTreeMap;
+use dgan_core::{frame_at, tracks_from_rows, AgentClass, Detection, Predictor, Result, TimeBase};
 use std::path::PathBuf;
 
 fn repo(rel: &str) -> PathBuf {
@@ -31,34 +29,21 @@ fn main() -> Result<()> {
     let spec = &predictor.contract().input;
     let text = std::fs::read_to_string(&scene)
         .map_err(|e| dgan_core::DganError::InvalidFrame(format!("cannot read {}: {e}", scene.display())))?;
-    // frame ids step by 10 in the Social-GAN layout.
-    let first = t_obs_frame - 10.0 * (spec.t_obs as f64 - 1.0);
-    let mut tracks: BTreeMap<i64, Vec<Option<[f64; 2]>>> = BTreeMap::new();
+    // Each row a detection (frame ids step by 10, 0.4 s); the engine groups them into tracks and resamples them onto
+    // the model's grid as `dgan.Frame.from_records` does.
+    let seconds_per_frame_id = 0.04;
+    let mut rows = Vec::new();
     for line in text.lines() {
         let v: Vec<f64> = line.split_whitespace().filter_map(|s| s.parse().ok()).collect();
-        let [frame, ped, x, y] = v[..] else { continue };
-        let step = ((frame - first) / 10.0).round();
-        if step < 0.0 || step >= spec.t_obs as f64 {
-            continue;
-        }
-        tracks.entry(ped as i64).or_insert_with(|| vec![None; spec.t_obs])[step as usize] = Some([x, y]);
-    }
-    // Agents seen at t_obs.
-    tracks.retain(|_, steps| steps.last().is_some_and(Option::is_some));
-    let n = tracks.len();
-    let mut positions = Array3::zeros((n, spec.t_obs, 2));
-    let mut mask = Array2::from_elem((n, spec.t_obs), false);
-    for (i, steps) in tracks.values().enumerate() {
-        for (t, p) in steps.iter().enumerate() {
-            if let Some([x, y]) = p {
-                positions[[i, t, 0]] = *x;
-                positions[[i, t, 1]] = *y;
-                mask[[i, t]] = true;
-            }
+        if let [frame, ped, x, y] = v[..] {
+            rows.push((ped as i64, Detection::at(frame * seconds_per_frame_id, x, y)));
         }
     }
-    let frame =
-        Frame::new(positions, Some(mask), vec![AgentClass::Pedestrian; n])?.with_ids(tracks.into_keys().collect())?;
+    let tracks = tracks_from_rows(rows)?;
+    let views: Vec<(i64, &[Detection])> = tracks.iter().map(|(id, t)| (*id, t.as_slice())).collect();
+    let base = TimeBase::new(spec.t_obs, spec.dt_s)?;
+    let frame = frame_at(&views, t_obs_frame * seconds_per_frame_id, &base, AgentClass::Pedestrian)?;
+    let n = frame.len();
     let started = std::time::Instant::now();
     let prediction = predictor.predict_modes(&frame, 3)?;
     let elapsed = started.elapsed();
