@@ -860,6 +860,48 @@ def scalar_cases() -> list[Case]:
     return cases
 
 
+def evaluation_cases() -> list[Case]:
+    """:func:`dgan.evaluate` and :mod:`dgan.series` given bad options, times and tables."""
+    p, rec = dgan.Predictor("zara1"), zara1_records()
+
+    def ev(**options: Any) -> Any:
+        return dgan.evaluate(p, rec, **({"time_unit": 0.04} | options))
+
+    early = {k: v[rec["time"] <= 5600] for k, v in rec.items()}  # no agent seen for 20 steps
+    return [
+        ("evaluate modes 0", lambda: ev(modes=0), exc.InvalidSpecError, "modes must be in 1..=20"),
+        ("evaluate modes a string", lambda: ev(modes="5"), exc.InvalidSpecError, "modes must be a whole number"),
+        ("evaluate stride 0", lambda: ev(stride=0), exc.InvalidSpecError, "stride must be a whole number"),
+        ("evaluate stride a float", lambda: ev(stride=2.0), exc.InvalidSpecError, "stride must be a whole number"),
+        ("evaluate min_targets a bool", lambda: ev(min_targets=True), exc.InvalidSpecError, "min_targets must be"),
+        ("evaluate standing_m negative", lambda: ev(standing_m=-1.0), exc.InvalidSpecError, "non-negative distance"),
+        ("evaluate standing_m NaN", lambda: ev(standing_m=float("nan")), exc.InvalidSpecError, "standing_m"),
+        ("evaluate standing_m complex", lambda: ev(standing_m=1j), exc.InvalidSpecError, "standing_m"),
+        ("evaluate unknown_classes drop", lambda: ev(unknown_classes="drop"), exc.InvalidSpecError, "'error' or"),
+        ("evaluate spec given", lambda: ev(spec=p), exc.InvalidSpecError, "the time base is the model's"),
+        ("evaluate dt given", lambda: ev(dt=0.4), exc.InvalidSpecError, "the time base is the model's"),
+        ("evaluate no target", lambda: dgan.evaluate(p, early, time_unit=0.04), exc.InvalidFrameError, "no target"),
+        ("evaluate an unknown model", lambda: dgan.evaluate("zara9", rec), exc.ModelNotFoundError, "zara9"),
+        ("evaluate records None", lambda: dgan.evaluate(p, None), exc.InvalidFrameError, "table"),
+        ("series times a string", lambda: dgan.series.frames(rec, "5500", t_obs=8), exc.InvalidFrameError, "times"),
+        ("series current_time", lambda: dgan.series.frames(rec, t_obs=8, current_time=1.0), exc.InvalidFrameError, ""),
+        ("series an unknown option", lambda: dgan.series.frames(rec, t_obs=8, every=2), exc.InvalidFrameError, "every"),
+        ("series a time not in it", lambda: dgan.series.frames(rec, [1.0], t_obs=8), exc.InvalidFrameError, "no row"),
+        (
+            "series t_f a bool",
+            lambda: dgan.series.frames_with_futures(rec, True, t_obs=8),
+            exc.InvalidFrameError,
+            "t_f",
+        ),
+        (
+            "series t_f 10**6",
+            lambda: dgan.series.frames_with_futures(rec, 10**6, t_obs=8),
+            exc.InvalidFrameError,
+            "t_f",
+        ),
+    ]
+
+
 def all_cases(tmp: Path) -> list[Case]:
     return (
         frame_cases()
@@ -871,6 +913,7 @@ def all_cases(tmp: Path) -> list[Case]:
         + readers_cases(tmp)
         + file_and_misc_cases(tmp)
         + scalar_cases()
+        + evaluation_cases()
     )
 
 
