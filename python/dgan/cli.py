@@ -162,9 +162,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.out is not None:
         write_columns(result.to_records(), Path(args.out))
         print(f"wrote {len(result)} targets to {args.out}", file=sys.stderr)
-    if args.plot is not None:
-        result.plot().savefig(args.plot, dpi=120)
-        print(f"drew {args.plot}", file=sys.stderr)
+    for path, kind in ((args.plot, "classes"), (args.plot_horizon, "horizon")):
+        if path is not None:
+            result.plot(kind=kind).savefig(path, dpi=120)
+            print(f"drew {path}", file=sys.stderr)
     if args.json:
         json.dump({"model": args.model, "scenes": names, "times": result.times, "rows": result.rows()}, sys.stdout)
         print()

@@ -108,6 +108,7 @@ def evaluate_arguments(sub: Any) -> argparse.ArgumentParser:
     ev.add_argument("--json", action="store_true", help="print the table's rows as JSON to stdout")
     ev.add_argument("--out", default=None, help="write every target's errors: .csv, .parquet or .jsonl")
     ev.add_argument("--plot", default=None, metavar="PNG", help="draw top-1 beside constant velocity (dgan[plot])")
+    ev.add_argument("--plot-horizon", default=None, metavar="PNG", help="draw the mean error at each predicted step")
     return ev  # type: ignore[no-any-return]
 
 

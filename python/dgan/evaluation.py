@@ -70,6 +70,9 @@ class Evaluation:
     min_fde: npt.NDArray[np.float64]
     #: Constant velocity's ADE and FDE by variant (``last2``, ``mean1s``).
     cv: dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]
+    #: ``(targets, T_f)`` displacement at each predicted step: ``top-1``, ``best`` (the mode of least ADE), and
+    #: constant velocity's variants (:meth:`by_horizon`).
+    steps: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict)
     scene: Arr = field(default_factory=lambda: np.zeros(0, dtype=object))
 
     def __len__(self) -> int:
@@ -118,6 +121,19 @@ class Evaluation:
             )
         return "\n".join(lines)
 
+    def by_horizon(self, cls: str = "all", motion: str = "all") -> dict[str, npt.NDArray[np.float64]]:
+        """The mean displacement at each predicted step (``time_s`` after the current time) of the targets of class
+        ``cls`` (``"all"``: every class) and ``motion`` (``"all"``, ``"moving"``, ``"standing"``): ``top-1``,
+        ``best`` (best of ``modes`` by ADE) and constant velocity's ``last2`` and ``mean1s``."""
+        if motion not in MOTIONS:
+            raise InvalidSpecError(f"motion must be one of {MOTIONS}, got {motion!r}")
+        sel = np.ones(len(self), dtype=bool) if cls == "all" else self.classes == cls
+        sel &= True if motion == "all" else self.moving == (motion == "moving")
+        if not sel.any():
+            raise InvalidSpecError(f"no target of class {cls!r} and motion {motion!r}; classes: {set(self.classes)}")
+        out = {"time_s": self.dt_s * np.arange(1, self.t_f + 1)}
+        return out | {name: d[sel].mean(axis=0) for name, d in self.steps.items()}
+
     def to_records(self) -> dict[str, Arr]:
         """The targets one by one: scene (when joined), time, agent_id, class, moving, and each error."""
         out: dict[str, Arr] = {"scene": self.scene} if len(self.scene) else {}
@@ -128,11 +144,16 @@ class Evaluation:
             out |= {f"cv_{name}_ade": a, f"cv_{name}_fde": f}
         return out
 
-    def plot(self, ax: Any = None) -> Any:
-        """Top-1 ADE beside constant velocity's for each class and motion (``dgan[plot]``); returns the figure."""
+    def plot(self, ax: Any = None, kind: str = "classes") -> Any:
+        """Top-1 ADE beside constant velocity's for each class and motion (``kind="classes"``), or the mean error
+        at each predicted step (``kind="horizon"``, :meth:`by_horizon`), with ``dgan[plot]``; returns the figure."""
         from dgan.viz import _pyplot
 
+        if kind not in ("classes", "horizon"):
+            raise InvalidSpecError(f"kind must be 'classes' or 'horizon', got {kind!r}")
         plt = _pyplot()
+        if kind == "horizon":
+            return self._plot_horizon(plt, ax)
         rows = [r for r in self.rows() if r["targets"]]
         labels = [f"{r['class']}\n{r['motion']}\n({r['targets']})" for r in rows]
         fig, ax = plt.subplots(figsize=(max(6.0, 0.9 * len(rows)), 4.0)) if ax is None else (ax.figure, ax)
@@ -146,6 +167,22 @@ class Evaluation:
         ax.set_ylim(0, 1.25 * max(max(r["ade"], r["cv_ade"]) for r in rows))
         ax.set_title(f"{self.model} against constant velocity: {len(self)} targets, {self.times} times", fontsize=10)
         ax.legend(loc="upper right", ncol=2, fontsize=8)
+        fig.tight_layout()
+        return fig
+
+    def _plot_horizon(self, plt: Any, ax: Any) -> Any:
+        fig, ax = plt.subplots(figsize=(6.0, 4.0)) if ax is None else (ax.figure, ax)
+        h = self.by_horizon()
+        styles = {"top-1": ("tab:red", "-"), "best": ("tab:red", ":"), "last2": ("tab:gray", "-")}
+        styles["mean1s"] = ("tab:gray", "--")
+        names = {"top-1": f"{self.model} top-1", "best": f"{self.model} best of {self.modes}"}
+        for key, (colour, line) in styles.items():
+            label = names.get(key, f"constant velocity ({key})")
+            ax.plot(h["time_s"], h[key], line, color=colour, marker=".", label=label)
+        ax.set_xlabel("seconds ahead")
+        ax.set_ylabel("mean displacement (the table's unit)")
+        ax.set_title(f"{self.model}: error by horizon, {len(self)} targets, {self.times} times", fontsize=10)
+        ax.legend(fontsize=8)
         fig.tight_layout()
         return fig
 
@@ -214,8 +251,9 @@ def evaluate(
             f"no target: no agent of the table is seen over {spec.t_obs + spec.t_f} consecutive steps of "
             f"{spec.dt_s:g} s (is time_unit right?)"
         )
-    joined_parts = {key: np.concatenate([p[key] for p in parts]) for key in parts[0] if key != "cv"}
+    joined_parts = {key: np.concatenate([p[key] for p in parts]) for key in parts[0] if key not in ("cv", "steps")}
     cv = {name: tuple(np.concatenate([p["cv"][name][j] for p in parts]) for j in (0, 1)) for name in parts[0]["cv"]}
+    steps = {name: np.concatenate([p["steps"][name] for p in parts]) for name in parts[0]["steps"]}
     path = getattr(predictor, "path", None)
     return Evaluation(
         model=str(model) if isinstance(model, str) else (path.stem if path is not None else "model"),
@@ -226,6 +264,7 @@ def evaluate(
         standing_m=standing,
         times=len(parts),
         cv=cv,  # type: ignore[arg-type]
+        steps=steps,
         **joined_parts,
     )
 
@@ -244,10 +283,13 @@ def _scored(frame: Frame, future: Future, modes: Arr, dt_s: float, standing_m: f
     pred = modes[full]
     ade, fde = metrics.ade_fde_top1(pred, gt)
     min_ade, min_fde = metrics.min_ade_fde(pred, gt, pred.shape[1])
+    n = int(np.count_nonzero(full))
+    d = metrics.displacement(pred, gt)  # (n, M, T_f)
+    steps = {"top-1": d[:, 0], "best": d[np.arange(n), d.mean(axis=-1).argmin(axis=1)]}
     cv = {}
     for name, rollout in metrics.constant_velocity_variants(past, frame.mask[full], gt.shape[1], dt_s).items():
         cv[name] = metrics.ade_fde_top1(rollout, gt)
-    n = int(np.count_nonzero(full))
+        steps[name] = metrics.displacement(rollout, gt)[:, 0]
     return {
         "time": np.full(n, frame.time),
         "agent_ids": np.asarray(frame.agent_ids)[full],
@@ -258,6 +300,7 @@ def _scored(frame: Frame, future: Future, modes: Arr, dt_s: float, standing_m: f
         "min_ade": min_ade,
         "min_fde": min_fde,
         "cv": cv,
+        "steps": steps,
     }
 
 
@@ -269,6 +312,7 @@ def joined(evaluations: Sequence[Evaluation], scenes: Sequence[str]) -> Evaluati
     arrays = ("time", "agent_ids", "classes", "moving", "ade", "fde", "min_ade", "min_fde")
     cat = {a: np.concatenate([getattr(e, a) for e in evaluations]) for a in arrays}
     cv = {n: tuple(np.concatenate([e.cv[n][j] for e in evaluations]) for j in (0, 1)) for n in first.cv}
+    steps = {n: np.concatenate([e.steps[n] for e in evaluations]) for n in first.steps}
     scene = np.concatenate([np.full(len(e), s, dtype=object) for e, s in zip(evaluations, scenes, strict=True)])
     times = sum(e.times for e in evaluations)
-    return replace(first, times=times, cv=cv, scene=scene, **cat)  # type: ignore[arg-type]
+    return replace(first, times=times, cv=cv, steps=steps, scene=scene, **cat)  # type: ignore[arg-type]

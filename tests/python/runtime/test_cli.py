@@ -577,7 +577,7 @@ def test_predict_at_every_time_of_a_scene_into_one_table(tmp_path: Path, capsys:
 def test_evaluate_prints_the_table_writes_targets_and_draws(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out, chart = tmp_path / "targets.csv", tmp_path / "chart.png"
     args = ["evaluate", "zara1", str(SCENE), "--map", "zara1", "--modes", "5", "--out", str(out)]
-    assert main([*args, "--plot", str(chart)]) == 0
+    assert main([*args, "--plot", str(chart), "--plot-horizon", str(tmp_path / "horizon.png")]) == 0
     printed = capsys.readouterr()
     assert "zara1: 14 targets at 1 times" in printed.out
     assert "min5 ADE/FDE" in printed.out
@@ -586,6 +586,7 @@ def test_evaluate_prints_the_table_writes_targets_and_draws(tmp_path: Path, caps
     assert header.startswith("time,agent_id,class,moving,ade,fde,min5_ade")
     assert len(lines) == 14
     assert chart.stat().st_size > 10_000
+    assert (tmp_path / "horizon.png").stat().st_size > 10_000
     expected = dgan.evaluate("zara1", zara1_records(), time_unit=0.04, map=dgan.scene_map("zara1"), modes=5)
     assert main(["evaluate", "zara1", str(SCENE), "--map", "zara1", "--modes", "5", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)["rows"]

@@ -69,6 +69,18 @@ def test_classes_motions_and_the_table() -> None:
     records = result.to_records()
     assert set(records) >= {"time", "agent_id", "class", "moving", "ade", "min5_fde", "cv_mean1s_fde"}
     assert all(len(v) == len(result) for v in records.values())
+    horizon = result.by_horizon()
+    assert horizon["time_s"].tolist() == pytest.approx([0.4 * k for k in range(1, 13)])
+    assert horizon["top-1"].mean() == pytest.approx(rows[0]["ade"])
+    assert horizon["top-1"][-1] == pytest.approx(rows[0]["fde"])
+    assert horizon["best"].mean() == pytest.approx(rows[0]["min_ade"])
+    assert horizon[rows[0]["cv"]].mean() == pytest.approx(rows[0]["cv_ade"])
+    moving = result.by_horizon(motion="moving")
+    assert moving["top-1"].mean() == pytest.approx(rows[1]["ade"])
+    with pytest.raises(InvalidSpecError, match="no target of class 'vehicle'"):
+        result.by_horizon("vehicle")
+    with pytest.raises(InvalidSpecError, match="motion must be"):
+        result.by_horizon(motion="walking")
     both = dgan.evaluation.joined([result, result], ["a", "b"])
     assert len(both) == 2 * len(result)
     assert both.times == 2
@@ -115,3 +127,7 @@ def test_the_chart(tmp_path: Path) -> None:
     fig.savefig(tmp_path / "chart.png")
     assert (tmp_path / "chart.png").stat().st_size > 10_000
     assert "constant velocity" in fig.axes[0].get_title()
+    fig = dgan.evaluate("zara1", zara1_records(), time_unit=0.04).plot(kind="horizon")
+    assert [line.get_label() for line in fig.axes[0].get_lines()][:2] == ["zara1 top-1", "zara1 best of 20"]
+    with pytest.raises(InvalidSpecError, match="kind must be"):
+        dgan.evaluate("zara1", zara1_records(), time_unit=0.04).plot(kind="pie")
