@@ -111,10 +111,12 @@ def _models(args: argparse.Namespace) -> int:
     return 0
 
 
-def _frames_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> list[tuple[dgan.Frame, float | str]]:
+def _frames_of(
+    args: argparse.Namespace, p: dgan.Predictor, scene: Path, scene_map: dgan.RasterMap | dgan.VectorMap | None
+) -> list[tuple[dgan.Frame, float | str]]:
     """The frames of a scene file, each with its time: at ``--time`` (its last time by default), or with ``--every``
     at each of its times."""
-    cols, options = _table_of(args, scene)
+    cols, options = _table_of(args, scene, scene_map)
     options["spec"] = p
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ColumnWarning)
@@ -131,12 +133,18 @@ def _frames_of(args: argparse.Namespace, p: dgan.Predictor, scene: Path) -> list
     return frames
 
 
-def _table_of(args: argparse.Namespace, scene: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+def _map_of(args: argparse.Namespace) -> dgan.RasterMap | dgan.VectorMap | None:
+    """``--map``, read once for every scene of a command (a vector map keeps the tiles drawn from it)."""
+    return read_map(args.map, args.pixel_to_world) if args.map is not None else None
+
+
+def _table_of(
+    args: argparse.Namespace, scene: Path, scene_map: dgan.RasterMap | dgan.VectorMap | None
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """A scene file's columns, and the options of :meth:`dgan.Frame.from_records` the command line gives for it."""
     names = column_names(args.column)
     cols, unit = read_scene(scene, text_columns=(names.get("cls_column", "class"),))
     time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
-    scene_map = read_map(args.map, args.pixel_to_world) if args.map is not None else None
     options = {"time_unit": time_unit, "map": scene_map, "duplicates": args.duplicates, "upsample": args.upsample}
     return cols, options | {"class_names": class_names(args.class_name, args.common_classes), **names}
 
@@ -147,9 +155,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     files = scene_files(args.scene) or [Path(args.scene)]
     options = {"modes": args.modes, "stride": args.stride, "standing_m": args.standing_m}
     options |= {"min_targets": args.min_targets, "unknown_classes": args.unknown_classes}
-    parts, names = [], []
+    parts, names, scene_map = [], [], _map_of(args)
     for scene in progress(files, "scenes") if len(files) > 1 else files:
-        cols, table = _table_of(args, scene)
+        cols, table = _table_of(args, scene, scene_map)
         try:
             parts.append(dgan.evaluate(p, cols, progress=len(files) == 1, **options, **table))
         except DganError as e:
@@ -202,9 +210,10 @@ def _predict_many(args: argparse.Namespace, p: dgan.Predictor, files: list[Path]
         raise InvalidFrameError(f"{what} --out TABLE (.parquet, .csv or .jsonl)")
     preds: list[dgan.Prediction] = []
     names: list[str] = []
+    scene_map = _map_of(args)
     for scene in progress(files, "scenes"):
         try:
-            frames = [f for f, _ in _frames_of(args, p, scene)]
+            frames = [f for f, _ in _frames_of(args, p, scene, scene_map)]
             preds += p.predict_batch(frames, unknown_classes=args.unknown_classes)
         except DganError as e:
             raise type(e)(f"{scene}: {e}") from None
@@ -222,7 +231,7 @@ def _predict(args: argparse.Namespace) -> int:
     files = scene_files(args.scene)
     if files is not None or args.every:
         return _predict_many(args, p, files or [Path(args.scene)])
-    ((frame, now),) = _frames_of(args, p, Path(args.scene))
+    ((frame, now),) = _frames_of(args, p, Path(args.scene), _map_of(args))
     if p.spec.map is not None and frame.map is None and p.spec.map.optional:
         print(
             f"dgan: note: no --map given; {args.model} runs without a map (its map is optional; "

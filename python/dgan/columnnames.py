@@ -44,29 +44,19 @@ class Names:
         ]
 
 
-#: The keyword of :meth:`~dgan.Frame.from_records` that names each column, with its default.
-NAME_ARGUMENTS: Final = {
-    "agent_id": "agent_id",
-    "time": "time",
-    "x": "x",
-    "y": "y",
-    "cls_column": "class",
-    "heading": "heading",
-    "length": "length",
-    "width": "width",
-    "velocity": ("vx", "vy"),
-}
+#: The keywords of :meth:`~dgan.Frame.from_records` that name its columns (``velocity``: the (vx, vy) pair).
+NAME_ARGUMENTS: Final = ("agent_id", "time", "x", "y", "cls_column", "heading", "length", "width", "velocity")
 
 
-def names_of(**given: Any) -> Names:
-    """The :class:`Names` of :meth:`~dgan.Frame.from_records`' column keywords (``agent_id=``, ``time=``, ...,
-    ``velocity=(vx, vy)``), each checked; those not given keep their defaults."""
-    named = {**NAME_ARGUMENTS, **given}
-    velocity = named.pop("velocity")
+def names_of(
+    agent_id: str, time: str, x: str, y: str, cls_column: str, heading: str, length: str, width: str, velocity: Any
+) -> Names:
+    """The :class:`Names` of :meth:`~dgan.Frame.from_records`' column keywords, each checked."""
     if not (isinstance(velocity, (tuple, list)) and len(velocity) == 2):
         raise InvalidFrameError(f"velocity must be a pair of column names (vx, vy), got {velocity!r:.60}")
+    single = (agent_id, time, x, y, cls_column, heading, length, width)
     return Names(
-        *(checked_text(arg, named[arg]) for arg in NAME_ARGUMENTS if arg != "velocity"),
+        *(checked_text(arg, c) for arg, c in zip(NAME_ARGUMENTS[:-1], single, strict=True)),
         *(checked_text("velocity", c) for c in velocity),
     )
 

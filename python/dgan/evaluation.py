@@ -42,6 +42,10 @@ Arr = npt.NDArray[Any]
 #: Frames predicted per call of :meth:`~dgan.Predictor.predict_batch` (and per step of the progress bar).
 CHUNK = 64
 MOTIONS = ("all", "moving", "standing")
+#: The keys of :attr:`Evaluation.steps` that are the model's: its top mode, and its mode of least ADE.
+TOP, BEST = "top-1", "best"
+#: What each target carries, in :class:`Evaluation` and in the parts :func:`evaluate` and :func:`joined` join.
+_PER_TARGET = ("time", "agent_ids", "classes", "moving", "min_ade", "min_fde", "steps")
 
 
 @dataclass(frozen=True)
@@ -64,19 +68,32 @@ class Evaluation:
     agent_ids: Arr
     classes: Arr  # str
     moving: npt.NDArray[np.bool_]
-    ade: npt.NDArray[np.float64]
-    fde: npt.NDArray[np.float64]
+    #: Best of ``modes``: the least ADE and the least FDE, each over the modes.
     min_ade: npt.NDArray[np.float64]
     min_fde: npt.NDArray[np.float64]
-    #: Constant velocity's ADE and FDE by variant (``last2``, ``mean1s``).
-    cv: dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]
     #: ``(targets, T_f)`` displacement at each predicted step: ``top-1``, ``best`` (the mode of least ADE), and
-    #: constant velocity's variants (:meth:`by_horizon`).
-    steps: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict)
+    #: constant velocity's variants (``last2``, ``mean1s``; :meth:`by_horizon`).
+    steps: dict[str, npt.NDArray[np.float64]]
     scene: Arr = field(default_factory=lambda: np.zeros(0, dtype=object))
 
     def __len__(self) -> int:
-        return len(self.ade)
+        return len(self.min_ade)
+
+    @property
+    def ade(self) -> npt.NDArray[np.float64]:
+        """Top-1 ADE of each target."""
+        mean: npt.NDArray[np.float64] = self.steps[TOP].mean(axis=1)
+        return mean
+
+    @property
+    def fde(self) -> npt.NDArray[np.float64]:
+        """Top-1 FDE of each target."""
+        return self.steps[TOP][:, -1]
+
+    @property
+    def cv(self) -> dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]:
+        """Constant velocity's ADE and FDE of each target, by variant (``last2``, ``mean1s``)."""
+        return {name: (d.mean(axis=1), d[:, -1]) for name, d in self.steps.items() if name not in (TOP, BEST)}
 
     def rows(self) -> list[dict[str, Any]]:
         """The table: for each class (and ``all`` when there are several) and motion (``all``, ``moving``,
@@ -240,20 +257,17 @@ def evaluate(
     parts = []
     chunks = [pairs[i : i + CHUNK] for i in range(0, len(pairs), CHUNK)]
     for chunk in progress_bar(chunks, "chunks of 64 times") if progress else chunks:
-        chunk = [_known(f, fut, predictor.classes) for f, fut in chunk] if unknown_classes == "ignore" else chunk
+        chunk = [_known(f, fut, predictor) for f, fut in chunk] if unknown_classes == "ignore" else chunk
         preds = predictor.predict_batch([f for f, _ in chunk], modes=k, unknown_classes=unknown_classes)
         parts += [
             _scored(f, fut, p.trajectories, spec.dt_s, standing) for (f, fut), p in zip(chunk, preds, strict=True)
         ]
-    parts = [p for p in parts if len(p["ade"]) >= min_targets]
+    parts = [p for p in parts if len(p["min_ade"]) >= min_targets]
     if not parts:
         raise InvalidFrameError(
             f"no target: no agent of the table is seen over {spec.t_obs + spec.t_f} consecutive steps of "
             f"{spec.dt_s:g} s (is time_unit right?)"
         )
-    joined_parts = {key: np.concatenate([p[key] for p in parts]) for key in parts[0] if key not in ("cv", "steps")}
-    cv = {name: tuple(np.concatenate([p["cv"][name][j] for p in parts]) for j in (0, 1)) for name in parts[0]["cv"]}
-    steps = {name: np.concatenate([p["steps"][name] for p in parts]) for name in parts[0]["steps"]}
     path = getattr(predictor, "path", None)
     return Evaluation(
         model=str(model) if isinstance(model, str) else (path.stem if path is not None else "model"),
@@ -263,15 +277,13 @@ def evaluate(
         t_f=spec.t_f,
         standing_m=standing,
         times=len(parts),
-        cv=cv,  # type: ignore[arg-type]
-        steps=steps,
-        **joined_parts,
+        **_concatenated(parts),
     )
 
 
-def _known(frame: Frame, future: Future, classes: Sequence[str]) -> tuple[Frame, Future]:
-    """The frame and future of its agents of ``classes``."""
-    keep = np.fromiter((c in classes for c in frame.classes), dtype=bool, count=len(frame))
+def _known(frame: Frame, future: Future, predictor: Predictor) -> tuple[Frame, Future]:
+    """The frame and future of its agents of the model's classes."""
+    keep = predictor._known_rows(frame)
     return (frame, future) if keep.all() else (frame.select(keep), (future[0][keep], future[1][keep]))
 
 
@@ -280,39 +292,33 @@ def _scored(frame: Frame, future: Future, modes: Arr, dt_s: float, standing_m: f
     positions, (truth, seen) = frame.positions, future
     full = frame.mask.all(axis=1) & seen.all(axis=1)
     gt, past = truth[full], positions[full]
-    pred = modes[full]
-    ade, fde = metrics.ade_fde_top1(pred, gt)
-    min_ade, min_fde = metrics.min_ade_fde(pred, gt, pred.shape[1])
     n = int(np.count_nonzero(full))
-    d = metrics.displacement(pred, gt)  # (n, M, T_f)
-    steps = {"top-1": d[:, 0], "best": d[np.arange(n), d.mean(axis=-1).argmin(axis=1)]}
-    cv = {}
+    d = metrics.displacement(modes[full], gt)  # (n, M, T_f): every error below is read from it
+    steps = {TOP: d[:, 0], BEST: d[np.arange(n), d.mean(axis=-1).argmin(axis=1)]}
     for name, rollout in metrics.constant_velocity_variants(past, frame.mask[full], gt.shape[1], dt_s).items():
-        cv[name] = metrics.ade_fde_top1(rollout, gt)
         steps[name] = metrics.displacement(rollout, gt)[:, 0]
     return {
         "time": np.full(n, frame.time),
         "agent_ids": np.asarray(frame.agent_ids)[full],
         "classes": np.asarray(frame.classes, dtype=object)[full],
         "moving": np.linalg.norm(gt[:, -1] - past[:, 0], axis=-1) >= standing_m,
-        "ade": ade,
-        "fde": fde,
-        "min_ade": min_ade,
-        "min_fde": min_fde,
-        "cv": cv,
+        "min_ade": d.mean(axis=2).min(axis=1),  # as dgan.metrics.min_ade_fde over every mode
+        "min_fde": d[:, :, -1].min(axis=1),
         "steps": steps,
     }
+
+
+def _concatenated(parts: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The per-target fields of several parts (frames, or evaluations) one after the other."""
+    out = {key: np.concatenate([p[key] for p in parts]) for key in _PER_TARGET if key != "steps"}
+    return out | {"steps": {name: np.concatenate([p["steps"][name] for p in parts]) for name in parts[0]["steps"]}}
 
 
 def joined(evaluations: Sequence[Evaluation], scenes: Sequence[str]) -> Evaluation:
     """Several evaluations of one model (one per scene) as one, each target with its ``scene``."""
     if not evaluations or len(evaluations) != len(scenes):
         raise InvalidSpecError("joined takes one scene name per evaluation, and at least one")
-    first = evaluations[0]
-    arrays = ("time", "agent_ids", "classes", "moving", "ade", "fde", "min_ade", "min_fde")
-    cat = {a: np.concatenate([getattr(e, a) for e in evaluations]) for a in arrays}
-    cv = {n: tuple(np.concatenate([e.cv[n][j] for e in evaluations]) for j in (0, 1)) for n in first.cv}
-    steps = {n: np.concatenate([e.steps[n] for e in evaluations]) for n in first.steps}
+    cat = _concatenated([{key: getattr(e, key) for key in _PER_TARGET} for e in evaluations])
     scene = np.concatenate([np.full(len(e), s, dtype=object) for e, s in zip(evaluations, scenes, strict=True)])
     times = sum(e.times for e in evaluations)
-    return replace(first, times=times, cv=cv, steps=steps, scene=scene, **cat)  # type: ignore[arg-type]
+    return replace(evaluations[0], times=times, scene=scene, **cat)

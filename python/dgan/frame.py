@@ -15,7 +15,7 @@ from dgan.columnnames import names_of
 from dgan.exceptions import InvalidFrameError, InvalidMapError, TimeBaseError
 from dgan.labels import classes_of
 from dgan.maps import RasterMap, VectorMap
-from dgan.records import from_records
+from dgan.records import Parsed, from_records
 
 #: :meth:`Frame.denoised`'s default gate, metres: chosen on the ETH/UCY validation windows (0.08, 0.10 and 0.12 m
 #: tried; 0.10 the lowest that kept clean top-1 ADE within 0.5% on every fold).
@@ -222,6 +222,12 @@ class Frame:
             duplicates=duplicates,
             upsample=upsample,
         )
+        return cls._of_parsed((native, labels, source), map)
+
+    @classmethod
+    def _of_parsed(cls, parsed: Parsed, map: RasterMap | VectorMap | None) -> Frame:
+        """The frame of what the engine resampled from a table (:mod:`dgan.records`), with ``map``."""
+        native, labels, source = parsed
         out = cls._wrap(native, labels, None, source)
         return out if map is None else out.with_map(map)
 

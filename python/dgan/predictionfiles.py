@@ -53,10 +53,7 @@ def write_records(extra: dict[str, list[str]], preds: Sequence[dgan.Prediction],
     value per prediction, repeated on its rows)."""
     from dgan.prediction import write_atomically
 
-    suffix = out.suffix.lower()
-    if suffix not in (".csv", ".parquet", ".jsonl", ".ndjson"):
-        raise InvalidFrameError(f"--out must end in .csv, .parquet or .jsonl, got {out.name}")
-    if suffix == ".parquet":
+    if _format(out) == ".parquet":
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -86,7 +83,7 @@ def _write_rows(out: Path, names: list[str], rows: list[tuple[Any, ...]]) -> Non
     from dgan.prediction import write_atomically
 
     def write(f: Any) -> None:
-        if out.suffix.lower() == ".csv":
+        if _format(out) == ".csv":
             text = io.StringIO()
             w = csv.writer(text)
             w.writerow(names)
@@ -102,10 +99,7 @@ def write_columns(columns: dict[str, Any], out: Path) -> None:
     """Columns of equal length (``dgan evaluate --out``) as CSV, parquet or JSON lines, by extension, atomically."""
     from dgan.prediction import write_atomically
 
-    suffix = out.suffix.lower()
-    if suffix not in (".csv", ".parquet", ".jsonl", ".ndjson"):
-        raise InvalidFrameError(f"--out must end in .csv, .parquet or .jsonl, got {out.name}")
-    if suffix == ".parquet":
+    if _format(out) == ".parquet":
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -114,6 +108,14 @@ def write_columns(columns: dict[str, Any], out: Path) -> None:
         return
     names = list(columns)
     _write_rows(out, names, list(zip(*(_listed(columns[k]) for k in names), strict=True)))
+
+
+def _format(out: Path) -> str:
+    """``--out``'s format by its extension: ``.csv``, ``.parquet``, or JSON lines (``.jsonl``, ``.ndjson``)."""
+    suffix = out.suffix.lower()
+    if suffix not in (".csv", ".parquet", ".jsonl", ".ndjson"):
+        raise InvalidFrameError(f"--out must end in .csv, .parquet or .jsonl, got {out.name}")
+    return suffix
 
 
 def _listed(column: Any) -> list[Any]:

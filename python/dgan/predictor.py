@@ -216,8 +216,12 @@ class Predictor:
             raise InvalidSpecError(f"unknown_classes must be 'error' or 'ignore', got {unknown_classes!r}")
         if unknown_classes == "error" or not isinstance(frame, Frame):
             return frame
-        keep = np.fromiter((c in self.classes for c in frame.classes), dtype=bool, count=len(frame))
+        keep = self._known_rows(frame)
         return frame if keep.all() else frame.select(keep)
+
+    def _known_rows(self, frame: Frame) -> npt.NDArray[np.bool_]:
+        """``(N,)`` which agents of ``frame`` are of this model's classes."""
+        return np.fromiter((c in self.classes for c in frame.classes), dtype=bool, count=len(frame))
 
     def _check_map(self, frame: Frame) -> None:
         """Warns once (:class:`~dgan.exceptions.MapWarning`) if this model reads the ETH/UCY semantic masks and the

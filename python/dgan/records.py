@@ -229,9 +229,11 @@ def read_table(
     return Table(rows, labels, clock, uniq_t, int(t_obs), float(dt), max_gap, default_class, duplicates, upsample)
 
 
+#: What a frame's agents did next: ``(N, t_f, 2)`` positions (NaN where unseen) and their ``(N, t_f)`` mask.
+Future = tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]
 #: What a frame of :func:`frames_at` is: the frame as :func:`from_records` gives it, and with ``t_f`` > 0 its
-#: agents' next ``t_f`` positions ``(N, t_f, 2)`` and their mask ``(N, t_f)``.
-Framed = tuple[Parsed, tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]] | None]
+#: :data:`Future`.
+Framed = tuple[Parsed, Future | None]
 
 
 def frames_at(table: Table, nows: list[float | None], t_f: int = 0) -> list[Framed]:

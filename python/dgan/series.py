@@ -9,22 +9,22 @@
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
-import numpy.typing as npt
 
 from dgan._times import TimeLike
 from dgan.columnnames import NAME_ARGUMENTS, names_of
 from dgan.exceptions import InvalidFrameError
 from dgan.frame import Frame
-from dgan.records import Parsed, frames_at, read_table
+from dgan.records import Future, frames_at, read_table
 
-__all__ = ["frames", "frames_with_futures"]
+__all__ = ["Future", "frames", "frames_with_futures"]
 
-#: What a frame's agents did next: ``(N, T_f, 2)`` positions (NaN where unseen) and their ``(N, T_f)`` mask.
-Future = tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]
+#: :meth:`dgan.Frame.from_records`' parameters: the options a series of its frames takes, and their defaults.
+_FROM_RECORDS: Final = inspect.signature(Frame.from_records)
 
 
 def frames(records: Any, times: Sequence[TimeLike] | None = None, **options: Any) -> list[Frame]:
@@ -63,25 +63,20 @@ def _framed(
 ) -> list[tuple[Frame, Future | None]]:
     if "current_time" in options:
         raise InvalidFrameError("frames take times=, a list of current times, not current_time")
-    names = names_of(**{k: options.pop(k) for k in list(options) if k in NAME_ARGUMENTS})
-    scene_map = options.pop("map", None)
-    defaults: dict[str, Any] = {"t_obs": None, "dt": None, "spec": None, "time_unit": 1.0, "max_gap": None}
-    defaults |= {"default_class": "pedestrian", "class_names": None, "duplicates": "error", "upsample": False}
-    unknown = sorted(set(options) - set(defaults))
+    unknown = sorted(set(options) - set(_FROM_RECORDS.parameters))
     if unknown:
-        raise InvalidFrameError(f"unknown option(s) {', '.join(unknown)}; Frame.from_records takes {sorted(defaults)}")
-    table = read_table(records, current_time=None, names=names, **(defaults | options))
+        takes = sorted(set(_FROM_RECORDS.parameters) - {"records", "current_time"})
+        raise InvalidFrameError(f"unknown option(s) {', '.join(unknown)}; Frame.from_records takes {takes}")
+    bound = _FROM_RECORDS.bind(records, **options)  # with Frame.from_records' own defaults
+    bound.apply_defaults()
+    given = {k: v for k, v in bound.arguments.items() if k not in ("records", "current_time")}
+    scene_map = given.pop("map")
+    names = names_of(**{k: given.pop(k) for k in NAME_ARGUMENTS})
+    table = read_table(records, current_time=None, names=names, **given)
     if times is None:
         nows: list[float | None] = [float(t) for t in table.times]
     elif isinstance(times, (str, bytes)) or not isinstance(times, Sequence | np.ndarray):
         raise InvalidFrameError(f"times must be a sequence of times of the table, got {type(times).__name__}")
     else:
         nows = [table.clock.time_of(t) for t in times]
-    return [(_frame(parsed, scene_map), future) for parsed, future in frames_at(table, nows, t_f)]
-
-
-def _frame(parsed: Parsed, scene_map: Any) -> Frame:
-    """The public frame of what the engine resampled, as :meth:`~dgan.Frame.from_records` wraps it."""
-    native, labels, source = parsed
-    out = Frame._wrap(native, labels, None, source)
-    return out if scene_map is None else out.with_map(scene_map)
+    return [(Frame._of_parsed(parsed, scene_map), future) for parsed, future in frames_at(table, nows, t_f)]

@@ -343,10 +343,13 @@ pub fn frame_and_future_at(
         return Err(DganError::InvalidSpec(format!("t_f must be in 0..={}, got {t_f}", crate::spec::MAX_STEPS)));
     }
     let (resampled, sampled_on) = frame_and_base_at(tracks, now_s, base, default_class, upsample)?;
-    let by_id: std::collections::HashMap<i64, &[Detection]> = tracks.iter().copied().collect();
     let ids = resampled.frame.ids();
     let mut positions = Array3::<f64>::from_elem((ids.len(), t_f, 2), f64::NAN);
     let mut mask = Array2::<bool>::from_elem((ids.len(), t_f), false);
+    if t_f == 0 {
+        return Ok((resampled, Future { positions, mask })); // a frame alone (`Frame.from_records`): no lookup
+    }
+    let by_id: std::collections::HashMap<i64, &[Detection]> = tracks.iter().copied().collect();
     for (i, id) in ids.iter().enumerate() {
         let track = by_id.get(id).copied().unwrap_or_default();
         for k in 0..t_f {
