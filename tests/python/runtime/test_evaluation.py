@@ -41,7 +41,9 @@ def test_the_one_window_of_the_excerpt_scored_by_hand() -> None:
 
 def test_it_reproduces_the_results_table() -> None:
     """The zara1 row of docs/results.json (training.results, the Social-GAN protocol: windows of at least two
-    targets), from the raw test file through the public API, to the last bit."""
+    targets), from the raw test file through the public API: the same targets, and errors to the network's float32
+    precision (ONNX Runtime's kernels round differently on other CPUs: 4e-9 relative between the machine that wrote
+    the table and an AMD EPYC one)."""
     test_file = shared_data("eth_ucy") / "eth_ucy" / "datasets" / "zara1" / "test" / "crowds_zara01.txt"
     rows = read_scene(test_file)[0]
     result = dgan.evaluate("zara1", rows, time_unit=0.04, map=dgan.scene_map("zara1"), min_targets=2)
@@ -49,7 +51,7 @@ def test_it_reproduces_the_results_table() -> None:
     row = result.rows()[0]
     assert row["targets"] == 2253
     for mine, theirs in (("ade", "ade"), ("fde", "fde"), ("min_ade", "min_ade20"), ("cv_ade", "cv_ade")):
-        assert row[mine] == pytest.approx(published[theirs], abs=1e-9), mine
+        assert row[mine] == pytest.approx(published[theirs], rel=1e-6), mine
     every = dgan.evaluate("zara1", rows, time_unit=0.04, map=dgan.scene_map("zara1"), stride=2)
     assert every.times < result.times
     assert len(every) > 1000  # windows of one target too, every other time
