@@ -7,7 +7,7 @@
 
 from __future__ import annotations
 
-from dgan import contract, demo, evaluation, exceptions, metrics, models, scenes, series, tables
+from dgan import contract, demo, evaluation, exceptions, layouts, metrics, models, scenes, series, tables
 from dgan._dgan import __version__
 from dgan.contract import CLASSES, MAP_ELEMENT_KINDS
 from dgan.evaluation import evaluate
@@ -64,6 +64,7 @@ __all__ = [
     "evaluation",
     "exceptions",
     "kinematic_prior",
+    "layouts",
     "metrics",
     "models",
     "plot",

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 import dgan
+from dgan import layouts
 from dgan._progress import progress
 from dgan._times import iso_text
 from dgan.cliargs import evaluate_arguments, predict_arguments
@@ -143,7 +144,9 @@ def _table_of(
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """A scene file's columns, and the options of :meth:`dgan.Frame.from_records` the command line gives for it."""
     names = column_names(args.column)
-    cols, unit = read_scene(scene, text_columns=(names.get("cls_column", "class"),))
+    cols, unit, layout = read_scene(scene, (names.get("cls_column", "class"),), args.metres_per_pixel)
+    if layout not in (None, "social-gan"):
+        print(f"dgan: note: {scene.name} read as {layouts.by_name(layout).describe()}", file=sys.stderr)
     time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
     options = {"time_unit": time_unit, "map": scene_map, "duplicates": args.duplicates, "upsample": args.upsample}
     return cols, options | {"class_names": class_names(args.class_name, args.common_classes), **names}

@@ -19,9 +19,10 @@ def predict_arguments(sub: Any) -> argparse.ArgumentParser:
     pred.add_argument("model")
     pred.add_argument(
         "scene",
-        help="Social-GAN txt (frame id x y), CSV (or ; tab | separated) with agent_id,time,x,y[,...] (other names: "
-        "--column), or parquet/feather; a directory or "
-        "a quoted glob of them predicts each (at its last time, or --time) into one --out table with a scene column",
+        help="Social-GAN txt (frame id x y; Stanford Drone's and ApolloScape's layouts too: dgan.layouts), CSV "
+        "(or ; tab | separated) with agent_id,time,x,y[,...] (other names: --column), or parquet/feather; a "
+        "directory or a quoted glob of them predicts each (at its last time, or --time) into one --out table with a "
+        "scene column",
     )
     table_options(pred)
     pred.add_argument(
@@ -125,7 +126,14 @@ def table_options(pred: Any) -> None:
         "--time-unit",
         type=float,
         default=None,
-        help="seconds per unit of the file's time column (default: 1 for tables; Social-GAN files 0.4 s a step)",
+        help="seconds per unit of the file's time column (default: 1 for tables; Social-GAN files 0.4 s a step, "
+        "the other headerless layouts their own)",
+    )
+    pred.add_argument(
+        "--metres-per-pixel",
+        type=float,
+        default=None,
+        help="the scale of a headerless Stanford Drone file's pixels (its video's estimated_scales.yaml)",
     )
     pred.add_argument(
         "--duplicates",

@@ -13,18 +13,20 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
+from dgan import layouts
 from dgan.exceptions import InvalidFrameError, InvalidMapError
 
-#: Seconds between the annotations of a Social-GAN layout file (ETH/UCY), whatever its frame numbering.
-SOCIAL_GAN_DT_S = 0.4
 #: What may separate the fields of a scene table with a header.
 DELIMITERS = ",;\t|"
 
 
-def read_scene(path: Path, text_columns: Collection[str] = ("class",)) -> tuple[dict[str, Any], float | None]:
-    """A scene file as columns, and the seconds per unit of its time column when the format fixes it. In a table
-    with a header, ``text_columns`` are kept as text, other columns of numbers (empty fields NaN) become numbers, and
-    any other column stays text (ids that are names, times in ISO 8601)."""
+def read_scene(
+    path: Path, text_columns: Collection[str] = ("class",), metres_per_pixel: float | None = None
+) -> tuple[dict[str, Any], float | None, str | None]:
+    """A scene file as columns, the seconds per unit of its time column when the format fixes it, and the name of
+    its headerless layout (:mod:`dgan.layouts`; None for a table). In a table with a header, ``text_columns`` are kept
+    as text, other columns of numbers (empty fields NaN) become numbers, and any other column stays text (ids that are
+    names, times in ISO 8601). A headerless file in pixels needs ``metres_per_pixel``."""
     if path.suffix in (".parquet", ".feather", ".arrow") and path.is_file():
         try:
             import pyarrow.feather as feather
@@ -35,7 +37,7 @@ def read_scene(path: Path, text_columns: Collection[str] = ("class",)) -> tuple[
             table = pq.read_table(path) if path.suffix == ".parquet" else feather.read_table(path)
         except (OSError, ValueError) as e:
             raise InvalidFrameError(f"cannot read {path}: {e}") from None
-        return dgan.tables.columns(table), None
+        return dgan.tables.columns(table), None, None
     if not path.is_file():
         what = "does not exist" if not path.exists() else "is not a regular file"
         raise InvalidFrameError(f"cannot read scene {path}: it {what}")
@@ -45,29 +47,14 @@ def read_scene(path: Path, text_columns: Collection[str] = ("class",)) -> tuple[
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]
     if _is_header(first):
-        return _header_table(path, text, first, text_columns), None
-    try:
-        data = np.loadtxt(path, ndmin=2)
-    except ValueError as e:
-        raise InvalidFrameError(f"{path} is neither a CSV with a header nor `frame id x y` rows: {e}") from None
-    if data.shape[1] < 4 or data.shape[0] == 0:
-        raise InvalidFrameError(f"{path}: expected rows of 4 columns (frame id x y), found shape {data.shape}")
-    steps = np.diff(np.unique(data[:, 0]))
-    unit = SOCIAL_GAN_DT_S / float(steps.min()) if steps.size else 1.0
-    return {"time": data[:, 0], "agent_id": data[:, 1].astype(np.int64), "x": data[:, 2], "y": data[:, 3]}, unit
+        return _header_table(path, text, first, text_columns), None, None
+    cols, unit, layout = layouts.read(path, metres_per_pixel, text)
+    return cols, unit, layout.name
 
 
 def _is_header(line: str) -> bool:
     """Whether a file's first line is a header: fields split by one of :data:`DELIMITERS`, one of them no number."""
-    return any(d in line and any(not _is_number(f) for f in line.split(d)) for d in DELIMITERS)
-
-
-def _is_number(field: str) -> bool:
-    try:
-        float(field)
-    except ValueError:
-        return False
-    return True
+    return any(d in line and any(not layouts.is_number(f) for f in line.split(d)) for d in DELIMITERS)
 
 
 def _header_table(path: Path, text: str, header: str, text_columns: Collection[str]) -> dict[str, Any]:

@@ -228,7 +228,7 @@ def test_errors_exit_2_with_a_message(nomap_model: Path, tmp_path: Path, capsys:
     bad = tmp_path / "bad.txt"
     bad.write_text("1 2\n3 4\n")
     assert main(["predict", str(nomap_model), str(bad)]) == 2
-    assert "expected rows of 4 columns" in capsys.readouterr().err
+    assert "nor a known headerless layout: its first row has 2 fields" in capsys.readouterr().err
     # A time that is not in the file: an error naming the span, never "0 agents" and exit 0.
     assert main(["predict", str(nomap_model), str(SCENE), "--time", "5505"]) == 2
     assert "no row at current_time 5505; the table spans 5430..5620" in capsys.readouterr().err
