@@ -43,6 +43,7 @@ from dgan.scenefiles import (
     read_map,
     read_scene,
     scene_files,
+    scene_names,
 )
 
 
@@ -113,11 +114,15 @@ def _models(args: argparse.Namespace) -> int:
 
 
 def _frames_of(
-    args: argparse.Namespace, p: dgan.Predictor, scene: Path, scene_map: dgan.RasterMap | dgan.VectorMap | None
+    args: argparse.Namespace,
+    p: dgan.Predictor,
+    scene: Path,
+    scene_map: dgan.RasterMap | dgan.VectorMap | None,
+    said: set[str],
 ) -> list[tuple[dgan.Frame, float | str]]:
     """The frames of a scene file, each with its time: at ``--time`` (its last time by default), or with ``--every``
     at each of its times."""
-    cols, options = _table_of(args, scene, scene_map)
+    cols, options = _table_of(args, scene, scene_map, said)
     options["spec"] = p
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ColumnWarning)
@@ -140,12 +145,14 @@ def _map_of(args: argparse.Namespace) -> dgan.RasterMap | dgan.VectorMap | None:
 
 
 def _table_of(
-    args: argparse.Namespace, scene: Path, scene_map: dgan.RasterMap | dgan.VectorMap | None
+    args: argparse.Namespace, scene: Path, scene_map: dgan.RasterMap | dgan.VectorMap | None, said: set[str]
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """A scene file's columns, and the options of :meth:`dgan.Frame.from_records` the command line gives for it."""
+    """A scene file's columns, and the options of :meth:`dgan.Frame.from_records` the command line gives for it;
+    the first file of each headerless layout but Social-GAN's says how it was read (``said``: the layouts said)."""
     names = column_names(args.column)
     cols, unit, layout = read_scene(scene, (names.get("cls_column", "class"),), args.metres_per_pixel)
-    if layout not in (None, "social-gan"):
+    if layout is not None and layout not in ("social-gan", *said):
+        said.add(layout)
         print(f"dgan: note: {scene.name} read as {layouts.by_name(layout).describe()}", file=sys.stderr)
     time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
     options = {"time_unit": time_unit, "map": scene_map, "duplicates": args.duplicates, "upsample": args.upsample}
@@ -158,16 +165,16 @@ def _evaluate(args: argparse.Namespace) -> int:
     files = scene_files(args.scene) or [Path(args.scene)]
     options = {"modes": args.modes, "stride": args.stride, "standing_m": args.standing_m}
     options |= {"min_targets": args.min_targets, "unknown_classes": args.unknown_classes}
-    parts, names, scene_map = [], [], _map_of(args)
+    parts, scene_map, said = [], _map_of(args), set[str]()
     for scene in progress(files, "scenes") if len(files) > 1 else files:
-        cols, table = _table_of(args, scene, scene_map)
+        cols, table = _table_of(args, scene, scene_map, said)
         try:
             parts.append(dgan.evaluate(p, cols, progress=len(files) == 1, **options, **table))
         except DganError as e:
             if len(files) == 1:
                 raise
             raise type(e)(f"{scene}: {e}") from None
-        names.append(scene.name)
+    names = scene_names(files)
     result = dgan.evaluation.joined(parts, names) if len(parts) > 1 else parts[0]
     result = replace(result, model=args.model)
     if args.out is not None:
@@ -213,14 +220,14 @@ def _predict_many(args: argparse.Namespace, p: dgan.Predictor, files: list[Path]
         raise InvalidFrameError(f"{what} --out TABLE (.parquet, .csv or .jsonl)")
     preds: list[dgan.Prediction] = []
     names: list[str] = []
-    scene_map = _map_of(args)
-    for scene in progress(files, "scenes"):
+    scene_map, said = _map_of(args), set[str]()
+    for scene, name in progress(list(zip(files, scene_names(files), strict=True)), "scenes"):
         try:
-            frames = [f for f, _ in _frames_of(args, p, scene, scene_map)]
+            frames = [f for f, _ in _frames_of(args, p, scene, scene_map, said)]
             preds += p.predict_batch(frames, unknown_classes=args.unknown_classes)
         except DganError as e:
             raise type(e)(f"{scene}: {e}") from None
-        names += [scene.name] * len(frames)
+        names += [name] * len(frames)
     write_records({"scene": names}, preds, Path(args.out))
     agents = sum(len(pr) for pr in preds)
     at = f" at {len(preds)} times" if args.every else ""
@@ -234,7 +241,7 @@ def _predict(args: argparse.Namespace) -> int:
     files = scene_files(args.scene)
     if files is not None or args.every:
         return _predict_many(args, p, files or [Path(args.scene)])
-    ((frame, now),) = _frames_of(args, p, Path(args.scene), _map_of(args))
+    ((frame, now),) = _frames_of(args, p, Path(args.scene), _map_of(args), set())
     if p.spec.map is not None and frame.map is None and p.spec.map.optional:
         print(
             f"dgan: note: no --map given; {args.model} runs without a map (its map is optional; "

@@ -4,6 +4,7 @@ image with its homography, a vector-map JSON, an Argoverse 2 map), and folders o
 from __future__ import annotations
 
 import csv
+import os
 import re
 from collections.abc import Collection, Sequence
 from pathlib import Path
@@ -135,6 +136,15 @@ def scene_files(spec: str) -> list[Path] | None:
     if not files:
         raise InvalidFrameError(f"no scene files in {spec}")
     return files
+
+
+def scene_names(files: Sequence[Path]) -> list[str]:
+    """What the ``scene`` column calls each file: its name, or where two files share a name (every video's
+    ``annotations.txt``), its path from the folder that holds them all (``quad/video0/annotations.txt``)."""
+    if len({f.name for f in files}) == len(files):
+        return [f.name for f in files]
+    top = Path(os.path.commonpath([f.parent.absolute() for f in files]))
+    return [f.absolute().relative_to(top).as_posix() for f in files]
 
 
 #: ``--column ARG=NAME``: each ARG and the argument of :meth:`dgan.Frame.from_records` that names that column.

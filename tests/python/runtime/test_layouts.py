@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -137,3 +138,22 @@ def test_a_file_of_no_known_layout_is_refused(tmp_path: Path, text: str, message
 def test_a_pixel_layout_takes_a_positive_scale(scale: object) -> None:
     with pytest.raises(InvalidFrameError, match="metres per pixel must be a positive number"):
         read(SDD, scale)  # type: ignore[arg-type]
+
+
+def test_files_of_one_name_in_several_folders_are_told_apart(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every Stanford Drone video's annotations are called annotations.txt: a glob of them names each scene by its
+    path from their common folder, and the layout is said once."""
+    import pyarrow.parquet as pq
+
+    for video in ("video0", "video1"):
+        (tmp_path / "hyang" / video).mkdir(parents=True)
+        (tmp_path / "hyang" / video / "frames.txt").write_text(SDD.read_text())
+    out = tmp_path / "all.parquet"
+    pattern = str(tmp_path / "hyang" / "video*" / "frames.txt")
+    assert main(["predict", "sdd", pattern, "--metres-per-pixel", str(HYANG0_M_PER_PX), "--out", str(out)]) == 0
+    assert capsys.readouterr().err.count("read as sdd-steps") == 1
+    assert set(pq.read_table(out).column("scene").to_pylist()) == {"video0/frames.txt", "video1/frames.txt"}
+    assert main(["evaluate", "sdd", pattern, "--metres-per-pixel", str(HYANG0_M_PER_PX), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["scenes"] == ["video0/frames.txt", "video1/frames.txt"]
