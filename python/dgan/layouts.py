@@ -150,6 +150,8 @@ def read(
     ('apolloscape', 0.5, ['agent_id', 'class', 'heading', 'length', 'time', 'width', 'x', 'y'])
     >>> frame = dgan.Frame.from_records(cols, t_obs=6, dt=0.5, time_unit=time_unit)
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise InvalidFrameError(f"a scene file's path must be a str or a path, got {type(path).__name__}")
     path = Path(path)
     if text is None:
         try:
@@ -196,7 +198,8 @@ def _rows(path: Path, text: str, layout: Layout) -> Rows:
 
 
 def _scale(metres_per_pixel: float) -> float:
-    if not (isinstance(metres_per_pixel, (int, float)) and 0 < metres_per_pixel < float("inf")):
+    number = isinstance(metres_per_pixel, (int, float)) and not isinstance(metres_per_pixel, bool)
+    if not (number and 0 < metres_per_pixel < float("inf")):
         raise InvalidFrameError(f"metres per pixel must be a positive number, got {metres_per_pixel!r:.40}")
     return float(metres_per_pixel)
 

@@ -134,10 +134,17 @@ def test_a_file_of_no_known_layout_is_refused(tmp_path: Path, text: str, message
     assert message in str(e.value)
 
 
-@pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), float("inf"), "0.03"])
+@pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), float("inf"), "0.03", True])
 def test_a_pixel_layout_takes_a_positive_scale(scale: object) -> None:
     with pytest.raises(InvalidFrameError, match="metres per pixel must be a positive number"):
         read(SDD, scale)  # type: ignore[arg-type]
+
+
+def test_a_path_of_the_wrong_kind_is_refused() -> None:
+    with pytest.raises(InvalidFrameError, match="a scene file's path must be a str or a path, got int"):
+        read(5)  # type: ignore[arg-type]
+    with pytest.raises(InvalidFrameError, match="cannot read scene"):
+        read(BUNDLED)
 
 
 def test_files_of_one_name_in_several_folders_are_told_apart(
