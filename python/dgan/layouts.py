@@ -30,6 +30,8 @@ SOCIAL_GAN_DT_S = 0.4
 
 Rows = npt.NDArray[np.str_]
 Numbers = npt.NDArray[np.float64]
+#: A layout's columns for :meth:`dgan.Frame.from_records`, and which rows are observations of an agent in view.
+Read = tuple[dict[str, Any], npt.NDArray[np.bool_]]
 
 
 @dataclass(frozen=True)
@@ -46,36 +48,49 @@ class Layout:
     pixels: bool
     #: Seconds per unit of the time field; None: the Social-GAN rule (0.4 s over the smallest step between frames).
     seconds_per_unit: float | None
-    read: Callable[[Numbers, float], dict[str, Any]]
+    #: Its rows' numbers (every field but a label), their last fields as text (the labels), the scale and the path.
+    read: Callable[[Numbers, Rows, float, Path], Read]
 
     def describe(self) -> str:
         unit = "metres" if not self.pixels else "pixels"
         return f"{self.name} ({' '.join(self.fields)}; {self.source}, {unit})"
 
 
-def _numbers(rows: Rows, path: Path, layout: str) -> npt.NDArray[np.float64]:
+def _numbers(rows: Rows, path: Path, layout: str) -> Numbers:
     try:
         return rows.astype(np.float64)
     except ValueError as e:
         raise InvalidFrameError(f"{path}: a field of the {layout} layout is not a number: {e}") from None
 
 
-def _social_gan(rows: Numbers, _scale: float) -> dict[str, Any]:
-    return {"time": rows[:, 0], "agent_id": rows[:, 1], "x": rows[:, 2], "y": rows[:, 3]}
+def _all(rows: Numbers) -> npt.NDArray[np.bool_]:
+    return np.ones(len(rows), dtype=bool)
 
 
-def _sdd_steps(rows: Numbers, scale: float) -> dict[str, Any]:
-    return {"time": rows[:, 0], "agent_id": rows[:, 1], "x": rows[:, 2] * scale, "y": rows[:, 3] * scale}
+def _social_gan(rows: Numbers, _labels: Rows, _scale: float, _path: Path) -> Read:
+    return {"time": rows[:, 0], "agent_id": rows[:, 1], "x": rows[:, 2], "y": rows[:, 3]}, _all(rows)
 
 
-def _sdd_annotations(rows: Numbers, scale: float) -> dict[str, Any]:
+def _sdd_steps(rows: Numbers, labels: Rows, scale: float, _path: Path) -> Read:
+    cols = {"time": rows[:, 0], "agent_id": rows[:, 1], "x": rows[:, 2] * scale, "y": rows[:, 3] * scale}
+    return cols | {"class": _sdd_classes(labels)}, _all(rows)
+
+
+def _sdd_annotations(rows: Numbers, labels: Rows, scale: float, _path: Path) -> Read:
     centre = (rows[:, 1:3] + rows[:, 3:5]) / 2 * scale
-    return {"time": rows[:, 5], "agent_id": rows[:, 0], "x": centre[:, 0], "y": centre[:, 1], "lost": rows[:, 6]}
+    cols = {"time": rows[:, 5], "agent_id": rows[:, 0], "x": centre[:, 0], "y": centre[:, 1]}
+    return cols | {"class": _sdd_classes(labels)}, rows[:, 6] == 0  # lost: the agent is outside the view
 
 
-def _apolloscape(rows: Numbers, _scale: float) -> dict[str, Any]:
+def _apolloscape(rows: Numbers, _labels: Rows, _scale: float, path: Path) -> Read:
     cols = {"time": rows[:, 0], "agent_id": rows[:, 1], "x": rows[:, 3], "y": rows[:, 4]}
-    return cols | {"length": rows[:, 6], "width": rows[:, 7], "heading": rows[:, 9], "type": rows[:, 2]}
+    sizes = {"length": rows[:, 6], "width": rows[:, 7], "heading": rows[:, 9]}
+    return cols | sizes | {"class": _apollo_classes(rows[:, 2], path)}, _all(rows)
+
+
+def _sdd_classes(labels: Rows) -> npt.NDArray[np.object_]:
+    """Stanford Drone's labels (quoted in a video's annotations) as dgan's classes; others as they are."""
+    return np.array([SDD_LABEL_CLASS.get(s, s) for s in np.char.strip(labels, '"')], dtype=object)
 
 
 #: The layouts :func:`read` tells apart, by their rows' field counts and labels.
@@ -174,17 +189,10 @@ def read(
         )
     scale = 1.0 if metres_per_pixel is None else _scale(metres_per_pixel)
     rows = _rows(path, text, layout)
-    label = np.char.strip(rows[:, -1], '"') if layout.labelled else None
-    cols = layout.read(_numbers(rows[:, : len(layout.fields) - layout.labelled], path, layout.name), scale)
-    keep = np.ones(len(rows), dtype=bool)
-    if "lost" in cols:  # an annotation of an agent outside the view
-        keep = cols.pop("lost") == 0
-    if label is not None:
-        cols["class"] = np.array([SDD_LABEL_CLASS.get(s, s) for s in label], dtype=object)
-    if "type" in cols:
-        cols["class"] = _apollo_classes(cols.pop("type"), path)
+    numbers = _numbers(rows[:, : len(layout.fields) - layout.labelled], path, layout.name)
+    cols, seen = layout.read(numbers, rows[:, -1], scale, path)
     cols["agent_id"] = _ids(cols["agent_id"], path)
-    return {k: v[keep] for k, v in cols.items()}, _seconds_per_unit(layout, cols["time"]), layout
+    return {k: v[seen] for k, v in cols.items()}, _seconds_per_unit(layout, cols["time"]), layout
 
 
 def _rows(path: Path, text: str, layout: Layout) -> Rows:
