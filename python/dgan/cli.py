@@ -30,11 +30,10 @@ from typing import Any
 import numpy as np
 
 import dgan
-from dgan import layouts
 from dgan._progress import progress
 from dgan._times import iso_text
 from dgan.cliargs import evaluate_arguments, predict_arguments
-from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError
+from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, InvalidMapError
 from dgan.predictionfiles import prediction_json, write_columns, write_records, write_table
 from dgan.scenefiles import (
     class_names,
@@ -141,22 +140,26 @@ def _frames_of(
 
 def _map_of(args: argparse.Namespace) -> dgan.RasterMap | dgan.VectorMap | None:
     """``--map``, read once for every scene of a command (a vector map keeps the tiles drawn from it)."""
+    if args.no_map and args.map is not None:
+        raise InvalidMapError("--map and --no-map ask for opposite things: give one")
     return read_map(args.map, args.pixel_to_world) if args.map is not None else None
 
 
 def _table_of(
     args: argparse.Namespace, scene: Path, scene_map: dgan.RasterMap | dgan.VectorMap | None, said: set[str]
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """A scene file's columns, and the options of :meth:`dgan.Frame.from_records` the command line gives for it;
-    the first file of each headerless layout but Social-GAN's says how it was read (``said``: the layouts said)."""
+    """A scene file's columns, and the options of :meth:`dgan.Frame.from_records` the command line gives for it (a
+    scenario's own map unless ``--map`` names one); the first file of each headerless layout but Social-GAN's, and of
+    each kind of scenario, says how it was read (``said``: the layouts said)."""
     names = column_names(args.column)
-    cols, unit, layout = read_scene(scene, (names.get("cls_column", "class"),), args.metres_per_pixel)
-    if layout is not None and layout not in ("social-gan", *said):
-        said.add(layout)
-        print(f"dgan: note: {scene.name} read as {layouts.by_name(layout).describe()}", file=sys.stderr)
-    time_unit = args.time_unit if args.time_unit is not None else (unit or 1.0)
-    options = {"time_unit": time_unit, "map": scene_map, "duplicates": args.duplicates, "upsample": args.upsample}
-    return cols, options | {"class_names": class_names(args.class_name, args.common_classes), **names}
+    read = read_scene(scene, (names.get("cls_column", "class"),), args.metres_per_pixel)
+    if read.description is not None and read.layout not in said:
+        said.add(str(read.layout))
+        print(f"dgan: note: {scene.name} read as {read.description}", file=sys.stderr)
+    time_unit = args.time_unit if args.time_unit is not None else (read.time_unit or 1.0)
+    options = {"time_unit": time_unit, "duplicates": args.duplicates, "upsample": args.upsample}
+    options["map"] = None if args.no_map else scene_map if scene_map is not None else read.map
+    return read.columns, options | {"class_names": class_names(args.class_name, args.common_classes), **names}
 
 
 def _evaluate(args: argparse.Namespace) -> int:
@@ -242,7 +245,7 @@ def _predict(args: argparse.Namespace) -> int:
     if files is not None or args.every:
         return _predict_many(args, p, files or [Path(args.scene)])
     ((frame, now),) = _frames_of(args, p, Path(args.scene), _map_of(args), set())
-    if p.spec.map is not None and frame.map is None and p.spec.map.optional:
+    if p.spec.map is not None and frame.map is None and p.spec.map.optional and not args.no_map:
         print(
             f"dgan: note: no --map given; {args.model} runs without a map (its map is optional; "
             "see `dgan info` for the map it was trained with)",

@@ -1,5 +1,6 @@
-"""The scene files ``dgan predict`` reads: tables of detections (CSV, parquet, Social-GAN text, JSON), maps (an
-image with its homography, a vector-map JSON, an Argoverse 2 map), and folders or globs of scenes."""
+"""The scene files ``dgan predict`` reads: tables of detections (CSV, parquet, Social-GAN text and the other headerless
+layouts of :mod:`dgan.layouts`), driving scenarios with their vector maps (ScenarioNet, GPUDrive, Argoverse 2), maps
+(an image with its homography, a vector-map JSON, an Argoverse 2 map), and folders or globs of scenes."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import os
 import re
 from collections.abc import Collection, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -21,13 +22,58 @@ from dgan.exceptions import InvalidFrameError, InvalidMapError
 DELIMITERS = ",;\t|"
 
 
+#: The names of driving scenario files (:func:`dgan.datasets.hdmaps.read_scenario`): ScenarioNet / MetaDrive pickles,
+#: GPUDrive / Nocturne or ScenarioNet JSON. Argoverse 2 scenario and sensor-log folders are scenarios too.
+SCENARIO_SUFFIXES: Final = (".pkl", ".pkl.gz", ".json", ".json.gz")
+
+
+#: How a scenario's ``source`` is named in notes.
+SCENARIO_SOURCES: Final = {"nuscenes": "nuScenes", "waymo": "Waymo", "argoverse2": "Argoverse 2"}
+
+
+class SceneFile(NamedTuple):
+    """A scene file read by :func:`read_scene`."""
+
+    #: Its rows as columns for :meth:`dgan.Frame.from_records`.
+    columns: dict[str, Any]
+    #: The seconds per unit of its time column where the format fixes it (None: a table's, the caller's to say).
+    time_unit: float | None
+    #: The name of its headerless layout (:mod:`dgan.layouts`) or ``"<source> scenario"``; None for a table.
+    layout: str | None
+    #: How it was read, for a note (None for a table or a Social-GAN file).
+    description: str | None = None
+    #: A scenario's own vector map.
+    map: dgan.VectorMap | None = None
+
+
+def is_scenario(path: Path) -> bool:
+    """Whether ``path`` names a driving scenario (:data:`SCENARIO_SUFFIXES`, or an Argoverse 2 scenario or
+    sensor-log folder) rather than a table of detections."""
+    if path.is_dir():
+        return (path / "annotations.feather").is_file() or any(path.glob("scenario_*.parquet"))
+    return path.name.lower().endswith(SCENARIO_SUFFIXES)
+
+
+def read_scenario_file(path: Path) -> SceneFile:
+    """A driving scenario (:func:`is_scenario`) as a scene file: every valid state of every agent (time in seconds
+    from its first step; :meth:`dgan.datasets.hdmaps.Scenario.records`) and its vector map."""
+    from dgan.datasets.hdmaps import read_scenario
+
+    scenario = read_scenario(path)
+    source = SCENARIO_SOURCES.get(scenario.source, scenario.source)
+    what = f"a scenario of {source} ({1 / scenario.dt_s:g} Hz tracks of {len(scenario.ids)} agents, its vector map)"
+    return SceneFile(scenario.records(), 1.0, f"{scenario.source} scenario", what, scenario.map)
+
+
 def read_scene(
     path: Path, text_columns: Collection[str] = ("class",), metres_per_pixel: float | None = None
-) -> tuple[dict[str, Any], float | None, str | None]:
-    """A scene file as columns, the seconds per unit of its time column when the format fixes it, and the name of
-    its headerless layout (:mod:`dgan.layouts`; None for a table). In a table with a header, ``text_columns`` are kept
-    as text, other columns of numbers (empty fields NaN) become numbers, and any other column stays text (ids that are
-    names, times in ISO 8601). A headerless file in pixels needs ``metres_per_pixel``."""
+) -> SceneFile:
+    """A scene file (:class:`SceneFile`): a table, a headerless layout (:mod:`dgan.layouts`) or a driving scenario
+    with its map (:func:`is_scenario`). In a table with a header, ``text_columns`` are kept as text, other columns of
+    numbers (empty fields NaN) become numbers, and any other column stays text (ids that are names, times in ISO
+    8601). A headerless file in pixels needs ``metres_per_pixel``."""
+    if is_scenario(path):
+        return read_scenario_file(path)
     if path.suffix in (".parquet", ".feather", ".arrow") and path.is_file():
         try:
             import pyarrow.feather as feather
@@ -38,7 +84,7 @@ def read_scene(
             table = pq.read_table(path) if path.suffix == ".parquet" else feather.read_table(path)
         except (OSError, ValueError) as e:
             raise InvalidFrameError(f"cannot read {path}: {e}") from None
-        return dgan.tables.columns(table), None, None
+        return SceneFile(dgan.tables.columns(table), None, None)
     if not path.is_file():
         what = "does not exist" if not path.exists() else "is not a regular file"
         raise InvalidFrameError(f"cannot read scene {path}: it {what}")
@@ -48,9 +94,9 @@ def read_scene(
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]
     if _is_header(first):
-        return _header_table(path, text, first, text_columns), None, None
+        return SceneFile(_header_table(path, text, first, text_columns), None, None)
     cols, unit, layout = layouts.read(path, metres_per_pixel, text)
-    return cols, unit, layout.name
+    return SceneFile(cols, unit, layout.name, None if layout.name == "social-gan" else layout.describe())
 
 
 def _is_header(line: str) -> bool:
@@ -123,14 +169,17 @@ def read_map(spec: str, pixel_to_world: str | None) -> dgan.RasterMap | dgan.Vec
 
 
 def scene_files(spec: str) -> list[Path] | None:
-    """The scene files ``spec`` names when it is a directory or a glob (sorted), None for one file."""
+    """The scene files ``spec`` names when it is a directory or a glob (sorted), None for one file or scenario. A
+    directory's or a glob's Argoverse 2 scenario folders are scenes too."""
     import glob
 
     path = Path(spec)
+    if path.is_dir() and is_scenario(path):
+        return None
     if path.is_dir():
-        files = sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith("."))
+        files = sorted(p for p in path.iterdir() if (p.is_file() or is_scenario(p)) and not p.name.startswith("."))
     elif any(c in spec for c in "*?[") and not path.exists():
-        files = sorted(Path(p) for p in glob.glob(spec) if Path(p).is_file())
+        files = sorted(Path(p) for p in glob.glob(spec) if Path(p).is_file() or is_scenario(Path(p)))
     else:
         return None
     if not files:

@@ -57,6 +57,23 @@ class Scenario:
     def num_steps(self) -> int:
         return int(self.positions.shape[1])
 
+    def records(self) -> dict[str, Arr]:
+        """Every valid state as one row of a long table that :meth:`dgan.Frame.from_records`, :func:`dgan.evaluate`
+        and :func:`dgan.series.frames` read (with ``time_unit=1``, the scenario's map as ``map=``): ``agent_id``,
+        ``time`` (seconds from the scenario's first step), ``x``, ``y``, ``class`` (the engine's), ``heading``,
+        ``length`` and ``width`` (NaN where unknown); rows by agent, then time."""
+        agent, step = np.nonzero(self.valid)
+        return {
+            "agent_id": self.ids[agent],
+            "time": np.round(step * self.dt_s, 9),  # 0.1 · 3 is 0.30000000000000004
+            "x": self.positions[agent, step, 0],
+            "y": self.positions[agent, step, 1],
+            "class": np.asarray(self.labels, dtype=object)[agent],
+            "heading": self.heading[agent, step],
+            "length": self.length[agent, step],
+            "width": self.width[agent, step],
+        }
+
     def frame(self, now: int, t_obs: int, every: int = 1) -> Frame:
         """The frame at step ``now``: ``t_obs`` steps ``every`` source steps apart, ending at ``now``, with every
         agent valid at ``now``."""
