@@ -33,7 +33,7 @@ import dgan
 from dgan._progress import progress
 from dgan._times import iso_text
 from dgan.cliargs import evaluate_arguments, predict_arguments
-from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, InvalidMapError
+from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, InvalidMapError, NoTargetError
 from dgan.predictionfiles import prediction_json, write_columns, write_records, write_table
 from dgan.scenefiles import (
     class_names,
@@ -168,16 +168,23 @@ def _evaluate(args: argparse.Namespace) -> int:
     files = scene_files(args.scene) or [Path(args.scene)]
     options = {"modes": args.modes, "stride": args.stride, "standing_m": args.standing_m}
     options |= {"min_targets": args.min_targets, "unknown_classes": args.unknown_classes}
-    parts, scene_map, said = [], _map_of(args), set[str]()
-    for scene in progress(files, "scenes") if len(files) > 1 else files:
+    parts, names, scene_map, said = [], [], _map_of(args), set[str]()
+    pairs = list(zip(files, scene_names(files), strict=True))
+    for scene, name in progress(pairs, "scenes") if len(files) > 1 else pairs:
         cols, table = _table_of(args, scene, scene_map, said)
         try:
             parts.append(dgan.evaluate(p, cols, progress=len(files) == 1, **options, **table))
+            names.append(name)
+        except NoTargetError as e:  # one short scene of many: the others are still scored
+            if len(files) == 1:
+                raise
+            print(f"dgan: note: {scene}: left out: {cli_wording(str(e))}", file=sys.stderr)
         except DganError as e:
             if len(files) == 1:
                 raise
             raise type(e)(f"{scene}: {e}") from None
-    names = scene_names(files)
+    if not parts:
+        raise NoTargetError(f"no target in any of the {len(files)} scenes (notes above)")
     result = dgan.evaluation.joined(parts, names) if len(parts) > 1 else parts[0]
     result = replace(result, model=args.model)
     if args.out is not None:

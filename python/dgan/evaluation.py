@@ -31,7 +31,7 @@ import numpy.typing as npt
 from dgan import metrics
 from dgan._progress import progress as progress_bar
 from dgan._values import checked_real
-from dgan.exceptions import InvalidFrameError, InvalidSpecError
+from dgan.exceptions import InvalidSpecError, NoTargetError
 from dgan.frame import Frame
 from dgan.predictor import Predictor
 from dgan.series import Future, frames_with_futures
@@ -236,7 +236,8 @@ def evaluate(
             base is the model's.
 
     Raises:
-        InvalidFrameError: a table the frames cannot be read from, or no target at any time.
+        InvalidFrameError: a table the frames cannot be read from; :class:`~dgan.exceptions.NoTargetError` (one):
+            no target at any time.
         InvalidSpecError: wrong ``modes``, ``stride``, ``standing_m`` or ``unknown_classes``.
     """
     predictor = model if isinstance(model, Predictor) else Predictor(model)
@@ -264,7 +265,7 @@ def evaluate(
         ]
     parts = [p for p in parts if len(p["min_ade"]) >= min_targets]
     if not parts:
-        raise InvalidFrameError(
+        raise NoTargetError(
             f"no target: no agent of the table is seen over {spec.t_obs + spec.t_f} consecutive steps of "
             f"{spec.dt_s:g} s (is time_unit right?)"
         )

@@ -20,6 +20,7 @@ __all__ = [
     "MapWarning",
     "ModelLoadError",
     "ModelNotFoundError",
+    "NoTargetError",
     "OutputError",
     "RuntimeLibraryError",
     "TimeUnitWarning",
@@ -44,6 +45,10 @@ class MapRequiredError(InvalidFrameError):
 class TimeBaseError(InvalidFrameError):
     """The frame's time base differs from the model's, or the data cannot be resampled to it (too sparse,
     unordered times)."""
+
+
+class NoTargetError(InvalidFrameError):
+    """A table with nothing to score (:func:`dgan.evaluate`): no agent seen over the model's window and horizon."""
 
 
 class SceneTooLargeError(InvalidFrameError, MemoryError):

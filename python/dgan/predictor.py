@@ -289,7 +289,10 @@ class Predictor:
         for f in frames:
             self._check_map(f)
         natives = [_native(f, f"frame {i} of the batch") for i, f in enumerate(frames)]
-        outs = self._predictor.predict_batch(natives, m, self._checks_headings)
+        try:
+            outs = self._predictor.predict_batch(natives, m, self._checks_headings)
+        except UnknownClassError as e:
+            raise UnknownClassError(f"{e}; unknown_classes='ignore' predicts only the agents of its classes") from None
         for o in outs:
             self._warn_headings(o.headings)
         dt_s = self._spec.dt_s

@@ -12,7 +12,7 @@ from conftest import ROOT, shared_data, zara1_records
 
 import dgan
 from dgan.datasets.hdmaps import read_scenario
-from dgan.exceptions import InvalidFrameError, InvalidSpecError, UnknownClassError
+from dgan.exceptions import InvalidFrameError, InvalidSpecError, NoTargetError, UnknownClassError
 from dgan.scenefiles import read_scene
 
 
@@ -117,7 +117,7 @@ def test_bad_options_and_tables_are_refused() -> None:
     for bad in ({"standing_m": -1.0}, {"standing_m": "far"}, {"unknown_classes": "drop"}, {"spec": "zara1"}):
         with pytest.raises(InvalidSpecError):
             dgan.evaluate("zara1", rows, time_unit=0.04, **bad)
-    with pytest.raises(InvalidFrameError, match="no target"):
+    with pytest.raises(NoTargetError, match="no target"):
         dgan.evaluate("zara1", {k: v[rows["time"] <= 5600] for k, v in rows.items()}, time_unit=0.04)
     with pytest.raises(InvalidFrameError, match="lack the column"):
         dgan.evaluate("zara1", {"id": [1], "time": [0.0], "x": [0.0], "y": [0.0]})

@@ -618,6 +618,8 @@ def test_unknown_classes_ignore_predicts_the_model_s_own() -> None:
     street = dgan.Frame(pos, classes=["pedestrian", "vehicle", "pedestrian"], ids=["a", "car", "b"])
     with pytest.raises(exc.UnknownClassError, match="unknown_classes='ignore'"):
         p.predict(street)
+    with pytest.raises(exc.UnknownClassError, match=r"frame 1 of the batch.*unknown_classes='ignore'"):
+        p.predict_batch([dgan.Frame(pos[[0, 2]]), street])
     pred = p.predict(street, unknown_classes="ignore")
     assert pred.agent_ids.tolist() == ["a", "b"]
     alone = p.predict(dgan.Frame(pos[[0, 2]], ids=["a", "b"]))

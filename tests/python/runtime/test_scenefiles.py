@@ -132,3 +132,24 @@ def test_a_bad_scenario_is_a_clear_error(
 def test_map_and_no_map_together_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["predict", "hdmap", str(WAYMO_FILE), "--no-map", "--map", "zara1"]) == 2
     assert "--map and --no-map ask for opposite things" in capsys.readouterr().err
+
+
+def test_a_scene_with_no_target_is_left_out_of_a_pooled_evaluation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One short scene of a folder (no agent seen over the model's window and horizon) is named and left out; the
+    others are scored as alone. A folder where no scene has a target is an error."""
+    short = tmp_path / "short.csv"
+    short.write_text("agent_id,time,x,y\n1,0.0,0.0,0.0\n1,0.2,0.3,0.0\n")
+    shutil.copy(WAYMO_FILE, tmp_path / WAYMO_FILE.name)
+    assert main(["evaluate", "hdmap", str(tmp_path), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert f"{short}: left out: no target" in captured.err
+    got = json.loads(captured.out)
+    assert got["scenes"] == [WAYMO_FILE.name]
+    assert main(["evaluate", "hdmap", str(WAYMO_FILE), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["rows"] == got["rows"]
+    (tmp_path / WAYMO_FILE.name).unlink()
+    shutil.copy(short, tmp_path / "short2.csv")
+    assert main(["evaluate", "hdmap", str(tmp_path)]) == 2
+    assert "no target in any of the 2 scenes" in capsys.readouterr().err
