@@ -153,3 +153,20 @@ def test_a_scene_with_no_target_is_left_out_of_a_pooled_evaluation(
     shutil.copy(short, tmp_path / "short2.csv")
     assert main(["evaluate", "hdmap", str(tmp_path)]) == 2
     assert "no target in any of the 2 scenes" in capsys.readouterr().err
+
+
+def test_the_command_line_reproduces_the_argoverse_row_of_the_results(capsys: pytest.CaptureFixture[str]) -> None:
+    """``dgan evaluate hdmap`` on Argoverse 2's public files (a scenario and two sensor logs, each over its own map)
+    gives docs/results_hdmap.json's Argoverse 2 row, which training.evaluate measured: the same targets, and the
+    same errors to float32 precision (ONNX Runtime's kernels differ a little between CPUs)."""
+    root = shared_data("argoverse2") / "argoverse2"
+    assert main(["evaluate", "hdmap", str(root / "*" / "*"), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    (got,) = [r for r in rows if (r["class"], r["motion"]) == ("all", "all")]
+    results = Path(__file__).resolve().parents[3] / "docs" / "results_hdmap.json"
+    want = json.loads(results.read_text())["argoverse2"]["map"]
+    assert got["targets"] == want["agents"] == 12222
+    for ours, theirs in (("ade", "ade"), ("fde", "fde"), ("min_ade", "min_ade20"), ("min_fde", "min_fde20")):
+        assert got[ours] == pytest.approx(want[theirs], rel=1e-6)
+    assert got["cv"] == want["cv_variant"] == "last2"
+    assert (got["cv_ade"], got["cv_fde"]) == pytest.approx((want["cv_ade"], want["cv_fde"]), rel=1e-9)
