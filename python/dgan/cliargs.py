@@ -22,7 +22,8 @@ def predict_arguments(sub: Any) -> argparse.ArgumentParser:
         help="Social-GAN txt (frame id x y; Stanford Drone's and ApolloScape's layouts too: dgan.layouts), CSV "
         "(or ; tab | separated) with agent_id,time,x,y[,...] (other names: --column), parquet/feather, or a "
         "driving scenario with its vector map (ScenarioNet .pkl[.gz] or .json[.gz], GPUDrive .json[.gz], an "
-        "Argoverse 2 scenario or sensor-log folder; times in seconds; pickles run code: only files you trust); a "
+        "Argoverse 2 scenario or sensor-log folder, an INTERACTION track file; times in seconds from its first "
+        "step; pickles run code: only files you trust); a "
         "directory or a quoted glob of them predicts each (at its last time, or --time) into one --out table with a "
         "scene column",
     )
@@ -71,8 +72,8 @@ def map_options(pred: Any) -> None:
         "--map",
         default=None,
         help="a bundled scene (eth hotel univ zara1 zara2), an image (for the ETH/UCY models a semantic mask in "
-        "dgan.scenes.MASK_PALETTE, not a photo), or a vector map JSON; a driving scenario's own map serves "
-        "unless --map names another",
+        "dgan.scenes.MASK_PALETTE, not a photo), a vector map JSON, or a Lanelet2 .osm map (INTERACTION's); a "
+        "driving scenario's own map serves unless --map names another",
     )
     pred.add_argument("--pixel-to-world", default=None, help="the 3×3 homography file of an image --map")
     pred.add_argument(

@@ -27,6 +27,8 @@ DELIMITERS = ",;\t|"
 SCENARIO_SUFFIXES: Final = (".pkl", ".pkl.gz", ".json", ".json.gz")
 
 
+#: The columns that make a table an INTERACTION track file (:func:`dgan.datasets.lanelet2.read_interaction`).
+INTERACTION_COLUMNS: Final = frozenset({"track_id", "frame_id", "timestamp_ms", "agent_type", "x", "y"})
 #: How a scenario's ``source`` is named in notes.
 SCENARIO_SOURCES: Final = {"nuscenes": "nuScenes", "waymo": "Waymo", "argoverse2": "Argoverse 2"}
 
@@ -93,6 +95,12 @@ def read_scene(
     except (OSError, UnicodeDecodeError, MemoryError) as e:
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]
+    if _is_header(first) and {f.strip() for f in first.split(",")} >= INTERACTION_COLUMNS:
+        from dgan.datasets.lanelet2 import read_interaction
+
+        scenario = read_interaction(path)
+        what = f"INTERACTION tracks (10 Hz, {len(scenario.ids)} agents; its Lanelet2 map with --map MAP.osm)"
+        return SceneFile(scenario.records(), 1.0, "interaction", what)
     if _is_header(first):
         return SceneFile(_header_table(path, text, first, text_columns), None, None)
     cols, unit, layout = layouts.read(path, metres_per_pixel, text)
@@ -140,8 +148,8 @@ def _numbers_or_text(values: npt.NDArray[Any]) -> npt.NDArray[Any]:
 
 
 def read_map(spec: str, pixel_to_world: str | None) -> dgan.RasterMap | dgan.VectorMap:
-    """``--map``: a bundled ETH/UCY scene name, an image with ``--pixel-to-world``, or a vector map JSON (dgan's own
-    or an Argoverse 2 map archive)."""
+    """``--map``: a bundled ETH/UCY scene name, an image with ``--pixel-to-world``, a vector map JSON (dgan's own
+    or an Argoverse 2 map archive), or a Lanelet2 ``.osm`` map (INTERACTION's, from the origin (0, 0))."""
     if spec in dgan.scenes.ETH_UCY_SCENES:
         return dgan.scene_map(spec)
     path = Path(spec)
@@ -157,6 +165,10 @@ def read_map(spec: str, pixel_to_world: str | None) -> dgan.RasterMap | dgan.Vec
         except (OSError, ValueError) as e:
             raise InvalidMapError(f"cannot read --pixel-to-world {pixel_to_world}: {e}") from None
         return dgan.RasterMap.from_pixel_to_world(path, homography)
+    if path.suffix.lower() == ".osm":
+        from dgan.datasets.lanelet2 import lanelet2_map
+
+        return lanelet2_map(path)  # INTERACTION's origin (0, 0), projected as Lanelet2's UtmProjector does
     try:
         return dgan.VectorMap.from_json(path)
     except InvalidMapError as own:

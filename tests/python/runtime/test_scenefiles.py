@@ -170,3 +170,27 @@ def test_the_command_line_reproduces_the_argoverse_row_of_the_results(capsys: py
         assert got[ours] == pytest.approx(want[theirs], rel=1e-6)
     assert got["cv"] == want["cv_variant"] == "last2"
     assert (got["cv_ade"], got["cv_fde"]) == pytest.approx((want["cv_ade"], want["cv_fde"]), rel=1e-9)
+
+
+def test_interaction_tracks_and_a_lanelet2_map(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An INTERACTION track file is read by its header as dgan.datasets.lanelet2 reads it, and ``--map x.osm`` is its
+    Lanelet2 map; a map that is no OSM file is refused."""
+    from dgan.datasets.lanelet2 import lanelet2_map, read_interaction
+
+    sample = shared_data("interaction_format_sample") / "interaction_format_sample"
+    tracks = sample / "recorded_trackfiles" / "TestScenarioForScripts" / "vehicle_tracks_000.csv"
+    osm = sample / "maps" / "TestScenarioForScripts.osm"
+    assert main(["predict", "hdmap", str(tracks), "--map", str(osm), "--time", "5", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert "read as INTERACTION tracks (10 Hz, 2 agents" in captured.err
+    got = json.loads(captured.out)
+    p = dgan.Predictor("hdmap")
+    sc = read_interaction(tracks, osm)
+    frame = dgan.Frame.from_records(sc.records(), spec=p, time_unit=1.0, current_time=5.0, map=lanelet2_map(osm))
+    want = p.predict(frame, modes=3)
+    trajectories = np.array([[m["trajectory"] for m in a["modes"]] for a in got["agents"]])
+    np.testing.assert_allclose(trajectories, want.trajectories, atol=1e-9)
+    bad = tmp_path / "map.osm"
+    bad.write_text("<notosm/>")
+    assert main(["predict", "hdmap", str(tracks), "--map", str(bad)]) == 2
+    assert "is not an OSM file" in capsys.readouterr().err
