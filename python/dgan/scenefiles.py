@@ -15,16 +15,12 @@ import numpy as np
 import numpy.typing as npt
 
 import dgan
-from dgan import layouts
+from dgan import datasets, layouts
+from dgan.datasets import is_scenario
 from dgan.exceptions import InvalidFrameError, InvalidMapError
 
 #: What may separate the fields of a scene table with a header.
 DELIMITERS = ",;\t|"
-
-
-#: The names of driving scenario files (:func:`dgan.datasets.hdmaps.read_scenario`): ScenarioNet / MetaDrive pickles,
-#: GPUDrive / Nocturne or ScenarioNet JSON. Argoverse 2 scenario and sensor-log folders are scenarios too.
-SCENARIO_SUFFIXES: Final = (".pkl", ".pkl.gz", ".json", ".json.gz")
 
 
 #: The columns that make a table an INTERACTION track file (:func:`dgan.datasets.lanelet2.read_interaction`).
@@ -48,20 +44,10 @@ class SceneFile(NamedTuple):
     map: dgan.VectorMap | None = None
 
 
-def is_scenario(path: Path) -> bool:
-    """Whether ``path`` names a driving scenario (:data:`SCENARIO_SUFFIXES`, or an Argoverse 2 scenario or
-    sensor-log folder) rather than a table of detections."""
-    if path.is_dir():
-        return (path / "annotations.feather").is_file() or any(path.glob("scenario_*.parquet"))
-    return path.name.lower().endswith(SCENARIO_SUFFIXES)
-
-
 def read_scenario_file(path: Path) -> SceneFile:
-    """A driving scenario (:func:`is_scenario`) as a scene file: every valid state of every agent (time in seconds
-    from its first step; :meth:`dgan.datasets.hdmaps.Scenario.records`) and its vector map."""
-    from dgan.datasets.hdmaps import read_scenario
-
-    scenario = read_scenario(path)
+    """A driving scenario (:func:`dgan.datasets.is_scenario`) as a scene file: every valid state of every agent (time
+    in seconds from its first step; :meth:`dgan.datasets.scenario.Scenario.records`) and its vector map."""
+    scenario = datasets.read(path)
     source = SCENARIO_SOURCES.get(scenario.source, scenario.source)
     what = f"a scenario of {source} ({1 / scenario.dt_s:g} Hz tracks of {len(scenario.ids)} agents, its vector map)"
     return SceneFile(scenario.records(), 1.0, f"{scenario.source} scenario", what, scenario.map)
@@ -95,16 +81,14 @@ def read_scene(
     except (OSError, UnicodeDecodeError, MemoryError) as e:
         raise InvalidFrameError(f"cannot read scene {path}: {e}") from None
     first = text.lstrip().split("\n", 1)[0]
-    if _is_header(first) and {f.strip() for f in first.split(",")} >= INTERACTION_COLUMNS:
-        from dgan.datasets.lanelet2 import read_interaction
-
-        scenario = read_interaction(path)
+    if not _is_header(first):
+        cols, unit, layout = layouts.read(path, metres_per_pixel, text)
+        return SceneFile(cols, unit, layout.name, None if layout.name == "social-gan" else layout.describe())
+    if {f.strip() for f in first.split(",")} >= INTERACTION_COLUMNS:
+        scenario = datasets.read(path, "interaction")
         what = f"INTERACTION tracks (10 Hz, {len(scenario.ids)} agents; its Lanelet2 map with --map MAP.osm)"
         return SceneFile(scenario.records(), 1.0, "interaction", what)
-    if _is_header(first):
-        return SceneFile(_header_table(path, text, first, text_columns), None, None)
-    cols, unit, layout = layouts.read(path, metres_per_pixel, text)
-    return SceneFile(cols, unit, layout.name, None if layout.name == "social-gan" else layout.describe())
+    return SceneFile(_header_table(path, text, first, text_columns), None, None)
 
 
 def _is_header(line: str) -> bool:

@@ -18,14 +18,20 @@ from __future__ import annotations
 import importlib
 import os
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final
 
 from dgan.exceptions import InvalidFrameError
 
 if TYPE_CHECKING:
     from dgan.datasets.scenario import Scenario
 
-__all__ = ["formats", "read", "reader", "register"]
+__all__ = ["JSON_SUFFIXES", "PICKLE_SUFFIXES", "formats", "is_scenario", "read", "reader", "register"]
+
+#: The file names :func:`read` guesses as ScenarioNet / MetaDrive pickles.
+PICKLE_SUFFIXES: Final = (".pkl", ".pkl.gz")
+#: The file names :func:`read` guesses as JSON scenarios (GPUDrive / Nocturne, or ScenarioNet's JSON).
+JSON_SUFFIXES: Final = (".json", ".json.gz")
 
 #: Format name → ``"module:function"`` of its reader.
 _REGISTRY: dict[str, str] = {
@@ -57,6 +63,15 @@ def reader(name: str) -> Callable[[str | os.PathLike[str]], Scenario]:
     module, _, function = _REGISTRY[name].partition(":")
     fn: Callable[[str | os.PathLike[str]], Scenario] = getattr(importlib.import_module(module), function)
     return fn
+
+
+def is_scenario(path: str | os.PathLike[str]) -> bool:
+    """Whether :func:`read` takes ``path`` for a scenario by its name: a pickle or JSON file, an Argoverse 2 sensor-log
+    folder (``annotations.feather``) or scenario folder (``scenario_*.parquet``). No reader is imported."""
+    path = Path(path)
+    if path.is_dir():
+        return (path / "annotations.feather").is_file() or any(path.glob("scenario_*.parquet"))
+    return path.name.lower().endswith(PICKLE_SUFFIXES + JSON_SUFFIXES)
 
 
 def read(path: str | os.PathLike[str], format: str | None = None) -> Scenario:

@@ -34,6 +34,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from dgan.datasets import JSON_SUFFIXES, PICKLE_SUFFIXES
 from dgan.datasets.argoverse2 import (
     AV2_SCENARIO_CLASSES,
     AV2_SENSOR_CLASSES,
@@ -84,9 +85,9 @@ def read_scenario(path: str | os.PathLike[str]) -> Scenario:
             return read_av2_sensor_log(path)
         return read_av2_scenario(path)
     name = path.name.lower()
-    if name.endswith((".pkl", ".pkl.gz")):
+    if name.endswith(PICKLE_SUFFIXES):
         return read_scenarionet(path)
-    if name.endswith((".json", ".json.gz")):
+    if name.endswith(JSON_SUFFIXES):
         return read_waymo_json(path) if _is_gpudrive(path) else read_scenarionet(path)
     raise InvalidFrameError(
         f"unknown scenario format: {path} (expected .pkl[.gz], .json[.gz] or an Argoverse 2 folder)"

@@ -14,10 +14,11 @@ from conftest import shared_data
 
 import dgan
 from dgan.cli import main
+from dgan.datasets import is_scenario
 from dgan.datasets.hdmaps import Scenario, read_scenario
 from dgan.demo import SCENE_FILE, WAYMO_FILE
 from dgan.exceptions import DatasetWarning, InvalidFrameError
-from dgan.scenefiles import is_scenario, read_scene, scene_files
+from dgan.scenefiles import read_scene, scene_files
 
 
 def waymo() -> Scenario:
