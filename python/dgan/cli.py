@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import time
 import warnings
@@ -33,7 +34,7 @@ import dgan
 from dgan._progress import progress
 from dgan._times import iso_text
 from dgan.cliargs import evaluate_arguments, predict_arguments
-from dgan.exceptions import ColumnWarning, DganError, InvalidFrameError, InvalidMapError, NoTargetError
+from dgan.exceptions import ColumnWarning, DatasetWarning, DganError, InvalidFrameError, InvalidMapError, NoTargetError
 from dgan.predictionfiles import prediction_json, write_columns, write_records, write_table
 from dgan.scenefiles import (
     class_names,
@@ -338,17 +339,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _show_warning(message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:
-    """A warning as one line of the command line's own (``dgan: warning: ...``), without Python's source line."""
-    print(f"dgan: warning: {cli_wording(str(message))}", file=sys.stderr)
+class _Warnings:
+    """The command's warnings as its own lines (``dgan: warning: ...``), without Python's source line. A dataset
+    warning that repeats one shown for another file (the same words but the file's name and the counts: each Waymo
+    scenario's undrawn driveways) is counted instead, and the count told once at the end."""
+
+    def __init__(self) -> None:
+        self.kinds: set[str] = set()
+        self.repeats = 0
+
+    def show(self, message: Warning | str, category: type[Warning], *_: Any, **__: Any) -> None:
+        text = cli_wording(str(message))
+        if issubclass(category, DatasetWarning):
+            kind = re.sub(r"\d+", "#", text.split(": ", 1)[-1].split(": ", 1)[0])
+            if kind in self.kinds:
+                self.repeats += 1
+                return
+            self.kinds.add(kind)
+        print(f"dgan: warning: {text}", file=sys.stderr)
+
+    def tell_repeats(self) -> None:
+        if self.repeats:
+            print(
+                f"dgan: note: {self.repeats} more dataset warning(s) like those above, for other files", file=sys.stderr
+            )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
+        shown = _Warnings()
         with warnings.catch_warnings():
-            warnings.showwarning = _show_warning
-            code: int = args.func(args)
+            warnings.showwarning = shown.show
+            try:
+                code: int = args.func(args)
+            finally:
+                shown.tell_repeats()
     except DganError as e:
         print(f"dgan: error: {cli_wording(str(e))}", file=sys.stderr)
         return 2

@@ -123,7 +123,7 @@ class Evaluation:
     def __str__(self) -> str:
         head = (
             f"{self.model}: {len(self)} targets at {self.times} times (every agent seen over the {self.t_obs} "
-            f"observed and {self.t_f} predicted steps, {self.dt_s:g} s apart; standing: moved < {self.standing_m:g})"
+            f"observed and {self.t_f} predicted steps, {self.dt_s:g} s apart; standing: moved < {self.standing_m:g} m)"
         )
         cols = f"{'class':<11} {'motion':<9} {'targets':>7}  {'top-1 ADE/FDE':>13}  {f'min{self.modes} ADE/FDE':>13}"
         lines = [head, cols + f"  {'constant velocity':<24} top-1 / CV (ADE, FDE)"]

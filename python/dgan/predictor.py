@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import numbers
 import os
 import warnings
@@ -248,20 +249,29 @@ class Predictor:
         as they are and has not warned yet (:meth:`_warn_headings`)."""
         return not self._heading_warned and self._spec.heading == "measured"
 
-    def _warn_headings(self, check: tuple[int, float, bool, bool] | None) -> None:
+    def _warn_headings(self, check: tuple[int, float, float, bool, bool] | None) -> None:
         """Warns once (:class:`~dgan.exceptions.HeadingWarning`) if the frame's measured headings, which this model
         takes as they are, disagree with its agents' motion (the engine checks them within ``predict``)."""
         if check is None or self._heading_warned:
             return
-        moving, median_deg, beyond_two_pi, disagrees = check
+        moving, median_deg, largest, by_motion, disagrees = check
         if disagrees:
             self._heading_warned = True
-            why = "some exceed 2π, so they may be degrees; " if beyond_two_pi else ""
+            if by_motion:
+                why = "some exceed 2π, so they may be degrees; " if largest > 2 * math.pi + 1e-6 else ""
+                what = (
+                    f"the frame's headings disagree with its agents' direction of motion by {median_deg:.0f}° "
+                    f"(median over {moving} agents moving at ≥ 1 m/s); {why}"
+                )
+            else:
+                what = (
+                    f"the frame's headings reach {largest:.4g}, beyond radians unwrapped by three turns (6π), and "
+                    f"too few agents move at ≥ 1 m/s ({moving}) to check them against the motion: degrees? "
+                )
             warnings.warn(
-                f"the frame's headings disagree with its agents' direction of motion by {median_deg:.0f}° (median "
-                f"over {moving} agents moving at ≥ 1 m/s); {why}{self.path.name} turns each agent's frame by its "
-                "heading. Pass headings in radians, counter-clockwise from the world x axis along the direction of "
-                "travel, or none (the engine then takes the direction of motion). Warned once per Predictor.",
+                f"{what}{self.path.name} turns each agent's frame by its heading. Pass headings in radians, "
+                "counter-clockwise from the world x axis along the direction of travel, or none (the engine then "
+                "takes the direction of motion). Warned once per Predictor.",
                 HeadingWarning,
                 stacklevel=3,
             )

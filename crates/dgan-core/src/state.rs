@@ -138,22 +138,38 @@ pub struct HeadingCheck {
     pub moving: usize,
     /// Median angle in degrees between those agents' measured headings and their direction of motion.
     pub median_error_deg: f64,
-    /// Whether some measured heading exceeds 2π in magnitude: degrees passed as radians, unless the agents moving
-    /// confirm the headings (logs also store radians unwrapped past 2π).
-    pub beyond_two_pi: bool,
+    /// The largest magnitude of a measured heading (radians, if they are radians): beyond 2π, degrees passed as
+    /// radians, unless the agents moving confirm the headings (logs also store radians unwrapped past 2π).
+    pub largest_rad: f64,
 }
 
+/// With too few agents moving to judge the headings, the magnitude beyond which they are taken for degrees: 6π.
+/// Logs' radians unwrapped past 2π stay below it (the shared Waymo scenarios reach 17.3 rad, 2.75π), while degrees
+/// exceed it for any heading beyond 19°.
+pub const HEADING_CHECK_UNWRAPPED_MAX_RAD: f64 = 3.0 * std::f64::consts::TAU;
+
 impl HeadingCheck {
+    /// Whether some measured heading exceeds 2π in magnitude.
+    pub fn beyond_two_pi(&self) -> bool {
+        self.largest_rad > std::f64::consts::TAU + 1e-6
+    }
+
+    /// Whether enough agents move ([`HEADING_CHECK_MIN_MOVING`]) for their motion to judge the headings.
+    pub fn judged_by_motion(&self) -> bool {
+        self.moving >= HEADING_CHECK_MIN_MOVING
+    }
+
     /// Whether the headings are most likely in another convention: enough moving agents to judge and a median
-    /// disagreement over [`HEADING_CHECK_MAX_MEDIAN_DEG`], or, with too few to judge, values beyond 2π that the
-    /// moving agents there are (compared modulo 2π) do not confirm. Headings that follow the motion are radians even
-    /// when unwrapped past 2π.
+    /// disagreement over [`HEADING_CHECK_MAX_MEDIAN_DEG`], or, with too few to judge, values beyond
+    /// [`HEADING_CHECK_UNWRAPPED_MAX_RAD`] that the moving agents there are (compared modulo 2π) do not confirm.
+    /// Headings that follow the motion are radians even when unwrapped past 2π, and so are headings within three
+    /// turns of a frame whose agents stand (a quiet moment of a Waymo log).
     pub fn disagrees(&self) -> bool {
-        if self.moving >= HEADING_CHECK_MIN_MOVING {
+        if self.judged_by_motion() {
             self.median_error_deg > HEADING_CHECK_MAX_MEDIAN_DEG
         } else {
             let confirmed = self.moving > 0 && self.median_error_deg <= HEADING_CHECK_MAX_MEDIAN_DEG;
-            self.beyond_two_pi && !confirmed
+            self.largest_rad > HEADING_CHECK_UNWRAPPED_MAX_RAD && !confirmed
         }
     }
 }
@@ -178,8 +194,8 @@ pub fn check_headings(frame: &Frame, dt_s: f64) -> Option<HeadingCheck> {
         n if n % 2 == 1 => errors[n / 2],
         n => (errors[n / 2 - 1] + errors[n / 2]) / 2.0,
     };
-    let beyond_two_pi = given.iter().any(|(_, h)| h.abs() > std::f64::consts::TAU + 1e-6);
-    Some(HeadingCheck { moving: errors.len(), median_error_deg, beyond_two_pi })
+    let largest_rad = given.iter().map(|(_, h)| h.abs()).fold(0.0, f64::max);
+    Some(HeadingCheck { moving: errors.len(), median_error_deg, largest_rad })
 }
 
 #[cfg(test)]
@@ -259,28 +275,30 @@ mod tests {
             |h: [f64; 5]| Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap().with_headings(&h).unwrap();
         let up = std::f64::consts::FRAC_PI_2;
         let ok = check_headings(&f([0.0, 0.05, up + 0.1, 3.0, f64::NAN]), 1.0).unwrap();
-        assert_eq!((ok.moving, ok.beyond_two_pi, ok.disagrees()), (3, false, false));
+        assert_eq!((ok.moving, ok.beyond_two_pi(), ok.disagrees()), (3, false, false));
         assert!((ok.median_error_deg - 0.05f64.to_degrees()).abs() < 1e-9);
         // Reversed headings, and degrees passed as radians.
         let reversed = check_headings(&f([3.1, 3.1, -up, 0.0, f64::NAN]), 1.0).unwrap();
         assert!(reversed.median_error_deg > 170.0 && reversed.disagrees());
         let degrees = check_headings(&f([0.0, 0.0, 90.0, 0.0, f64::NAN]), 1.0).unwrap();
-        assert!(degrees.beyond_two_pi);
+        assert!(degrees.beyond_two_pi());
         // ... which the motion judges: 0° is 0 rad, so two of the three moving agents agree and the median holds.
         assert!(!degrees.disagrees());
         let all_degrees = check_headings(&f([180.0, 180.0, 90.0, 0.0, f64::NAN]), 1.0).unwrap();
-        assert!(all_degrees.beyond_two_pi && all_degrees.disagrees());
+        assert!(all_degrees.beyond_two_pi() && all_degrees.disagrees());
         // Radians unwrapped past 2π that follow the motion: beyond 2π, yet confirmed by the three moving agents.
         let tau = std::f64::consts::TAU;
         let unwrapped = check_headings(&f([2.0 * tau, 2.0 * tau, up + tau, 0.0, f64::NAN]), 1.0).unwrap();
-        assert!(unwrapped.beyond_two_pi && !unwrapped.disagrees());
-        // Too few moving agents to judge the median: beyond 2π decides, unless the few moving agents agree with the
+        assert!(unwrapped.beyond_two_pi() && !unwrapped.disagrees());
+        // Too few moving agents to judge the median: beyond 6π decides, unless the few moving agents agree with the
         // headings modulo 2π (unwrapped radians, issue 28: "disagree by 0°, some exceed 2π" was a false warning).
-        let slow =
-            |h: f64, moving: usize, err: f64| HeadingCheck { moving, median_error_deg: err, beyond_two_pi: h > tau };
+        let slow = |h: f64, moving: usize, err: f64| HeadingCheck { moving, median_error_deg: err, largest_rad: h };
         assert!(slow(90.0, 0, 0.0).disagrees() && !slow(1.0, 0, 0.0).disagrees());
         assert!(!slow(8.95, 2, 0.0).disagrees());
         assert!(slow(90.0, 2, 120.0).disagrees());
+        // A quiet moment of a Waymo log, every agent standing, its radians unwrapped up to 10.5: not degrees.
+        assert!(!slow(10.52, 0, 0.0).disagrees() && slow(10.52, 0, 0.0).beyond_two_pi());
+        assert!(slow(19.0, 0, 0.0).disagrees());
         let none = Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap();
         assert_eq!(check_headings(&none, 1.0), None);
     }

@@ -67,7 +67,7 @@ def test_classes_motions_and_the_table() -> None:
     text = str(result)
     assert "min5 ADE/FDE" in text
     assert "constant velocity" in text
-    assert "standing: moved < 1.5" in text
+    assert "standing: moved < 1.5 m)" in text
     records = result.to_records()
     assert set(records) >= {"time", "agent_id", "class", "moving", "ade", "min5_fde", "cv_mean1s_fde"}
     assert all(len(v) == len(result) for v in records.values())

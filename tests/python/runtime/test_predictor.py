@@ -515,6 +515,14 @@ def test_headings_in_another_convention_are_warned_about_once() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         dgan.Predictor("hdmap").predict(dgan.Frame(two, headings=[2 * np.pi, 8.95], classes=["vehicle"] * 2))
+    # ... and when nobody moves, as at a quiet moment of a Waymo log (radians unwrapped up to 10.5): no warning, but
+    # headings beyond 6π there are named as likely degrees.
+    parked = np.stack([np.full((10, 2), [0.0, 0.0]), np.full((10, 2), [0.0, 20.0])])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        dgan.Predictor("hdmap").predict(dgan.Frame(parked, headings=[10.52, 7.9], classes=["vehicle"] * 2))
+    with pytest.warns(exc.HeadingWarning, match=r"reach 90, beyond radians unwrapped by three turns .* \(0\)"):
+        dgan.Predictor("hdmap").predict(dgan.Frame(parked, headings=[90.0, 7.9], classes=["vehicle"] * 2))
     for bad in (np.degrees(frame.headings), frame.headings + np.pi):
         fresh = dgan.Predictor("hdmap")
         with pytest.warns(exc.HeadingWarning, match="disagree with its agents' direction of motion"):
@@ -544,7 +552,8 @@ def test_a_prediction_crosses_from_the_engine_typed_with_its_heading_check() -> 
     assert isinstance(native, dgan._dgan.Prediction)
     assert native.trajectories.shape[:2] == (len(frame), 3)
     assert native.headings is not None
-    assert not native.headings[3]  # real headings agree with the motion
+    assert native.headings[3]  # enough agents move to judge the headings by the motion
+    assert not native.headings[4]  # and real headings agree with it
     assert predictor._predictor.predict(frame._frame, 3).headings is None  # not asked
     degrees = dgan.Frame(
         frame.positions,

@@ -195,3 +195,19 @@ def test_interaction_tracks_and_a_lanelet2_map(tmp_path: Path, capsys: pytest.Ca
     bad.write_text("<notosm/>")
     assert main(["predict", "hdmap", str(tracks), "--map", str(bad)]) == 2
     assert "is not an OSM file" in capsys.readouterr().err
+
+
+def test_a_glob_of_scenarios_warns_of_each_kind_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Each Waymo scenario's undrawn driveways are one dataset warning per file: over a folder the command shows the
+    first and counts the rest. The shared ScenarioNet pickle holds a quiet moment (no agent at 1 m/s) whose
+    radians are unwrapped up to 10.5: not taken for degrees (it was, once per command)."""
+    for name in ("a", "b"):
+        shutil.copy(WAYMO_FILE, tmp_path / f"{name}_{WAYMO_FILE.name}")
+    pickles = shared_data("waymo_motion_samples") / "waymo_motion_samples" / "scenarionet_pkl"
+    quiet = pickles / "sd_training.tfrecord-00000-of-01000_2a1e44d405a6833f.pkl"
+    shutil.copy(quiet, tmp_path / quiet.name)
+    assert main(["evaluate", "hdmap", str(tmp_path), "--json"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("map elements not drawn") == 1
+    assert "dgan: note: 2 more dataset warning(s) like those above, for other files" in err
+    assert "degrees" not in err
