@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import numbers
 import os
 import warnings
@@ -249,16 +248,16 @@ class Predictor:
         as they are and has not warned yet (:meth:`_warn_headings`)."""
         return not self._heading_warned and self._spec.heading == "measured"
 
-    def _warn_headings(self, check: tuple[int, float, float, bool, bool] | None) -> None:
+    def _warn_headings(self, check: tuple[int, float, float, bool, bool, bool] | None) -> None:
         """Warns once (:class:`~dgan.exceptions.HeadingWarning`) if the frame's measured headings, which this model
         takes as they are, disagree with its agents' motion (the engine checks them within ``predict``)."""
         if check is None or self._heading_warned:
             return
-        moving, median_deg, largest, by_motion, disagrees = check
+        moving, median_deg, largest, beyond_two_pi, by_motion, disagrees = check
         if disagrees:
             self._heading_warned = True
             if by_motion:
-                why = "some exceed 2π, so they may be degrees; " if largest > 2 * math.pi + 1e-6 else ""
+                why = "some exceed 2π, so they may be degrees; " if beyond_two_pi else ""
                 what = (
                     f"the frame's headings disagree with its agents' direction of motion by {median_deg:.0f}° "
                     f"(median over {moving} agents moving at ≥ 1 m/s); {why}"

@@ -43,9 +43,10 @@ pub struct PyPrediction {
 }
 
 /// How well a frame's measured headings follow its agents' motion (`dgan_core::state::check_headings`): `(moving
-/// agents, median error in degrees, the largest |heading|, whether enough agents move to judge by the motion, whether
-/// they most likely follow another convention)`, or `None` when not asked or when the frame has no measured heading.
-type Headings = Option<(usize, f64, f64, bool, bool)>;
+/// agents, median error in degrees, the largest |heading|, whether some |heading| > 2π, whether enough agents move to
+/// judge by the motion, whether they most likely follow another convention)`, or `None` when not asked or when the
+/// frame has no measured heading.
+type Headings = Option<(usize, f64, f64, bool, bool, bool)>;
 
 fn native_prediction(py: Python<'_>, p: Prediction, headings: Headings) -> PyPrediction {
     PyPrediction {
@@ -62,7 +63,7 @@ fn native_prediction(py: Python<'_>, p: Prediction, headings: Headings) -> PyPre
 /// The heading check of `frame` at the model's time base (`dgan_core::state::check_headings`).
 fn heading_check(frame: &dgan_core::Frame, dt_s: f64) -> Headings {
     dgan_core::state::check_headings(frame, dt_s)
-        .map(|c| (c.moving, c.median_error_deg, c.largest_rad, c.judged_by_motion(), c.disagrees()))
+        .map(|c| (c.moving, c.median_error_deg, c.largest_rad, c.beyond_two_pi(), c.judged_by_motion(), c.disagrees()))
 }
 
 #[pymethods]

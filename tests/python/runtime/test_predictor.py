@@ -552,8 +552,8 @@ def test_a_prediction_crosses_from_the_engine_typed_with_its_heading_check() -> 
     assert isinstance(native, dgan._dgan.Prediction)
     assert native.trajectories.shape[:2] == (len(frame), 3)
     assert native.headings is not None
-    assert native.headings[3]  # enough agents move to judge the headings by the motion
-    assert not native.headings[4]  # and real headings agree with it
+    assert native.headings[4]  # enough agents move to judge the headings by the motion
+    assert not native.headings[5]  # and real headings agree with it
     assert predictor._predictor.predict(frame._frame, 3).headings is None  # not asked
     degrees = dgan.Frame(
         frame.positions,
