@@ -8,9 +8,12 @@ pub const MAX_COORDINATE_M: f64 = 1e9;
 /// Relative tolerance for "the same time": a detection within `dt_s · TIME_TOLERANCE` of a grid time is on it.
 pub const TIME_TOLERANCE: f64 = 1e-6;
 
-/// The machine's cores (1 when unknown): the most threads one call may use.
+/// The machine's cores (1 when unknown): the most threads one call may use. Asked of the system once per process
+/// (Linux answers from the affinity mask and the cgroup's CPU quota, files read on each call: about 60 µs, as long
+/// as preprocessing a few agents).
 pub fn cores() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
 }
 
 /// `work` on each item concurrently: the first item on the calling thread, each other on a scoped thread of its own

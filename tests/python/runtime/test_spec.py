@@ -50,6 +50,18 @@ def test_map_classes_name_classes_of_the_model_and_are_written_only_when_given()
         dgan.MapSpec(classes="pedestrian")
 
 
+def test_a_specs_json_is_built_once_and_follows_a_replaced_copy() -> None:
+    from dataclasses import replace
+
+    assert SPEC.to_json() is SPEC.to_json()  # built once: preprocess passes it to the engine on every call
+    wider = replace(SPEC, attention_lambda=2.0)
+    assert json_round_trip(wider)["attention_lambda"] == 2.0
+    assert json_round_trip(SPEC)["attention_lambda"] == 0.5
+    assert wider == dgan.InputSpec.from_dict(json_round_trip(wider))
+    assert wider != SPEC
+    assert "_json" not in repr(SPEC)
+
+
 def json_round_trip(spec: dgan.InputSpec) -> dict[str, object]:
     import json
 
