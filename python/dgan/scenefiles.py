@@ -85,8 +85,12 @@ def read_scene(
         cols, unit, layout = layouts.read(path, metres_per_pixel, text)
         return SceneFile(cols, unit, layout.name, None if layout.name == "social-gan" else layout.describe())
     if {f.strip() for f in first.split(",")} >= INTERACTION_COLUMNS:
+        from dgan.datasets.lanelet2 import interaction_companion
+
         scenario = datasets.read(path, "interaction")
-        what = f"INTERACTION tracks (10 Hz, {len(scenario.ids)} agents; its Lanelet2 map with --map MAP.osm)"
+        other = interaction_companion(path)
+        joined = "" if other is None else f", with {other.name} beside it"
+        what = f"INTERACTION tracks (10 Hz, {len(scenario.ids)} agents{joined}; its Lanelet2 map with --map MAP.osm)"
         return SceneFile(scenario.records(), 1.0, "interaction", what)
     return SceneFile(_header_table(path, text, first, text_columns), None, None)
 
@@ -180,7 +184,17 @@ def scene_files(spec: str) -> list[Path] | None:
         return None
     if not files:
         raise InvalidFrameError(f"no scene files in {spec}")
-    return files
+    return _without_companions(files)
+
+
+def _without_companions(files: list[Path]) -> list[Path]:
+    """``files`` less each INTERACTION ``pedestrian_tracks_*.csv`` whose recording's ``vehicle_tracks_*.csv`` is
+    among them: reading the one reads the other too (:func:`dgan.datasets.lanelet2.read_interaction`), so each
+    recording is one scene, once."""
+    from dgan.datasets.lanelet2 import interaction_companion
+
+    listed = set(files)
+    return [f for f in files if not (f.name.startswith("pedestrian_tracks_") and interaction_companion(f) in listed)]
 
 
 def scene_names(files: Sequence[Path]) -> list[str]:

@@ -87,3 +87,19 @@ def zara1_raster_map() -> dgan.RasterMap:
 def zara1_frame() -> dgan.Frame:
     """Every pedestrian seen at frame 5500 of zara1, 8 steps of 0.4 s (frame ids step by 10)."""
     return dgan.Frame.from_records(zara1_records(), t_obs=8, dt=0.4, time_unit=0.04, current_time=5500.0)
+
+
+def interaction_recording(folder: Path) -> tuple[Path, Path]:
+    """The format sample's vehicle file and a pedestrian file of the same recording beside it (INTERACTION's
+    pedestrian columns; frames 3-40, so the two files start on different frames): two walkers and a cyclist."""
+    folder.mkdir(parents=True, exist_ok=True)
+    vehicles = folder / "vehicle_tracks_000.csv"
+    sample = shared_data("interaction_format_sample") / "interaction_format_sample"
+    vehicles.write_text((sample / "recorded_trackfiles/TestScenarioForScripts/vehicle_tracks_000.csv").read_text())
+    rows = ["track_id,frame_id,timestamp_ms,agent_type,x,y,vx,vy"]
+    for track, kind, x0, speed in (("P1", "pedestrian", 10.0, 1.2), ("P2", "pedestrian/bicycle", 30.0, -1.0)):
+        rows += [f"{track},{f},{100 * f},{kind},{x0 + speed * 0.1 * f:.2f},-1.5,{speed},0" for f in range(3, 41)]
+    rows += [f"P7,{f},{100 * f},bicycle,{5 + 0.4 * f:.2f},8.0,4.0,0" for f in range(10, 36)]
+    pedestrians = folder / "pedestrian_tracks_000.csv"
+    pedestrians.write_text("\n".join(rows) + "\n")
+    return vehicles, pedestrians

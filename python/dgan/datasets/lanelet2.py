@@ -28,6 +28,7 @@ instead (no pyproj needed; within 0.2% of UTM over a few kilometres near the zon
 from __future__ import annotations
 
 import os
+import re
 import xml.etree.ElementTree as ET
 from collections import Counter
 from pathlib import Path
@@ -199,31 +200,49 @@ def lanelet2_map(
     return VectorMap(elements)
 
 
+#: INTERACTION's pedestrian track ids (``P1``, ``P2``, ...) as the engine's integer ids: this offset plus their
+#: number, so that they never meet a vehicle's id when a recording's two track files are read as one scene.
+PEDESTRIAN_ID_OFFSET: Final = 1_000_000
+
+#: An INTERACTION recording's track file: ``vehicle_tracks_007.csv`` or ``pedestrian_tracks_007.csv``.
+_TRACK_FILE: Final = re.compile(r"^(vehicle|pedestrian)_tracks_(\w+)\.csv$")
+
+
+def interaction_companion(tracks_csv: str | os.PathLike[str]) -> Path | None:
+    """The other track file of the same INTERACTION recording beside ``tracks_csv`` (``pedestrian_tracks_007.csv``
+    for ``vehicle_tracks_007.csv`` and the other way round), or None where there is none: INTERACTION keeps a
+    recording's pedestrians and cyclists apart from its vehicles, on the same frames."""
+    path = Path(tracks_csv)
+    m = _TRACK_FILE.match(path.name)
+    if m is None:
+        return None
+    other = path.with_name(f"{'pedestrian' if m[1] == 'vehicle' else 'vehicle'}_tracks_{m[2]}.csv")
+    return other if other.is_file() else None
+
+
 def read_interaction(
     tracks_csv: str | os.PathLike[str],
     map_osm: str | os.PathLike[str] | None = None,
     origin: tuple[float, float] = (0.0, 0.0),
+    companion: bool = True,
 ) -> Scenario:
     """An INTERACTION track file (``vehicle_tracks_*.csv`` or ``pedestrian_tracks_*.csv``: ``track_id, frame_id,
-    timestamp_ms, agent_type, x, y[, vx, vy, psi_rad, length, width]``, 10 Hz) with its Lanelet2 map."""
-    import csv
-
+    timestamp_ms, agent_type, x, y[, vx, vy, psi_rad, length, width]``, 10 Hz) with its Lanelet2 map. With
+    ``companion``, the recording's other track file beside it (:func:`interaction_companion`) joins it: one scene of
+    every agent, on the recording's frames. Pedestrian ids ``P<n>`` become :data:`PEDESTRIAN_ID_OFFSET` + n."""
     path = Path(tracks_csv)
+    other = interaction_companion(path) if companion else None
+    rows = _track_rows(path) + ([] if other is None else _track_rows(other))
     try:
-        with path.open(newline="") as f:
-            rows = list(csv.DictReader(f))
-    except (OSError, UnicodeDecodeError, csv.Error) as e:
-        raise InvalidFrameError(f"cannot read INTERACTION tracks {path}: {e}") from None
-    need = {"track_id", "frame_id", "agent_type", "x", "y"}
-    if not rows or not need <= rows[0].keys():
-        raise InvalidFrameError(f"{path}: not an INTERACTION track file (needs {sorted(need)})")
-    num = {k: np.array([float(r.get(k) or "nan") for r in rows]) for k in ("x", "y", "psi_rad", "length", "width")}
-    frame = np.array([int(r["frame_id"]) for r in rows])
+        num = {k: np.array([float(r.get(k) or "nan") for r in rows]) for k in ("x", "y", "psi_rad", "length", "width")}
+    except ValueError as e:
+        raise InvalidFrameError(f"{path}: {e} (x, y, psi_rad, length and width must be numbers)") from None
     labels = np.array([INTERACTION_CLASSES.get(r["agent_type"], "") for r in rows], dtype=object)
     unknown = sorted({r["agent_type"] for r in rows} - INTERACTION_CLASSES.keys())
     if unknown:
         raise InvalidFrameError(f"{path}: agent types {unknown} have no engine class")
-    track = np.array([int(str(r["track_id"]).lstrip("P")) for r in rows])
+    frame = np.array([r["frame_id"] for r in rows])
+    track = np.array([r["track_id"] for r in rows])
     step = frame - frame.min()
     tracks = _Tracks()
     xy = np.c_[num["x"], num["y"]]
@@ -231,3 +250,29 @@ def read_interaction(
     _long_rows(tracks, track, step, int(step.max()) + 1, labels, xy, *sizes, unknown_heading=np.nan)
     elements = [] if map_osm is None else lanelet2_map(map_osm, origin).elements()
     return tracks.scenario(path, path.stem, "interaction", 0.1, elements)
+
+
+def _track_rows(path: Path) -> list[dict[str, Any]]:
+    """An INTERACTION track file's rows, their ``frame_id`` and ``track_id`` as integers (``P<n>``, a pedestrian's,
+    as :data:`PEDESTRIAN_ID_OFFSET` + n)."""
+    import csv
+
+    try:
+        with path.open(newline="") as f:
+            rows: list[dict[str, Any]] = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise InvalidFrameError(f"cannot read INTERACTION tracks {path}: {e}") from None
+    need = {"track_id", "frame_id", "agent_type", "x", "y"}
+    if not rows or not need <= rows[0].keys():
+        raise InvalidFrameError(f"{path}: not an INTERACTION track file (needs {sorted(need)})")
+    for k, r in enumerate(rows, 2):
+        track_id, frame_id = str(r["track_id"]).strip(), str(r["frame_id"]).strip()
+        number = track_id[1:] if track_id[:1] == "P" else track_id
+        if not (number.isdigit() and frame_id.isdigit()):
+            raise InvalidFrameError(
+                f"{path}, line {k}: track_id {track_id!r} must be a whole number (P and one for a pedestrian) and "
+                f"frame_id {frame_id!r} a whole number"
+            )
+        r["track_id"] = int(number) + (PEDESTRIAN_ID_OFFSET if number != track_id else 0)
+        r["frame_id"] = int(frame_id)
+    return rows

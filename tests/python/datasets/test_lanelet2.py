@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import shared_data
+from conftest import interaction_recording, shared_data
 
 import dgan
-from dgan.datasets.lanelet2 import lanelet2_map, read_interaction
-from dgan.exceptions import DatasetWarning, InvalidMapError
+from dgan.datasets.lanelet2 import PEDESTRIAN_ID_OFFSET, interaction_companion, lanelet2_map, read_interaction
+from dgan.exceptions import DatasetWarning, InvalidFrameError, InvalidMapError
 
 
 def sample() -> Path:
@@ -67,3 +67,44 @@ def test_local_xy_tags_unmapped_types_and_bad_files(tmp_path: Path) -> None:
         lanelet2_map(bad)
     with pytest.raises(InvalidMapError, match="'utm' or 'local'"):
         lanelet2_map(sample() / MAP, projection="mercator")
+
+
+def test_a_recordings_two_track_files_are_one_scene(tmp_path: Path) -> None:
+    """INTERACTION keeps a recording's pedestrians and cyclists in a file of their own beside its vehicles': reading
+    either reads both, on the recording's frames, with the pedestrians' ids P<n> apart from the vehicles'."""
+    vehicles, pedestrians = interaction_recording(tmp_path / "rec")
+    assert interaction_companion(vehicles) == pedestrians
+    assert interaction_companion(pedestrians) == vehicles
+    assert interaction_companion(sample() / TRACKS) is None  # the sample has no pedestrian file
+    both = read_interaction(vehicles, sample() / MAP)
+    ids = [PEDESTRIAN_ID_OFFSET + k for k in (1, 2, 7)]
+    assert sorted(both.ids.tolist()) == [1, 2, *ids]
+    label = dict(zip(both.ids.tolist(), list(both.labels), strict=True))
+    assert [label[i] for i in (1, *ids)] == ["vehicle", "pedestrian", "pedestrian", "cyclist"]
+    row = both.ids.tolist().index(ids[0])
+    assert both.positions[row, 10 - 1].tolist() == pytest.approx([10.0 + 1.2 * 0.1 * 10, -1.5], abs=1e-9)
+    assert not both.valid[row, : 3 - 1].any()  # the vehicles' first frame is the scene's first step
+    from_pedestrians = read_interaction(pedestrians)
+    order = [from_pedestrians.ids.tolist().index(i) for i in both.ids.tolist()]
+    np.testing.assert_array_equal(from_pedestrians.positions[order], both.positions)
+    alone = read_interaction(pedestrians, companion=False)
+    assert sorted(alone.ids.tolist()) == ids
+    assert alone.valid[alone.ids.tolist().index(ids[0]), 0]  # its own first frame (3) is its first step
+    frame = both.frame(30, 10, every=5)  # frame 31: vehicle 2 from frame 31, the cyclist P7 on frames 10-35
+    assert len(dgan.Predictor("hdmap", sessions=1).predict(frame)) == len(frame) == 5
+
+
+def test_bad_interaction_rows_are_typed_errors(tmp_path: Path) -> None:
+    for field, bad, message in (
+        ("track_id", "X9", r"line 3: track_id 'X9' must be a whole number \(P and one for a pedestrian\)"),
+        ("frame_id", "2.5", r"frame_id '2.5' a whole number"),
+        ("x", "east", r"must be numbers"),
+    ):
+        vehicles, _ = interaction_recording(tmp_path / field)
+        lines = vehicles.read_text().splitlines()
+        header = lines[0].split(",")
+        cells = lines[2].split(",")
+        cells[header.index(field)] = bad
+        vehicles.write_text("\n".join([*lines[:2], ",".join(cells), *lines[3:]]) + "\n")
+        with pytest.raises(InvalidFrameError, match=message):
+            read_interaction(vehicles)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import shared_data
+from conftest import interaction_recording, shared_data
 
 import dgan
 from dgan.cli import main
@@ -195,6 +195,19 @@ def test_interaction_tracks_and_a_lanelet2_map(tmp_path: Path, capsys: pytest.Ca
     bad.write_text("<notosm/>")
     assert main(["predict", "hdmap", str(tracks), "--map", str(bad)]) == 2
     assert "is not an OSM file" in capsys.readouterr().err
+
+
+def test_an_interaction_recordings_two_files_are_read_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder holding a recording's vehicle and pedestrian track files is one scene, read once (by the vehicle
+    file, which brings the other), and the note says so; the pedestrians are predicted beside the vehicles."""
+    vehicles, pedestrians = interaction_recording(tmp_path / "rec")
+    assert scene_files(str(tmp_path / "rec")) == [vehicles]
+    assert scene_files(str(tmp_path / "rec" / "*.csv")) == [vehicles]
+    assert main(["predict", "hdmap", str(pedestrians), "--time", "3", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert "5 agents, with vehicle_tracks_000.csv beside it" in captured.err
+    ids = sorted(a["id"] for a in json.loads(captured.out)["agents"])
+    assert ids == [1, 2, 1_000_001, 1_000_002, 1_000_007]
 
 
 def test_a_glob_of_scenarios_warns_of_each_kind_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
