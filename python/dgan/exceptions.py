@@ -24,6 +24,7 @@ __all__ = [
     "OutputError",
     "RuntimeLibraryError",
     "TimeUnitWarning",
+    "UnitWarning",
     "UnknownClassError",
 ]
 
@@ -121,3 +122,11 @@ class HeadingWarning(UserWarning):
     compass bearings, the rear of the box). Every agent-centric frame is then turned by that much. Pass headings in
     radians, counter-clockwise from the world x axis, along the direction of travel; or pass none (the engine then
     takes the direction of motion). Issued once per :class:`~dgan.Predictor`."""
+
+
+class UnitWarning(UserWarning):
+    """A frame's agents move implausibly fast for their class (the median over at least three moving agents of a
+    class beyond 6 m/s for pedestrians, 35 for cyclists, 70 for vehicles, taking the positions as metres and the
+    steps as the model's): the positions are most likely in pixels or centimetres, or the times in another unit than
+    ``time_unit`` says. Every model takes metres; a scene in pixels needs its homography first. Issued once per
+    :class:`~dgan.Predictor`."""

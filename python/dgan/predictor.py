@@ -23,6 +23,7 @@ from dgan.exceptions import (
     InvalidSpecError,
     MapWarning,
     ModelNotFoundError,
+    UnitWarning,
     UnknownClassError,
 )
 from dgan.frame import Frame
@@ -114,6 +115,7 @@ class Predictor:
         self._spec = InputSpec.from_dict(self._contract)
         self._modes = self._check_modes(modes)
         self._heading_warned = False
+        self._speed_warned = False
         self._reads_mask = reads_masks(self._contract)
         self._maps_checked: weakref.WeakSet[RasterMap] = weakref.WeakSet()  # by reference: ids are reused
 
@@ -204,10 +206,11 @@ class Predictor:
         frame = self._known(frame, unknown_classes)
         self._check_map(frame)
         try:
-            native = self._predictor.predict(_native(frame), m, self._checks_headings)
+            native = self._predictor.predict(_native(frame), m, self._checks_headings, not self._speed_warned)
         except UnknownClassError as e:
             raise UnknownClassError(f"{e}; unknown_classes='ignore' predicts only the agents of its classes") from None
         self._warn_headings(native.headings)
+        self._warn_speeds(native.speeds)
         return Prediction.from_native(native, frame.agent_ids, self.classes, self._spec.dt_s, frame._table_time)
 
     def _known(self, frame: Frame, unknown_classes: str) -> Frame:
@@ -275,6 +278,23 @@ class Predictor:
                 stacklevel=3,
             )
 
+    def _warn_speeds(self, check: tuple[str, int, float, float, bool] | None) -> None:
+        """Warns once (:class:`~dgan.exceptions.UnitWarning`) if a class's moving agents are implausibly fast in
+        metres (the engine checks their speeds within ``predict``)."""
+        if check is None or self._speed_warned or not check[4]:
+            return
+        self._speed_warned = True
+        cls, moving, median, bound, _ = check
+        warnings.warn(
+            f"the frame's {moving} moving {cls} agents go at a median {median:.3g} units a second, taking its "
+            f"positions as metres: beyond the {bound:g} m/s that {cls} agents reach. The positions are most likely "
+            "in pixels or centimetres, or the times in another unit than time_unit says; "
+            f"{self.path.name} takes metres (a scene in pixels needs its homography first). Warned once per "
+            "Predictor.",
+            UnitWarning,
+            stacklevel=3,
+        )
+
     def predict_batch(
         self, frames: Sequence[Frame], *, modes: int | None = None, unknown_classes: str = "error"
     ) -> list[Prediction]:
@@ -299,11 +319,12 @@ class Predictor:
             self._check_map(f)
         natives = [_native(f, f"frame {i} of the batch") for i, f in enumerate(frames)]
         try:
-            outs = self._predictor.predict_batch(natives, m, self._checks_headings)
+            outs = self._predictor.predict_batch(natives, m, self._checks_headings, not self._speed_warned)
         except UnknownClassError as e:
             raise UnknownClassError(f"{e}; unknown_classes='ignore' predicts only the agents of its classes") from None
         for o in outs:
             self._warn_headings(o.headings)
+            self._warn_speeds(o.speeds)
         dt_s = self._spec.dt_s
         return [
             Prediction.from_native(o, f.agent_ids, self.classes, dt_s, f._table_time)

@@ -1,5 +1,6 @@
 //! Traffic state (speed, acceleration, heading, yaw rate, size) from each agent's history, robust to missing steps.
 
+use crate::class::AgentClass;
 use crate::frame::Frame;
 use crate::transform::{wrap_angle, AgentPose};
 use serde::{Deserialize, Serialize};
@@ -198,10 +199,71 @@ pub fn check_headings(frame: &Frame, dt_s: f64) -> Option<HeadingCheck> {
     Some(HeadingCheck { moving: errors.len(), median_error_deg, largest_rad })
 }
 
+/// The moving agents of a class [`SpeedCheck::implausible`] needs to judge its speeds.
+pub const SPEED_CHECK_MIN_MOVING: usize = 3;
+
+/// The fastest plausible median speed, m/s, of a class's moving agents (at least [`MIN_MOVING_SPEED_MPS`]): a
+/// crowd running a race or on skateboards, motorcycles (which several sources count as cyclists), traffic on a
+/// motorway stay below it, while the same agents in pixels (10-50 to the metre from a drone or a fixed camera) or
+/// centimetres exceed it several times. On the shared data's sources the largest median was 0.65 of it (Stanford
+/// Drone's pedestrians), 0.56 (ApolloScape's cyclists, motorcycles among them) and 0.23 (vehicles).
+pub fn plausible_median_speed_mps(class: AgentClass) -> f64 {
+    match class {
+        AgentClass::Vehicle => 70.0,
+        AgentClass::Cyclist => 35.0,
+        AgentClass::Pedestrian => 6.0,
+    }
+}
+
+/// A frame's speeds against what its agents' classes can do ([`check_speeds`]): positions in another unit than
+/// metres (pixels, centimetres), or times in another unit than the model's steps, make every agent implausibly fast.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedCheck {
+    /// The class whose median speed is furthest beyond its [`plausible_median_speed_mps`].
+    pub class: AgentClass,
+    /// Its agents moving at least [`MIN_MOVING_SPEED_MPS`].
+    pub moving: usize,
+    /// Their median speed, in the frame's units per second.
+    pub median_speed: f64,
+}
+
+impl SpeedCheck {
+    /// Whether enough agents of the class move ([`SPEED_CHECK_MIN_MOVING`]) and their median speed exceeds
+    /// [`plausible_median_speed_mps`].
+    pub fn implausible(&self) -> bool {
+        self.moving >= SPEED_CHECK_MIN_MOVING && self.median_speed > plausible_median_speed_mps(self.class)
+    }
+}
+
+/// The speeds of a frame's moving agents, per class, against [`plausible_median_speed_mps`]: the class furthest
+/// beyond its bound (or nearest below it) among those with [`SPEED_CHECK_MIN_MOVING`] moving agents; `None` when no
+/// class has that many.
+pub fn check_speeds(frame: &Frame, dt_s: f64) -> Option<SpeedCheck> {
+    let states = traffic_states_with(frame, dt_s, HeadingSource::Motion);
+    AgentClass::ALL
+        .iter()
+        .filter_map(|&class| {
+            let mut speeds: Vec<f64> = (states.iter().zip(frame.classes()))
+                .filter(|(s, c)| **c == class && s.speed >= MIN_MOVING_SPEED_MPS)
+                .map(|(s, _)| s.speed)
+                .collect();
+            if speeds.len() < SPEED_CHECK_MIN_MOVING {
+                return None;
+            }
+            speeds.sort_by(f64::total_cmp);
+            let n = speeds.len();
+            let median_speed = if n % 2 == 1 { speeds[n / 2] } else { (speeds[n / 2 - 1] + speeds[n / 2]) / 2.0 };
+            Some(SpeedCheck { class, moving: n, median_speed })
+        })
+        .max_by(|a, b| {
+            let beyond = |c: &SpeedCheck| c.median_speed / plausible_median_speed_mps(c.class);
+            beyond(a).total_cmp(&beyond(b))
+        })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::class::AgentClass;
     use ndarray::{array, Array3};
 
     #[test]
@@ -301,5 +363,34 @@ mod tests {
         assert!(slow(19.0, 0, 0.0).disagrees());
         let none = Frame::new(p.clone(), None, vec![AgentClass::Vehicle; 5]).unwrap();
         assert_eq!(check_headings(&none, 1.0), None);
+    }
+
+    #[test]
+    fn speed_checks() {
+        // Four pedestrians walking +x at 1.4 m/s and one standing; two cars at 15 m/s (too few to judge).
+        let walk = |scale: f64| {
+            let speeds = [1.4, 1.2, 1.5, 1.3, 0.0, 15.0, 15.0];
+            let p = Array3::from_shape_fn((7, 4, 2), |(i, t, d)| {
+                scale * if d == 0 { speeds[i] * 0.4 * t as f64 } else { 3.0 * i as f64 }
+            });
+            let mut classes = vec![AgentClass::Pedestrian; 5];
+            classes.extend([AgentClass::Vehicle; 2]);
+            Frame::new(p, None, classes).unwrap()
+        };
+        let metres = check_speeds(&walk(1.0), 0.4).unwrap();
+        assert_eq!((metres.class, metres.moving), (AgentClass::Pedestrian, 4));
+        assert!((metres.median_speed - 1.35).abs() < 1e-9 && !metres.implausible());
+        // The same scene in pixels of a camera at 25 px/m: 34 px/s walkers.
+        let pixels = check_speeds(&walk(25.0), 0.4).unwrap();
+        assert!(pixels.implausible() && (pixels.median_speed - 33.75).abs() < 1e-9);
+        // In centimetres the cars are 1,500 cm/s, yet too few to judge; the walkers decide.
+        assert_eq!(check_speeds(&walk(100.0), 0.4).unwrap().class, AgentClass::Pedestrian);
+        // Standing agents alone, or too few moving ones, say nothing.
+        let still = Frame::new(Array3::zeros((5, 4, 2)), None, vec![AgentClass::Pedestrian; 5]).unwrap();
+        assert_eq!(check_speeds(&still, 0.4), None);
+        let few = SpeedCheck { class: AgentClass::Cyclist, moving: 2, median_speed: 90.0 };
+        assert!(!few.implausible());
+        assert!(SpeedCheck { moving: 3, ..few }.implausible());
+        assert!(!SpeedCheck { class: AgentClass::Vehicle, moving: 3, median_speed: 40.0 }.implausible());
     }
 }

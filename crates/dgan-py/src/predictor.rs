@@ -40,7 +40,15 @@ pub struct PyPrediction {
     /// The frame's measured headings against its agents' motion, when `predict` was asked to check them.
     #[pyo3(get)]
     headings: Headings,
+    /// The frame's speeds against its agents' classes, when `predict` was asked to check them.
+    #[pyo3(get)]
+    speeds: Speeds,
 }
+
+/// A frame's speeds against what its agents' classes can do (`dgan_core::state::check_speeds`): `(class, moving
+/// agents of it, their median speed in the frame's units per second, the class's plausible median in m/s, whether
+/// it exceeds that)`, or `None` when not asked or when no class has enough moving agents to judge.
+type Speeds = Option<(&'static str, usize, f64, f64, bool)>;
 
 /// How well a frame's measured headings follow its agents' motion (`dgan_core::state::check_headings`): `(moving
 /// agents, median error in degrees, the largest |heading|, whether some |heading| > 2π, whether enough agents move to
@@ -48,7 +56,7 @@ pub struct PyPrediction {
 /// frame has no measured heading.
 type Headings = Option<(usize, f64, f64, bool, bool, bool)>;
 
-fn native_prediction(py: Python<'_>, p: Prediction, headings: Headings) -> PyPrediction {
+fn native_prediction(py: Python<'_>, p: Prediction, (headings, speeds): (Headings, Speeds)) -> PyPrediction {
     PyPrediction {
         agent_ids: ndarray::Array1::from(p.agent_ids).into_pyarray(py).unbind(),
         trajectories: p.trajectories.into_pyarray(py).unbind(),
@@ -57,6 +65,7 @@ fn native_prediction(py: Python<'_>, p: Prediction, headings: Headings) -> PyPre
         mode_classes: p.mode_classes.into_pyarray(py).unbind(),
         edges: p.edges.into_pyarray(py).unbind(),
         headings,
+        speeds,
     }
 }
 
@@ -64,6 +73,18 @@ fn native_prediction(py: Python<'_>, p: Prediction, headings: Headings) -> PyPre
 fn heading_check(frame: &dgan_core::Frame, dt_s: f64) -> Headings {
     dgan_core::state::check_headings(frame, dt_s)
         .map(|c| (c.moving, c.median_error_deg, c.largest_rad, c.beyond_two_pi(), c.judged_by_motion(), c.disagrees()))
+}
+
+/// The speed check of `frame` at the model's time base (`dgan_core::state::check_speeds`).
+fn speed_check(frame: &dgan_core::Frame, dt_s: f64) -> Speeds {
+    use dgan_core::state::{check_speeds, plausible_median_speed_mps};
+    check_speeds(frame, dt_s)
+        .map(|c| (c.class.name(), c.moving, c.median_speed, plausible_median_speed_mps(c.class), c.implausible()))
+}
+
+/// The checks `predict` was asked for: `(headings, speeds)`.
+fn checks(frame: &dgan_core::Frame, dt_s: f64, headings: bool, speeds: bool) -> (Headings, Speeds) {
+    (headings.then(|| heading_check(frame, dt_s)).flatten(), speeds.then(|| speed_check(frame, dt_s)).flatten())
 }
 
 #[pymethods]
@@ -134,37 +155,43 @@ impl PyPredictor {
     }
 
     /// Predicts several frames in as few network calls as fit; one prediction per frame (each with its frame's
-    /// heading check when `check_headings`).
-    #[pyo3(signature = (frames, modes, check_headings = false))]
+    /// heading check when `check_headings`, and its speed check when `check_speeds`).
+    #[pyo3(signature = (frames, modes, check_headings = false, check_speeds = false))]
     fn predict_batch<'py>(
         &self,
         py: Python<'py>,
         frames: Vec<PyRef<'py, PyFrame>>,
         modes: usize,
         check_headings: bool,
+        check_speeds: bool,
     ) -> PyResult<Vec<PyPrediction>> {
         let frames: Vec<dgan_core::Frame> = frames.iter().map(|f| f.inner.clone()).collect();
         let dt_s = self.inner.contract().input.dt_s;
-        let (out, headings) = py.detach(|| {
-            let checks: Vec<Headings> =
-                frames.iter().map(|f| if check_headings { heading_check(f, dt_s) } else { None }).collect();
-            (self.inner.predict_batch(&frames, modes), checks)
+        let (out, found) = py.detach(|| {
+            let found: Vec<_> = frames.iter().map(|f| checks(f, dt_s, check_headings, check_speeds)).collect();
+            (self.inner.predict_batch(&frames, modes), found)
         });
         let out = out.py()?;
-        Ok(out.into_iter().zip(headings).map(|(p, h)| native_prediction(py, p, h)).collect())
+        Ok(out.into_iter().zip(found).map(|(p, c)| native_prediction(py, p, c)).collect())
     }
 
     /// Predicts the top `modes` modes of every agent; with `check_headings`, also checks the frame's measured
-    /// headings against its agents' motion (in the same call, on the same frame).
-    #[pyo3(signature = (frame, modes, check_headings = false))]
-    fn predict(&self, py: Python<'_>, frame: &PyFrame, modes: usize, check_headings: bool) -> PyResult<PyPrediction> {
+    /// headings against its agents' motion, and with `check_speeds` its agents' speeds against their classes (in
+    /// the same call, on the same frame).
+    #[pyo3(signature = (frame, modes, check_headings = false, check_speeds = false))]
+    fn predict(
+        &self,
+        py: Python<'_>,
+        frame: &PyFrame,
+        modes: usize,
+        check_headings: bool,
+        check_speeds: bool,
+    ) -> PyResult<PyPrediction> {
         let frame = &frame.inner;
         let dt_s = self.inner.contract().input.dt_s;
-        let (p, headings) = py.detach(|| {
-            let p = self.inner.predict_modes(frame, modes);
-            (p, if check_headings { heading_check(frame, dt_s) } else { None })
-        });
-        Ok(native_prediction(py, p.py()?, headings))
+        let (p, found) =
+            py.detach(|| (self.inner.predict_modes(frame, modes), checks(frame, dt_s, check_headings, check_speeds)));
+        Ok(native_prediction(py, p.py()?, found))
     }
 }
 

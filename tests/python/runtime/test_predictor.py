@@ -571,6 +571,39 @@ def test_a_prediction_crosses_from_the_engine_typed_with_its_heading_check() -> 
         dgan.Predictor("hdmap", sessions=1).predict_batch([frame, degrees])
 
 
+def test_speeds_too_fast_for_metres_are_warned_about_once() -> None:
+    """The bundled zara1 scene in pixels (30 to the metre, an ETH/UCY camera's order) makes every walker implausibly
+    fast in metres: a UnitWarning naming the class and the median, once per predictor; in metres, none. The engine
+    checks within the same call and returns its verdict typed."""
+    from dgan.demo import scene_for
+
+    predictor = dgan.Predictor("zara1", sessions=1)
+    frame = scene_for(predictor.spec).frame.without_map()
+    pixels = dgan.Frame(frame.positions * 30.0, mask=frame.mask, classes=list(frame.classes), dt=frame.dt)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        predictor.predict(frame)
+        predictor.predict_batch([frame, frame])
+    native = predictor._predictor.predict(frame._frame, 3, False, True)
+    assert native.speeds is not None
+    cls, moving, median, bound, implausible = native.speeds
+    assert (cls, bound, implausible) == ("pedestrian", 6.0, False)
+    assert moving >= 3
+    assert 0.5 < median < 2.0  # walkers, in metres a second
+    assert predictor._predictor.predict(frame._frame, 3).speeds is None  # not asked
+    in_pixels = predictor._predictor.predict(pixels._frame, 3, False, True).speeds
+    assert in_pixels is not None
+    assert in_pixels[4]
+    with pytest.warns(exc.UnitWarning, match=r"moving pedestrian agents go at a median \d+(\.\d+)? units a second"):
+        predictor.predict(pixels)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per predictor
+        predictor.predict(pixels)
+        predictor.predict_batch([pixels])
+    with pytest.warns(exc.UnitWarning, match="beyond the 6 m/s that pedestrian agents reach"):
+        dgan.Predictor("zara1", sessions=1).predict_batch([frame, pixels])
+
+
 def test_predictor_frame_and_prediction_pickle(tmp_path: Path) -> None:
     import pickle
 
