@@ -179,24 +179,47 @@ impl HeadingCheck {
 /// headings: headings in another convention (degrees, compass bearings, reversed) turn every agent-centric frame.
 /// `None` when no agent has a measured heading.
 pub fn check_headings(frame: &Frame, dt_s: f64) -> Option<HeadingCheck> {
+    check_frame(frame, dt_s, true, false).0
+}
+
+/// [`check_headings`] and [`check_speeds`], those asked for, from one computation of the frame's traffic states
+/// (headings from the motion).
+pub fn check_frame(
+    frame: &Frame,
+    dt_s: f64,
+    headings: bool,
+    speeds: bool,
+) -> (Option<HeadingCheck>, Option<SpeedCheck>) {
     let given: Vec<(usize, f64)> = frame.headings().iter().enumerate().filter_map(|(i, h)| h.map(|h| (i, h))).collect();
-    if given.is_empty() {
-        return None;
+    let headings = headings && !given.is_empty();
+    if !headings && !speeds {
+        return (None, None);
     }
     let states = traffic_states_with(frame, dt_s, HeadingSource::Motion);
+    (headings.then(|| headings_against(&given, &states)), speeds.then(|| speeds_by_class(frame, &states)).flatten())
+}
+
+/// [`check_headings`] of the measured headings `given` (agent index, heading) against the `states` from the motion.
+fn headings_against(given: &[(usize, f64)], states: &[TrafficState]) -> HeadingCheck {
     let mut errors: Vec<f64> = given
         .iter()
         .filter(|(i, _)| states[*i].speed >= MOTION_HEADING_MIN_SPEED_MPS)
         .map(|(i, h)| wrap_angle(h - states[*i].heading).abs().to_degrees())
         .collect();
-    errors.sort_by(f64::total_cmp);
-    let median_error_deg = match errors.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => errors[n / 2],
-        n => (errors[n / 2 - 1] + errors[n / 2]) / 2.0,
-    };
+    let median_error_deg = median(&mut errors).unwrap_or(0.0);
     let largest_rad = given.iter().map(|(_, h)| h.abs()).fold(0.0, f64::max);
-    Some(HeadingCheck { moving: errors.len(), median_error_deg, largest_rad })
+    HeadingCheck { moving: errors.len(), median_error_deg, largest_rad }
+}
+
+/// The median of `values` (the mean of the middle two for an even count; sorts them), None when empty.
+fn median(values: &mut [f64]) -> Option<f64> {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(values[n / 2]),
+        _ => Some((values[n / 2 - 1] + values[n / 2]) / 2.0),
+    }
 }
 
 /// The moving agents of a class [`SpeedCheck::implausible`] needs to judge its speeds.
@@ -239,7 +262,11 @@ impl SpeedCheck {
 /// beyond its bound (or nearest below it) among those with [`SPEED_CHECK_MIN_MOVING`] moving agents; `None` when no
 /// class has that many.
 pub fn check_speeds(frame: &Frame, dt_s: f64) -> Option<SpeedCheck> {
-    let states = traffic_states_with(frame, dt_s, HeadingSource::Motion);
+    check_frame(frame, dt_s, false, true).1
+}
+
+/// [`check_speeds`] from the frame's traffic `states`.
+fn speeds_by_class(frame: &Frame, states: &[TrafficState]) -> Option<SpeedCheck> {
     AgentClass::ALL
         .iter()
         .filter_map(|&class| {
@@ -250,10 +277,8 @@ pub fn check_speeds(frame: &Frame, dt_s: f64) -> Option<SpeedCheck> {
             if speeds.len() < SPEED_CHECK_MIN_MOVING {
                 return None;
             }
-            speeds.sort_by(f64::total_cmp);
-            let n = speeds.len();
-            let median_speed = if n % 2 == 1 { speeds[n / 2] } else { (speeds[n / 2 - 1] + speeds[n / 2]) / 2.0 };
-            Some(SpeedCheck { class, moving: n, median_speed })
+            let median_speed = median(&mut speeds)?;
+            Some(SpeedCheck { class, moving: speeds.len(), median_speed })
         })
         .max_by(|a, b| {
             let beyond = |c: &SpeedCheck| c.median_speed / plausible_median_speed_mps(c.class);

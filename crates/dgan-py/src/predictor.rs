@@ -69,22 +69,17 @@ fn native_prediction(py: Python<'_>, p: Prediction, (headings, speeds): (Heading
     }
 }
 
-/// The heading check of `frame` at the model's time base (`dgan_core::state::check_headings`).
-fn heading_check(frame: &dgan_core::Frame, dt_s: f64) -> Headings {
-    dgan_core::state::check_headings(frame, dt_s)
-        .map(|c| (c.moving, c.median_error_deg, c.largest_rad, c.beyond_two_pi(), c.judged_by_motion(), c.disagrees()))
-}
-
-/// The speed check of `frame` at the model's time base (`dgan_core::state::check_speeds`).
-fn speed_check(frame: &dgan_core::Frame, dt_s: f64) -> Speeds {
-    use dgan_core::state::{check_speeds, plausible_median_speed_mps};
-    check_speeds(frame, dt_s)
-        .map(|c| (c.class.name(), c.moving, c.median_speed, plausible_median_speed_mps(c.class), c.implausible()))
-}
-
-/// The checks `predict` was asked for: `(headings, speeds)`.
+/// The checks `predict` was asked for, at the model's time base (`dgan_core::state::check_frame`): `(headings,
+/// speeds)`.
 fn checks(frame: &dgan_core::Frame, dt_s: f64, headings: bool, speeds: bool) -> (Headings, Speeds) {
-    (headings.then(|| heading_check(frame, dt_s)).flatten(), speeds.then(|| speed_check(frame, dt_s)).flatten())
+    use dgan_core::state::{check_frame, plausible_median_speed_mps};
+    let (h, s) = check_frame(frame, dt_s, headings, speeds);
+    (
+        h.map(|c| {
+            (c.moving, c.median_error_deg, c.largest_rad, c.beyond_two_pi(), c.judged_by_motion(), c.disagrees())
+        }),
+        s.map(|c| (c.class.name(), c.moving, c.median_speed, plausible_median_speed_mps(c.class), c.implausible())),
+    )
 }
 
 #[pymethods]
